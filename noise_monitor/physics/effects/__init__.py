@@ -1,0 +1,18 @@
+"""Noise effects: the plug-in API, the built-in library and the registry."""
+from .base import DISTRIBUTIONS, Effect, EffectError, Param
+from .builtin import BUILTIN_EFFECTS, PAPER_EFFECTS
+from .registry import (
+    ENTRY_POINT_GROUP,
+    available,
+    build_effects,
+    effect_class,
+    load_plugin_file,
+    make_effect,
+    parse_effect_arg,
+    register,
+)
+
+__all__ = [
+    "DISTRIBUTIONS", "Effect", "EffectError", "Param", "BUILTIN_EFFECTS", "PAPER_EFFECTS", "ENTRY_POINT_GROUP",
+    "available", "build_effects", "effect_class", "load_plugin_file", "make_effect", "parse_effect_arg", "register",
+]

@@ -1,0 +1,201 @@
+"""The effect plug-in API: a noise effect declares its parameters, variance and sampler.
+
+Every effect is one of five kinds of distribution, which tells the analytic model how to combine it
+with the others under clipping:
+
+- ``poisson``: a shot noise; implement :meth:`Effect.electrons` (mean electrons per pixel).
+- ``gaussian``: implement :meth:`Effect.sigma_dn` (standard deviation in DN at a clean signal).
+- ``mixture``: a fraction of pixels gets an offset; implement :meth:`Effect.mixture`.
+- ``quantization``: rounds the output; implement :meth:`Effect.lsb_dn`.
+- ``modifier``: changes the physical conditions (true gain, dark-current law, ...); implement
+  :meth:`Effect.modify`. Its variance contribution is the model's change with and without it.
+
+``temporal`` effects change from frame to frame; fixed-pattern ones (``temporal = False``) repeat in
+every frame of a camera and vanish from frame differences. Samplers have working defaults for every
+kind, so a plug-in usually implements one method.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..sensor import Conditions
+
+DISTRIBUTIONS = ("poisson", "gaussian", "mixture", "quantization", "modifier")
+
+
+class EffectError(ValueError):
+    """An effect is unknown, misconfigured or failed to evaluate."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of an effect."""
+
+    name: str
+    unit: str
+    default: float
+    bounds: tuple[float, float]
+    fittable: bool = True
+    integer: bool = False
+    description: str = ""
+
+
+class Effect:
+    """Base class of all noise effects (built-in and plug-in)."""
+
+    name: ClassVar[str] = ""
+    distribution: ClassVar[str] = "gaussian"
+    temporal: ClassVar[bool] = True
+    params: ClassVar[tuple[Param, ...]] = ()
+    description: ClassVar[str] = ""
+    #: plain-language reading of the effect's signature in residuals (format fields: the parameters)
+    signature: ClassVar[str] = ""
+
+    def __init__(self, **values: float) -> None:
+        known = {p.name: p for p in self.params}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise EffectError(
+                f"effect {self.name!r} has no parameter(s) {', '.join(unknown)}; "
+                f"parameters: {', '.join(known) or 'none'}"
+            )
+        self.values: dict[str, float] = {}
+        for p in self.params:
+            v = values.get(p.name, p.default)
+            try:
+                v = float(v)
+            except (TypeError, ValueError) as exc:
+                raise EffectError(f"{self.name}.{p.name} must be a number, got {v!r}") from exc
+            if not np.isfinite(v) or not p.bounds[0] <= v <= p.bounds[1]:
+                raise EffectError(
+                    f"{self.name}.{p.name} = {v:g} {p.unit} is outside [{p.bounds[0]:g}, {p.bounds[1]:g}] {p.unit}"
+                )
+            self.values[p.name] = round(v) if p.integer else v
+
+    def __getattr__(self, item: str) -> Any:
+        values = self.__dict__.get("values")
+        if values is not None and item in values:
+            return values[item]
+        raise AttributeError(item)
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v:g}" for k, v in self.values.items())
+        return f"{type(self).__name__}({args})"
+
+    def reading(self) -> str:
+        """The plain-language signature with this effect's parameter values filled in."""
+        fields = {**self.values, **{f"{k}_pct": 100.0 * v for k, v in self.values.items()}}
+        try:
+            return self.signature.format(**fields) if self.signature else self.description
+        except (KeyError, ValueError, IndexError):
+            return self.signature
+
+    def with_values(self, **values: float) -> "Effect":
+        return type(self)(**{**self.values, **values})
+
+    # --- what the analytic model needs (override the one matching `distribution`) ---------------
+    def electrons(self, signal_dn: np.ndarray, cond: Conditions) -> np.ndarray:
+        """Mean electrons of a Poisson source at clean signal ``signal_dn``."""
+        raise NotImplementedError
+
+    def sigma_dn(self, signal_dn: np.ndarray, cond: Conditions) -> np.ndarray:
+        """Standard deviation in DN of a Gaussian effect at clean signal ``signal_dn``."""
+        raise NotImplementedError
+
+    def mixture(self, signal_dn: np.ndarray, cond: Conditions) -> tuple[float, np.ndarray]:
+        """(fraction of affected pixels, their offset in DN) of a mixture effect."""
+        raise NotImplementedError
+
+    def lsb_dn(self, cond: Conditions) -> float:
+        """Quantization step in DN (8-bit scale) of a quantization effect."""
+        raise NotImplementedError
+
+    def modify(self, cond: Conditions) -> Conditions:
+        """New physical conditions (modifier effects)."""
+        return cond
+
+    # --- derived -------------------------------------------------------------------------------
+    def variance_dn2(self, signal_dn: np.ndarray | float, cond: Conditions) -> np.ndarray:
+        """Unclipped variance contribution in DN^2 at clean signal ``signal_dn``.
+
+        Modifiers return 0 here: their contribution is a change of the other effects
+        (see :meth:`noise_monitor.physics.NoiseModel.predict`).
+        """
+        s = np.asarray(signal_dn, dtype=float)
+        if self.distribution == "poisson":
+            return cond.dn_per_e**2 * np.broadcast_to(self.electrons(s, cond), s.shape)
+        if self.distribution == "gaussian":
+            return np.broadcast_to(np.asarray(self.sigma_dn(s, cond), dtype=float) ** 2, s.shape)
+        if self.distribution == "mixture":
+            frac, off = self.mixture(s, cond)
+            return np.broadcast_to(frac * (1.0 - frac) * np.asarray(off, dtype=float) ** 2, s.shape)
+        if self.distribution == "quantization":
+            return np.full(s.shape, self.lsb_dn(cond) ** 2 / 12.0)
+        return np.zeros(s.shape)
+
+    # --- Monte-Carlo sampling ------------------------------------------------------------------
+    def pattern(self, shape: tuple[int, ...], tag: str = "") -> np.ndarray:
+        """A fixed standard-normal pattern for this effect and image shape (same in every frame)."""
+        key = (tuple(shape), tag)
+        cache = self.__dict__.setdefault("_patterns", {})
+        if key not in cache:
+            digest = hashlib.sha256(f"{self.name}|{tag}|{shape}|{self.pattern_seed()}".encode()).digest()
+            rng = np.random.default_rng(int.from_bytes(digest[:8], "little"))
+            cache[key] = rng.standard_normal(shape, dtype=np.float32)
+        return cache[key]
+
+    def pattern_seed(self) -> int:
+        """Seed of the fixed pattern (fixed-pattern effects); override to give cameras distinct ones."""
+        return int(self.values.get("seed", 0))
+
+    def sample(self, signal_dn: np.ndarray, cond: Conditions, rng: np.random.Generator) -> np.ndarray:
+        """Noise in DN to add to ``signal_dn`` (before clipping); float32, same shape."""
+        s = signal_dn
+        if self.distribution == "poisson":
+            lam = np.broadcast_to(np.asarray(self.electrons(s, cond), dtype=np.float64), s.shape)
+            return (cond.dn_per_e * (poisson_sample(rng, lam) - lam)).astype(np.float32)
+        if self.distribution == "gaussian":
+            sigma = np.asarray(self.sigma_dn(s, cond), dtype=np.float32)
+            z = rng.standard_normal(s.shape, dtype=np.float32) if self.temporal else self.pattern(s.shape)
+            return z * sigma
+        if self.distribution == "mixture":
+            frac, off = self.mixture(s, cond)
+            if self.temporal:
+                hit = rng.random(s.shape, dtype=np.float32) < frac
+            else:
+                hit = self.pattern(s.shape, "hit") < _normal_quantile(frac)
+            return np.where(hit, np.asarray(off, dtype=np.float32), np.float32(0.0)).astype(np.float32)
+        if self.distribution == "modifier":
+            return np.zeros(s.shape, dtype=np.float32)
+        raise EffectError(f"effect {self.name!r}: quantization is applied by the model, not sampled")
+
+
+def _normal_quantile(p: float) -> float:
+    from scipy.special import ndtri
+
+    return float(ndtri(min(max(p, 0.0), 1.0)))
+
+
+POISSON_NORMAL_LAMBDA = 1000.0
+
+
+def poisson_sample(rng: np.random.Generator, lam: np.ndarray) -> np.ndarray:
+    """Poisson draws; a normal draw where lambda > 1000 (skewness < 0.03), much faster."""
+    lam = np.asarray(lam, dtype=np.float64)
+    if lam.ndim == 0 or lam.size == 1:
+        v = float(lam.reshape(-1)[0]) if lam.size else 0.0
+        if v > POISSON_NORMAL_LAMBDA:
+            return v + np.sqrt(v) * rng.standard_normal(lam.shape, dtype=np.float32)
+        return rng.poisson(lam).astype(np.float32)
+    big = lam > POISSON_NORMAL_LAMBDA
+    if not big.any():
+        return rng.poisson(lam).astype(np.float32)
+    out = np.empty(lam.shape, dtype=np.float32)
+    out[big] = lam[big] + np.sqrt(lam[big]) * rng.standard_normal(int(big.sum()), dtype=np.float32)
+    small = ~big
+    out[small] = rng.poisson(lam[small])
+    return out
