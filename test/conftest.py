@@ -1,0 +1,17 @@
+"""Test-session settings: an own ROS domain per test process, discovery on localhost, seeded RNG."""
+from __future__ import annotations
+
+import os
+
+# Before rclpy is imported anywhere: isolate this process's DDS traffic.
+os.environ["ROS_DOMAIN_ID"] = str(100 + os.getpid() % 100)
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+os.environ.setdefault("OMP_NUM_THREADS", "2")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)
