@@ -1,0 +1,104 @@
+"""Camera metadata from ROS messages and profiles -> CameraMetadata.
+
+Sources, lowest priority first: the static camera profile (YAML), a sensor_msgs/Temperature reading,
+and the per-frame metadata message (diagnostic_msgs/DiagnosticArray whose first status carries
+key/values named like the CameraMetadata fields, or a vendor message, see :mod:`msg_adapters.vendor`).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+from noise_monitor.physics import CameraMetadata, CameraProfile
+from noise_monitor.physics.metadata import NUMERIC_FIELDS
+
+from .errors import AdapterError
+
+REQUIRED_FIELDS: tuple[str, ...] = NUMERIC_FIELDS + ("sensor_type",)
+KNOWN_FIELDS: frozenset[str] = frozenset(REQUIRED_FIELDS + ("bit_depth",))
+#: Other common spellings with their conversion to the CameraMetadata field (SI units).
+ALIASES: dict[str, tuple[str, float, float]] = {  # key -> (field, scale, offset)
+    "exposure_time_us": ("exposure_time_s", 1e-6, 0.0),
+    "exposure_time_ms": ("exposure_time_s", 1e-3, 0.0),
+    "sensor_temperature_k": ("sensor_temperature_c", 1.0, -273.15),
+    "pixel_size_um": ("pixel_size_m", 1e-6, 0.0),
+    "sense_node_gain_uv_per_e": ("sense_node_gain_v_per_e", 1e-6, 0.0),
+    "thermal_white_noise_nv_per_sqrt_hz": ("thermal_white_noise_v_per_sqrt_hz", 1e-9, 0.0),
+    "pixel_clock_mhz": ("pixel_clock_hz", 1e6, 0.0),
+}
+
+
+def _number(key: str, value: Any) -> float:
+    try:
+        out = float(value.strip() if isinstance(value, str) else value)
+    except (TypeError, ValueError):
+        raise AdapterError(f"metadata value {key}={value!r} is not a number") from None
+    if not math.isfinite(out):
+        raise AdapterError(f"metadata value {key}={value!r} is not finite")
+    return out
+
+
+def metadata_from_mapping(values: Mapping[str, Any]) -> dict[str, float | str]:
+    """Keep the entries named like CameraMetadata fields (or a known alias), as numbers.
+
+    Other keys are ignored (drivers publish more than the noise model needs); empty values count as
+    absent; a non-numeric value of a numeric field raises :class:`AdapterError` naming it.
+    """
+    out: dict[str, float | str] = {}
+    for raw_key, value in values.items():
+        key = str(raw_key).strip().lower()
+        if value is None or (isinstance(value, str) and not value.strip()):
+            continue
+        if key == "sensor_type":
+            out[key] = str(value).strip().lower()
+        elif key == "bit_depth":
+            out[key] = int(_number(key, value))
+        elif key in KNOWN_FIELDS:
+            out[key] = _number(key, value)
+        elif key in ALIASES:
+            name, scale, offset = ALIASES[key]
+            out.setdefault(name, _number(key, value) * scale + offset)
+    return out
+
+
+def metadata_from_diagnostics(msg: Any) -> dict[str, float | str]:
+    """Metadata from a DiagnosticArray (its first status) or a DiagnosticStatus (rclpy or rosbags)."""
+    status = msg
+    if hasattr(msg, "status"):
+        if not len(msg.status):
+            raise AdapterError("metadata DiagnosticArray has no status")
+        status = msg.status[0]
+    if not hasattr(status, "values"):
+        raise AdapterError("not a DiagnosticArray/DiagnosticStatus message")
+    return metadata_from_mapping({kv.key: kv.value for kv in status.values})
+
+
+def metadata_from_temperature(msg: Any) -> dict[str, float]:
+    """``{"sensor_temperature_c": ...}`` from a sensor_msgs/Temperature message (degrees Celsius)."""
+    try:
+        value = msg.temperature
+    except AttributeError:
+        raise AdapterError("not a sensor_msgs/Temperature message") from None
+    return {"sensor_temperature_c": _number("temperature", value)}
+
+
+def resolve_metadata(
+    static: Mapping[str, Any] | CameraProfile | None,
+    dynamic: Mapping[str, Any],
+    temperature_c: float | None = None,
+) -> tuple[CameraMetadata | None, list[str]]:
+    """Merge static profile < Temperature reading < per-frame metadata into a CameraMetadata.
+
+    Returns ``(metadata, [])`` when complete, ``(None, missing_field_names)`` when fields are missing.
+    Values that are present but invalid (out of range, unknown sensor type) raise
+    :class:`noise_monitor.physics.MetadataError` (a ValueError) naming them.
+    """
+    base = dict(static.values) if isinstance(static, CameraProfile) else dict(static or {})
+    merged = metadata_from_mapping(base)
+    if temperature_c is not None:
+        merged["sensor_temperature_c"] = _number("temperature", temperature_c)
+    merged.update(metadata_from_mapping(dynamic))
+    missing = [name for name in REQUIRED_FIELDS if name not in merged]
+    if missing:
+        return None, missing
+    return CameraMetadata.from_mapping(merged), []
