@@ -1,0 +1,255 @@
+"""Read camera bags (rosbag2 MCAP or sqlite3 directories, bare .mcap/.db3 files) into monitor frames.
+
+Topics are found by message type unless given: the image topic (sensor_msgs/msg/Image), the metadata
+topic (a DiagnosticArray, a known vendor metadata type, or any type with fields named like
+CameraMetadata fields), CameraInfo and Temperature. Message definitions stored in the bag are
+registered (rosbags typesys), so vendor types deserialise without their packages installed.
+"""
+from __future__ import annotations
+
+import bisect
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import Connection
+from rosbags.rosbag2 import ReaderError
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, TypesysError, get_typestore
+
+from msg_adapters import AdapterError, camera_geometry, image_to_gray_dn
+from msg_adapters.metadata import KNOWN_FIELDS, ALIASES, metadata_from_diagnostics, metadata_from_mapping
+from msg_adapters.metadata import metadata_from_temperature, resolve_metadata
+from msg_adapters.vendor import VENDOR_TYPES, metadata_from_vendor, register_vendor_types
+from noise_monitor.physics import CameraMetadata, CameraProfile, MetadataError, load_profile
+
+from .errors import BagError
+
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
+DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+_READ_ERRORS = (AnyReaderError, ReaderError, SerdeError, TypesysError, struct.error, EOFError, KeyError,
+                IndexError, ValueError, OSError)
+_METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
+
+
+@dataclass
+class BagFrame:
+    """One image of a bag with its metadata, or the reason it cannot be processed."""
+
+    index: int
+    stamp_ns: int
+    image_dn: np.ndarray | None
+    metadata: CameraMetadata | None
+    missing: list[str] = field(default_factory=list)
+    skip_reason: str | None = None
+    raw_metadata: dict[str, Any] = field(default_factory=dict)
+
+
+def _stamp_ns(msg: Any, log_time: int) -> int:
+    """Header stamp of a message in ns; the log time when it has no (or a zero) header stamp."""
+    st = getattr(getattr(msg, "header", None), "stamp", None)
+    if st is None:
+        return int(log_time)
+    ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
+    return ns if ns > 0 else int(log_time)
+
+
+def _resolve_bag_path(path: Path) -> Path:
+    """The bag path rosbags should open: a rosbag2 dir, or the single storage file of a dir without
+    metadata.yaml (e.g. a copied MCAP folder), or a bare .mcap/.db3 file."""
+    if not path.exists():
+        raise FileNotFoundError(f"bag {path} does not exist")
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        files = sorted([*path.glob("*.mcap"), *path.glob("*.db3")])
+        if len(files) != 1:
+            raise BagError(f"{path} is a folder without metadata.yaml and {len(files)} .mcap/.db3 files; "
+                           "pass the bag file itself")
+        return files[0]
+    if path.is_file() and path.suffix not in (".mcap", ".db3"):
+        raise BagError(f"{path}: not a bag (expected a rosbag2 folder, a .mcap or a .db3 file)")
+    return path
+
+
+class BagReader:
+    """An opened bag with its detected topics. Iterate :meth:`frames`; ``len()`` = number of images."""
+
+    def __init__(self, path: str | Path, image_topic: str | None = None, metadata_topic: str | None = None,
+                 camera_info_topic: str | None = None, temperature_topic: str | None = None) -> None:
+        self.path = Path(path)
+        self._bag_path = _resolve_bag_path(self.path)
+        store = get_typestore(Stores.ROS2_JAZZY)
+        register_vendor_types(store)
+        try:
+            self._reader = AnyReader([self._bag_path], default_typestore=store)
+            self._reader.open()
+        except _READ_ERRORS as exc:
+            raise BagError(f"cannot read bag {self.path}: {exc or type(exc).__name__} (corrupt or truncated?)") from None
+        self.topics: dict[str, str] = {c.topic: c.msgtype for c in self._reader.connections}
+        if not self.topics or self._reader.message_count == 0:
+            self.close()
+            raise BagError(f"bag {self.path} is empty (no messages)")
+        try:
+            self.image_topic = self._pick("image", image_topic, self._image_candidates(), required=True)
+            self.metadata_topic = self._pick("metadata", metadata_topic, self._metadata_candidates())
+            self.camera_info_topic = self._pick("camera_info", camera_info_topic, self._typed(CAMERA_INFO_TYPE))
+            self.temperature_topic = self._pick("temperature", temperature_topic, self._typed(TEMPERATURE_TYPE))
+        except BagError:
+            self.close()
+            raise
+
+    # --- topic detection ----------------------------------------------------------------------
+    def _typed(self, msgtype: str) -> list[str]:
+        return sorted(t for t, m in self.topics.items() if m == msgtype)
+
+    def _image_candidates(self) -> list[str]:
+        imgs = self._typed(IMAGE_TYPE)
+        raw = [t for t in imgs if t.endswith("image_raw")]
+        return raw if len(raw) == 1 else imgs
+
+    def _metadata_candidates(self) -> list[str]:
+        diag = [t for t in self._typed(DIAGNOSTIC_TYPE) if "metadata" in t]
+        if diag:
+            return diag
+        vendor = sorted(t for t, m in self.topics.items() if m in VENDOR_TYPES)
+        if vendor:
+            return vendor
+        fielddefs = self._reader.typestore.fielddefs
+        generic = sorted(t for t, m in self.topics.items() if m not in (IMAGE_TYPE, CAMERA_INFO_TYPE, TEMPERATURE_TYPE)
+                         and m in fielddefs and _METADATA_NAMES & {f[0] for f in fielddefs[m][1]})
+        if generic:
+            return generic
+        return [t for t in self._typed(DIAGNOSTIC_TYPE) if t != "/diagnostics"]
+
+    def _pick(self, role: str, override: str | None, candidates: list[str], required: bool = False) -> str | None:
+        if override:
+            if override not in self.topics:
+                raise BagError(f"{role} topic {override!r} is not in bag {self.path}; topics: {self._listing()}")
+            return override
+        if len(candidates) > 1:
+            raise BagError(f"several {role} topics in bag {self.path}: {', '.join(candidates)}; "
+                           f"choose one with --{role.replace('_', '-')}-topic")
+        if not candidates and required:
+            raise BagError(f"no {role} topic ({IMAGE_TYPE}) in bag {self.path}; topics: {self._listing()}")
+        return candidates[0] if candidates else None
+
+    def _listing(self) -> str:
+        return ", ".join(f"{t} [{m}]" for t, m in sorted(self.topics.items())) or "none"
+
+    # --- info ------------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return sum(c.msgcount for c in self._conns(self.image_topic))
+
+    @property
+    def start_ns(self) -> int:
+        return int(self._reader.start_time)
+
+    @property
+    def duration_s(self) -> float:
+        return (self._reader.end_time - self._reader.start_time) / 1e9 if len(self) > 1 else 0.0
+
+    def _conns(self, topic: str | None) -> list[Connection]:
+        return [c for c in self._reader.connections if c.topic == topic]
+
+    def messages(self, topics: list[str]) -> Iterator[tuple[str, int, Any]]:
+        """(topic, log time ns, deserialised message) in log-time order; BagError if data is damaged."""
+        conns = [c for t in topics for c in self._conns(t)]
+        it = self._reader.messages(connections=conns)
+        while True:
+            try:
+                conn, log_time, raw = next(it)
+                msg = self._reader.deserialize(raw, conn.msgtype)
+            except StopIteration:
+                return
+            except _READ_ERRORS as exc:
+                raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
+            yield conn.topic, log_time, msg
+
+    def _metadata_of(self, msg: Any) -> dict[str, Any]:
+        mtype = getattr(msg, "__msgtype__", "")
+        if mtype == DIAGNOSTIC_TYPE:
+            return metadata_from_diagnostics(msg)
+        if mtype in VENDOR_TYPES:
+            return metadata_from_vendor(msg)
+        return metadata_from_mapping({k: getattr(msg, k) for k in _METADATA_NAMES if hasattr(msg, k)})
+
+    def _timeline(self, topic: str | None, convert) -> tuple[list[int], list[Any]]:
+        """(sorted header stamps, converted values) of a small side topic, errors kept as AdapterError."""
+        if topic is None:
+            return [], []
+        items = []
+        for _, log_time, msg in self.messages([topic]):
+            try:
+                value: Any = convert(msg)
+            except (AdapterError, ValueError) as exc:
+                value = AdapterError(f"{topic}: {exc}")
+            items.append((_stamp_ns(msg, log_time), value))
+        items.sort(key=lambda x: x[0])
+        return [s for s, _ in items], [v for _, v in items]
+
+    # --- frames ----------------------------------------------------------------------------------
+    def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None) -> Iterator[BagFrame]:
+        """Yield every image as a :class:`BagFrame` in stamp order.
+
+        Metadata is the latest metadata message with a header stamp <= the image stamp (an exact stamp
+        match is the contract), merged over ``profile`` (dynamic values win) and the latest Temperature.
+        Frames that cannot be processed carry ``skip_reason`` (bad image, incomplete or invalid metadata).
+        """
+        prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
+        depth = bit_depth or (prof.bit_depth if prof else None)
+        meta_t, meta_v = self._timeline(self.metadata_topic, self._metadata_of)
+        temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
+        info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
+        for index, (_, log_time, msg) in enumerate(self.messages([self.image_topic])):
+            stamp = _stamp_ns(msg, log_time)
+            raw = _latest(meta_t, meta_v, stamp)
+            temp = _latest(temp_t, temp_v, stamp)
+            geom = _latest(info_t, info_v, stamp)
+            frame = BagFrame(index, stamp, None, None, raw_metadata=dict(raw) if isinstance(raw, dict) else {})
+            try:
+                for side in (raw, temp, geom):
+                    if isinstance(side, Exception):
+                        raise side
+                frame_depth = depth or (raw.get("bit_depth") if isinstance(raw, dict) else None)
+                frame.image_dn = image_to_gray_dn(msg, bit_depth=frame_depth)
+                if geom is not None:
+                    geom.check_image(*_raw_size(msg))
+                temp_c = temp["sensor_temperature_c"] if temp else None
+                frame.metadata, frame.missing = resolve_metadata(prof, raw or {}, temp_c)
+                if frame.metadata is None:
+                    frame.skip_reason = "metadata incomplete: missing " + ", ".join(frame.missing)
+            except MetadataError as exc:
+                frame.skip_reason = f"invalid metadata: {exc}"
+            except AdapterError as exc:
+                frame.skip_reason = f"unusable message: {exc}"
+            yield frame
+
+    def close(self) -> None:
+        if getattr(self._reader, "stack", None):
+            self._reader.close()
+
+    def __enter__(self) -> "BagReader":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _raw_size(msg: Any) -> tuple[int, int]:
+    return int(msg.height), int(msg.width)
+
+
+def _latest(stamps: list[int], values: list[Any], stamp: int) -> Any:
+    i = bisect.bisect_right(stamps, stamp)
+    return values[i - 1] if i else None
+
+
+def open_bag(path: str | Path, image_topic: str | None = None, metadata_topic: str | None = None,
+             camera_info_topic: str | None = None, temperature_topic: str | None = None) -> BagReader:
+    """Open a bag and detect its topics (see :class:`BagReader`); raises BagError for unusable bags."""
+    return BagReader(path, image_topic=image_topic, metadata_topic=metadata_topic,
+                     camera_info_topic=camera_info_topic, temperature_topic=temperature_topic)

@@ -1,0 +1,176 @@
+"""Bag reading: formats, topic detection and overrides, vendor types from the bag, clear errors."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from noise_monitor.bag import BagError
+from noise_monitor.bag.messages import camera_info_msg, header, image_msg
+from noise_monitor.bag.reader import open_bag
+from noise_monitor.bag.simulate import load_truth, simulate_bag
+from noise_monitor.bag.writer import BagWriter, typestore
+from noise_monitor.physics import load_profile
+
+SMALL = dict(frames=4, width=48, height=32)
+
+
+@pytest.fixture(scope="module")
+def sim_bag(tmp_path_factory) -> Path:
+    return simulate_bag(tmp_path_factory.mktemp("bags") / "sim.mcap", "ev76c661", "gain_sweep", seed=1, **SMALL)
+
+
+@pytest.mark.parametrize("name,storage", [("bare.mcap", "mcap"), ("dir_mcap", "mcap"), ("dir_sqlite", "sqlite3")])
+def test_formats_round_trip_images_and_metadata(tmp_path, name, storage):
+    bag = simulate_bag(tmp_path / name, "icx285", "gain_sweep", storage=storage, seed=3, **SMALL)
+    assert bag.is_file() == name.endswith(".mcap")
+    truth = load_truth(bag)
+    with open_bag(bag) as reader:
+        assert (reader.image_topic, reader.metadata_topic, reader.camera_info_topic) == (
+            "/camera/image_raw", "/camera/metadata", "/camera/camera_info")
+        assert reader.temperature_topic is None
+        assert len(reader) == 4
+        frames = list(reader.frames())
+    assert [f.stamp_ns for f in frames] == [r["stamp_ns"] for r in truth["frames"]]
+    for f, r in zip(frames, truth["frames"]):
+        assert f.skip_reason is None and f.missing == []
+        assert f.image_dn.shape == (32, 48) and f.image_dn.dtype == np.float32
+        assert f.metadata.gain_db == pytest.approx(r["true_metadata"]["gain_db"])
+        assert f.metadata.sensor_type == "ccd" and f.metadata.full_well_e == 14000
+        assert f.raw_metadata["gain_db"] == pytest.approx(r["true_metadata"]["gain_db"])
+    assert frames[-1].metadata.gain_db == pytest.approx(24.0)
+
+
+def test_rosbag2_directory_without_metadata_yaml_and_inner_file(tmp_path):
+    bag = simulate_bag(tmp_path / "d", "icx285", "static", **SMALL)
+    (bag / "metadata.yaml").unlink()
+    with open_bag(bag) as reader:
+        assert len(reader) == 4
+    with open_bag(bag / "d.mcap") as reader:
+        assert len(list(reader.frames())) == 4
+
+
+def test_stated_metadata_is_what_the_reader_sees(tmp_path):
+    bag = simulate_bag(tmp_path / "t.mcap", "ev76c661", "double_thermal_noise", frames=10, width=32, height=32)
+    truth = load_truth(bag)
+    w = load_profile("ev76c661").values["thermal_white_noise_v_per_sqrt_hz"]
+    with open_bag(bag) as reader:
+        seen = [f.metadata.thermal_white_noise_v_per_sqrt_hz for f in reader.frames()]
+    expected = [2 * w if r["corrupted"] else w for r in truth["frames"]]
+    assert seen == pytest.approx(expected) and 2 * w in seen
+
+
+def test_profile_fills_fields_missing_from_the_bag(tmp_path):
+    path = tmp_path / "dyn_only.mcap"
+    img = np.full((16, 16), 100, np.uint8)
+    store = typestore()
+    t = store.types
+    with BagWriter(path) as w:
+        for i in range(3):
+            stamp = 1_000_000_000 * (i + 1)
+            w.write("/cam/image_raw", image_msg(img, stamp), stamp)
+            w.write("/cam/temperature", t["sensor_msgs/msg/Temperature"](header=header(stamp), temperature=40.0 + i,
+                                                                         variance=0.0), stamp)
+    with open_bag(path) as reader:
+        assert reader.metadata_topic is None and reader.temperature_topic == "/cam/temperature"
+        no_profile = list(reader.frames())
+        with_profile = list(reader.frames(profile="icx285"))
+    assert no_profile[0].metadata is None and "full_well_e" in no_profile[0].missing
+    assert no_profile[0].skip_reason.startswith("metadata incomplete")
+    # the profile has no gain/exposure: still incomplete, the reason names exactly those
+    assert with_profile[0].missing == ["gain_db", "exposure_time_s"]
+    assert "gain_db, exposure_time_s" in with_profile[0].skip_reason
+
+
+ACME = """\
+std_msgs/Header header
+float64 gain_db
+float64 exposure_time_s
+float32 sensor_temperature_c
+string firmware
+"""
+
+
+def test_vendor_type_definition_is_taken_from_the_bag(tmp_path):
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(ACME, "acme_msgs/msg/CameraState"))
+    path = tmp_path / "vendor.mcap"
+    img = np.full((16, 16), 80, np.uint8)
+    with BagWriter(path, store=store) as w:
+        for i in range(2):
+            stamp = 1_000_000_000 * (i + 1)
+            w.write("/acme/state", store.types["acme_msgs/msg/CameraState"](
+                header=header(stamp), gain_db=3.0 * i, exposure_time_s=0.01, sensor_temperature_c=30.0,
+                firmware="1.2"), stamp)
+            w.write("/acme/image_raw", image_msg(img, stamp), stamp)
+    assert "acme_msgs/msg/CameraState" not in typestore().types  # only the bag knows it
+    with open_bag(path) as reader:
+        assert reader.metadata_topic == "/acme/state"
+        frames = list(reader.frames(profile="ev76c661"))
+    assert [f.metadata.gain_db for f in frames] == [0.0, 3.0]
+    assert all(f.skip_reason is None for f in frames)
+
+
+def test_topic_overrides_and_ambiguity(tmp_path):
+    path = tmp_path / "two.mcap"
+    with BagWriter(path) as w:
+        for topic, value in (("/left/image", 10), ("/right/image", 200)):
+            w.write(topic, image_msg(np.full((8, 8), value, np.uint8), 5), 5)
+    with pytest.raises(BagError, match="several image topics.*--image-topic"):
+        open_bag(path)
+    with open_bag(path, image_topic="/right/image") as reader:
+        assert float(next(reader.frames()).image_dn.mean()) == 200.0
+    with pytest.raises(BagError, match="'/nope' is not in bag"):
+        open_bag(path, image_topic="/nope")
+
+
+def test_bad_image_is_skipped_with_reason(tmp_path):
+    path = tmp_path / "bad.mcap"
+    msg = image_msg(np.zeros((8, 8), np.uint8), 7)
+    msg.encoding = "yuv422_weird"
+    with BagWriter(path) as w:
+        w.write("/camera/image_raw", msg, 7)
+    with open_bag(path) as reader:
+        (frame,) = reader.frames(profile="icx285")
+    assert frame.image_dn is None and "unsupported image encoding" in frame.skip_reason
+
+
+def test_camera_info_mismatch_is_a_skip_reason(tmp_path):
+    path = tmp_path / "info.mcap"
+    with BagWriter(path) as w:
+        w.write("/camera/camera_info", camera_info_msg(100, 200, 1), 1)
+        w.write("/camera/image_raw", image_msg(np.zeros((8, 8), np.uint8), 1), 1)
+    with open_bag(path) as reader:
+        (frame,) = reader.frames()
+    assert "CameraInfo implies 200x100" in frame.skip_reason
+
+
+def test_unusable_bags_raise_bag_error(tmp_path, sim_bag):
+    with pytest.raises(FileNotFoundError):
+        open_bag(tmp_path / "missing.mcap")
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(b"not a bag at all" * 100)
+    truncated = tmp_path / "truncated.mcap"
+    truncated.write_bytes(sim_bag.read_bytes()[: sim_bag.stat().st_size // 2])
+    for bad in (empty, garbage, truncated):
+        with pytest.raises(BagError, match="cannot read bag"):
+            open_bag(bad)
+    text = tmp_path / "notes.txt"
+    text.write_text("hello")
+    with pytest.raises(BagError, match="not a bag"):
+        open_bag(text)
+    info_only = tmp_path / "info_only.mcap"
+    with BagWriter(info_only) as w:
+        w.write("/camera/camera_info", camera_info_msg(8, 8, 1), 1)
+    with pytest.raises(BagError, match="no image topic"):
+        open_bag(info_only)
+    no_msgs = tmp_path / "no_msgs"
+    shutil.copytree(simulate_bag(tmp_path / "src", "icx285", "static", frames=1, width=16, height=16), no_msgs)
+    (no_msgs / "src.mcap").write_bytes(b"")
+    with pytest.raises(BagError):
+        open_bag(no_msgs)

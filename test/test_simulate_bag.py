@@ -1,0 +1,98 @@
+"""Synthetic field campaigns: scenes, scenarios, truth sidecar, effects and the simulate-bag command."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from noise_monitor.bag.reader import open_bag
+from noise_monitor.bag.scenarios import EPISODE, SCENARIOS, get_scenario
+from noise_monitor.bag.scenes import camera_path, make_world, view
+from noise_monitor.bag.simulate import load_truth, simulate_bag, truth_path
+from noise_monitor.cli import main
+
+
+def test_world_has_flat_textured_and_gradient_regions_at_many_levels(rng):
+    world = make_world(rng, 64, 96)
+    assert world.shape == (round(64 * 1.6), round(96 * 1.8)) and world.dtype == np.float32
+    assert world.min() >= 0 and world.max() <= 255
+    tile = 96 * 18 // 10 // 6
+    blocks = [world[r:r + tile, c:c + tile] for r in range(0, world.shape[0] - tile + 1, tile)
+              for c in range(0, world.shape[1] - tile + 1, tile)]
+    flat = [b for b in blocks if np.ptp(b) == 0]
+    ramps = [b for b in blocks if np.ptp(b) > 0 and (np.ptp(np.diff(b, axis=0)) < 1e-3 or np.ptp(np.diff(b, axis=1)) < 1e-3)]
+    textured = [b for b in blocks if np.ptp(np.diff(b, axis=0)) > 1e-3 and np.ptp(np.diff(b, axis=1)) > 1e-3]
+    assert flat and ramps and textured
+    means = np.array([b.mean() for b in blocks])
+    assert means.min() < 40 and means.max() > 215
+
+
+def test_camera_path_static_and_moving():
+    u = np.linspace(0, 1, 41)
+    assert np.all(camera_path(u, moving=False) == 0.5)
+    pos = camera_path(u, moving=True)
+    steps = np.abs(np.diff(pos, axis=0)).sum(axis=1)
+    assert (steps == 0).sum() >= 10 and (steps > 0).sum() >= 10  # static stretches and pans
+    win, (x, y) = view(np.zeros((30, 40), np.float32), np.array([1.0, 1.0]), 20, 25)
+    assert win.shape == (20, 25) and (x, y) == (15, 10)
+
+
+def test_scenarios_cover_the_issue_list():
+    for name in ("gain_sweep", "exposure_sweep", "temperature_ramp", "image_noise", "double_thermal_noise",
+                 "double_temperature", "field", "lab", "static", "motion"):
+        assert name in SCENARIOS
+    assert get_scenario("gain_sweep").step(1.0).gain_db == 24.0
+    assert get_scenario("exposure_sweep").step(0.0).exposure_time_s == pytest.approx(0.001)
+    mid = sum(EPISODE) / 2
+    assert get_scenario("image_noise").step(mid).image_noise_dn == 5.0
+    assert get_scenario("image_noise").step(0.1).corrupted == []
+    assert get_scenario("double_temperature").step(mid).stated_factors == {"sensor_temperature_c": 2.0}
+    with pytest.raises(ValueError, match="unknown scenario 'nope'; known: static"):
+        get_scenario("nope")
+
+
+@pytest.mark.parametrize("scenario,profile,sign", [("image_noise", "icx285", "-"),
+                                                    ("double_thermal_noise", "ev76c661", "+"),
+                                                    ("double_temperature", "ev76c661", "+")])
+def test_truth_records_corruption_and_xi_sign(tmp_path, scenario, profile, sign):
+    bag = simulate_bag(tmp_path / "b.mcap", profile, scenario, frames=10, width=64, height=48, seed=2)
+    truth = load_truth(bag)
+    (ep,) = truth["episodes"]
+    assert ep["xi_sign"] == sign and ep["start_index"] == 4 and ep["end_index"] == 6
+    clean = [r for r in truth["frames"] if not r["corrupted"]]
+    assert all(abs(r["xi"]) < 0.15 for r in clean)  # model == image apart from quantisation and sampling
+    if scenario == "image_noise":
+        for r in truth["frames"][4:7]:  # the paper's expectation: xi = sigma_model - sqrt(sigma_model^2 + 25)
+            assert r["xi"] == pytest.approx(r["sigma_model"] - np.hypot(r["sigma_model"], 5.0), abs=0.25)
+
+
+def test_effect_switched_on_adds_unmodelled_noise(tmp_path):
+    bag = simulate_bag(tmp_path / "p.mcap", "icx285", "static", effects=["prnu=4"], frames=2, width=64, height=48)
+    truth = load_truth(bag)
+    assert truth["effects"] == ["prnu=4"]
+    for r in truth["frames"]:
+        assert r["sigma"]["prnu"] > 1.0 and r["xi"] < -0.5
+
+
+def test_same_seed_same_bag(tmp_path):
+    a = simulate_bag(tmp_path / "a.mcap", "generic", "motion", frames=3, width=32, height=32, seed=9)
+    b = simulate_bag(tmp_path / "b.mcap", "generic", "motion", frames=3, width=32, height=32, seed=9)
+    with open_bag(a) as ra, open_bag(b) as rb:
+        for fa, fb in zip(ra.frames(), rb.frames()):
+            assert np.array_equal(fa.image_dn, fb.image_dn)
+
+
+def test_simulate_bag_command(tmp_path, capsys):
+    out = tmp_path / "cmd.mcap"
+    summary = tmp_path / "s.json"
+    rc = main(["simulate-bag", str(out), "--profile", "ev76c661", "--scenario", "image_noise", "--frames", "5",
+               "--width", "32", "--height", "32", "--effect", "row_offsets=1", "--json", str(summary)])
+    assert rc == 0 and out.is_file() and truth_path(out).is_file()
+    s = json.loads(summary.read_text())
+    assert s["frames"] == 5 and s["effects"] == ["row_offsets=1"] and s["episodes"][0]["xi_sign"] == "-"
+    assert main(["simulate-bag", str(out), "--profile", "ev76c661", "--scenario", "static"]) == 2
+    assert "exists already" in capsys.readouterr().err
+    assert main(["simulate-bag", str(tmp_path / "x.mcap"), "--profile", "ev76c661", "--scenario", "static",
+                 "--effect", "nonsense=3"]) == 2
+    assert "unknown effect 'nonsense'" in capsys.readouterr().err
