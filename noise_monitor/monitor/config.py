@@ -1,0 +1,138 @@
+"""MonitorConfig: the tunable constants of the per-frame pipeline (also node parameters)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+XI_SOURCES = ("estimator", "model")
+MODEL_MODES = ("joint", "sequential")
+ALARM_LEVELS = ("WARN", "ERROR")
+
+#: One-line description per field (used for the node's declared parameters and --help texts).
+DESCRIPTIONS: dict[str, str] = {
+    "patches_per_frame": "patches (K) evaluated per frame, spread over the usable image area",
+    "patch_size": "patch edge in pixels; 0 = the estimator's native patch size",
+    "min_patch_mean_dn": "patches darker than this mean (DN) are skipped (underexposed: unreliable estimates)",
+    "max_patch_mean_dn": "patches brighter than this mean (DN) are skipped (overexposed: unreliable estimates)",
+    "max_clipped_fraction": "max fraction of pixels at 0 or 255 DN in a usable patch (black / saturated)",
+    "max_flat_fraction": "max fraction of equal neighbour pixels in a usable patch (flat-clipped plateaus)",
+    "smooth_fraction": "when there are more usable patches than needed, keep this least-textured fraction",
+    "model_mode": "physics model mode for the predicted sigma: joint (physical camera) or sequential (paper)",
+    "xi_source": "xi driving the alarm: estimator (Full-Meta xi head) or model (analytic sigma_model - estimated total)",
+    "xi_threshold_dn": "alarm when |filtered xi| exceeds this (DN)",
+    "xi_hysteresis_dn": "alarm clears only below threshold - hysteresis (DN)",
+    "alarm_min_frames": "consecutive processed frames beyond the threshold before the alarm rises",
+    "clear_min_frames": "consecutive processed frames below the clear level before the alarm clears",
+    "filter_alpha": "exponential filter weight of a new frame (0..1] for xi and the per-source sigmas",
+    "image_timeout_s": "no image for this long -> STALE",
+    "metadata_timeout_s": "metadata older than this (relative to the image) -> WARN, frame not evaluated",
+    "min_patches": "fewer usable patches than this -> WARN, frame not evaluated",
+    "alarm_level": "diagnostic level of an xi alarm: WARN or ERROR",
+}
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """Constants of patch selection, aggregation, filtering, alarms and staleness."""
+
+    patches_per_frame: int = 8
+    patch_size: int = 0
+    min_patch_mean_dn: float = 12.0
+    max_patch_mean_dn: float = 243.0
+    max_clipped_fraction: float = 0.01
+    max_flat_fraction: float = 0.9
+    smooth_fraction: float = 0.5
+    model_mode: str = "joint"
+    xi_source: str = "estimator"
+    xi_threshold_dn: float = 1.0
+    xi_hysteresis_dn: float = 0.3
+    alarm_min_frames: int = 5
+    clear_min_frames: int = 10
+    filter_alpha: float = 0.3
+    image_timeout_s: float = 2.0
+    metadata_timeout_s: float = 2.0
+    min_patches: int = 1
+    alarm_level: str = "ERROR"
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type == "int":
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or float(value) != int(value):
+                    raise ValueError(f"{f.name} must be an integer, got {value!r}")
+                object.__setattr__(self, f.name, int(value))
+            elif f.type == "float":
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                    raise ValueError(f"{f.name} must be a finite number, got {value!r}")
+                object.__setattr__(self, f.name, float(value))
+        checks = [
+            (self.patches_per_frame >= 1, "patches_per_frame must be >= 1"),
+            (self.patch_size == 0 or self.patch_size >= 8, "patch_size must be 0 (estimator's) or >= 8"),
+            (0 <= self.min_patch_mean_dn < self.max_patch_mean_dn <= 255, "need 0 <= min_patch_mean_dn < max_patch_mean_dn <= 255"),
+            (0 <= self.max_clipped_fraction <= 1, "max_clipped_fraction must be in [0, 1]"),
+            (0 < self.max_flat_fraction <= 1, "max_flat_fraction must be in (0, 1]"),
+            (0 < self.smooth_fraction <= 1, "smooth_fraction must be in (0, 1]"),
+            (self.model_mode in MODEL_MODES, f"model_mode must be one of {MODEL_MODES}"),
+            (self.xi_source in XI_SOURCES, f"xi_source must be one of {XI_SOURCES}"),
+            (self.xi_threshold_dn > 0, "xi_threshold_dn must be > 0"),
+            (0 <= self.xi_hysteresis_dn < self.xi_threshold_dn, "xi_hysteresis_dn must be in [0, xi_threshold_dn)"),
+            (self.alarm_min_frames >= 1 and self.clear_min_frames >= 1, "alarm/clear_min_frames must be >= 1"),
+            (0 < self.filter_alpha <= 1, "filter_alpha must be in (0, 1]"),
+            (self.image_timeout_s > 0 and self.metadata_timeout_s > 0, "timeouts must be > 0"),
+            (1 <= self.min_patches <= self.patches_per_frame, "min_patches must be in [1, patches_per_frame]"),
+            (self.alarm_level in ALARM_LEVELS, f"alarm_level must be one of {ALARM_LEVELS}"),
+        ]
+        for ok, reason in checks:
+            if not ok:
+                raise ValueError(f"monitor config: {reason}")
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], ignore_unknown: bool = False) -> "MonitorConfig":
+        """Build from a mapping of field names (e.g. node parameters); unknown keys are an error."""
+        names = set(cls.field_names())
+        unknown = sorted(set(values) - names)
+        if unknown and not ignore_unknown:
+            raise ValueError(f"unknown monitor setting(s): {', '.join(unknown)}; known: {', '.join(sorted(names))}")
+        return cls(**{k: v for k, v in values.items() if k in names})
+
+    @classmethod
+    def from_yaml(cls, path: str | Path | None = None) -> "MonitorConfig":
+        """The monitor settings of a ROS params file (default: the package's config/node.yaml).
+
+        Reads the ``ros__parameters`` of the first node entry and keeps the monitor's fields (other node
+        parameters such as topic names are ignored here).
+        """
+        params = read_ros_params(path)
+        return cls.from_mapping(params, ignore_unknown=True)
+
+
+def default_params_path() -> Path:
+    from ..paths import share_dir
+
+    return share_dir() / "config" / "node.yaml"
+
+
+def read_ros_params(path: str | Path | None = None) -> dict[str, Any]:
+    """``ros__parameters`` of the first node in a ROS 2 params YAML file."""
+    p = Path(path) if path else default_params_path()
+    if not p.exists():
+        raise FileNotFoundError(f"parameter file {p} not found")
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{p}: not valid YAML ({exc})") from exc
+    if not isinstance(doc, dict) or not doc:
+        raise ValueError(f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'")
+    node = next(iter(doc.values()))
+    if not isinstance(node, dict) or not isinstance(node.get("ros__parameters"), dict):
+        raise ValueError(f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'")
+    return dict(node["ros__parameters"])

@@ -1,0 +1,228 @@
+"""The per-frame pipeline shared by the live node and the bag replay.
+
+patches -> estimator (batched) -> physics model for the same patches -> median per frame ->
+exponential filter -> xi alarm state machine -> StatusReport / numeric outputs.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import cv2
+import numpy as np
+
+from msg_adapters.diagnostics import ERROR, OK, STALE, WARN, StatusReport
+from noise_monitor.physics import CameraMetadata, NoiseModel
+
+from .alarm import EmaFilter, XiAlarm
+from .config import MonitorConfig
+from .patches import PatchSelection, select_patches
+
+SOURCES = ("pn", "dcsn", "rn")
+ESTIMATOR_KEYS = SOURCES + ("total", "xi")
+#: Box filter (pixels) estimating a patch's clean intensity map for the model prediction.
+SMOOTH_KERNEL = 5
+
+
+class Estimator(Protocol):
+    """The estimator contract (``noise_monitor.estimator.load``)."""
+
+    patch_size: int
+    name: str
+
+    def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | list[CameraMetadata]) -> dict[str, np.ndarray]: ...
+
+
+@dataclass
+class Frame:
+    """One image with the metadata resolved for it (``None`` + ``missing`` when incomplete)."""
+
+    stamp_ns: int
+    image_dn: np.ndarray
+    metadata: CameraMetadata | None
+    missing: list[str] = field(default_factory=list)
+    metadata_age_s: float | None = None  # image stamp minus the stamp of the metadata used
+    metadata_error: str | None = None  # metadata present but invalid (e.g. out of range)
+
+
+def _fmt(value: float) -> str:
+    return f"{value:.6g}"
+
+
+@dataclass
+class FrameResult:
+    """Outcome of one frame: estimates, model prediction, xi, alarm, and the status to publish."""
+
+    stamp_ns: int
+    name: str
+    hardware_id: str
+    level: int
+    message: str
+    processed: bool
+    skip_reason: str | None = None
+    sigma: dict[str, float] = field(default_factory=dict)  # estimator medians (DN): pn dcsn rn total xi
+    model: dict[str, float] = field(default_factory=dict)  # model medians (DN) per effect and total
+    xi: float | None = None  # this frame's xi (per config.xi_source)
+    xi_filtered: float | None = None
+    xi_model: float | None = None  # analytic sigma_model - estimated total
+    filtered: dict[str, float] = field(default_factory=dict)
+    alarm_active: bool = False
+    alarm_state: str = "ok"
+    cause: str | None = None
+    patches: PatchSelection | None = None
+    processing_ms: float = 0.0
+    counters: dict[str, int] = field(default_factory=dict)
+
+    def numeric(self) -> dict[str, float]:
+        """Numbers of a processed frame (for plots, CSV and the numeric topics); empty when skipped."""
+        if not self.processed:
+            return {}
+        out = {f"sigma_{k}": self.sigma[k] for k in SOURCES + ("total",)}
+        out["xi"] = float(self.xi)
+        out["xi_filtered"] = float(self.xi_filtered)
+        out["xi_estimator"] = self.sigma["xi"]
+        out["xi_model"] = float(self.xi_model)
+        out["sigma_model"] = self.model["total"]
+        out.update({f"sigma_model_{k}": v for k, v in self.model.items() if k != "total"})
+        out.update({f"sigma_{k}_filtered": self.filtered[k] for k in SOURCES + ("total",)})
+        out["alarm"] = float(self.alarm_active)
+        out["patches"] = float(len(self.patches.corners))
+        out["processing_ms"] = self.processing_ms
+        return out
+
+    def values(self) -> dict[str, str]:
+        """Diagnostic key/values: numbers as numeric strings, plus the frame counters."""
+        vals = {k: _fmt(v) for k, v in self.numeric().items()}
+        vals.update({k: str(v) for k, v in self.counters.items()})
+        return vals
+
+    def report(self) -> StatusReport:
+        return StatusReport(self.level, self.name, self.message, self.hardware_id, self.values())
+
+
+class Monitor:
+    """Stateful per-camera monitor: call :meth:`process` per frame, :meth:`idle_report` from a timer."""
+
+    def __init__(self, config: MonitorConfig, estimator: Estimator, model: NoiseModel, camera_name: str,
+                 hardware_id: str) -> None:
+        self.config = config
+        self.estimator = estimator
+        self.model = model
+        self.name = f"noise_monitor: {camera_name}"
+        self.hardware_id = hardware_id
+        self.patch_size = config.patch_size or int(estimator.patch_size)
+        self.filter = EmaFilter(config.filter_alpha)
+        self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
+                             config.clear_min_frames)
+        self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0}
+        self.last_received_ns: int | None = None
+        self.last_result: FrameResult | None = None
+
+    # --- bookkeeping -----------------------------------------------------------------------
+    def count_dropped(self, n: int = 1) -> None:
+        """Frames the caller dropped before processing (e.g. the node's worker was busy)."""
+        self.counters["frames_dropped"] += n
+
+    def _result(self, frame: Frame, level: int, message: str, **kw: Any) -> FrameResult:
+        res = FrameResult(frame.stamp_ns, self.name, self.hardware_id, level, message,
+                          counters=dict(self.counters), **kw)
+        self.last_result = res
+        return res
+
+    def _skip(self, frame: Frame, reason: str) -> FrameResult:
+        self.counters["frames_skipped"] += 1
+        level, message = WARN, f"frame not evaluated: {reason}"
+        state = self.alarm.state
+        if state.active:
+            level = max(level, self._alarm_level())
+            message += f"; xi alarm still active: {state.cause}"
+        return self._result(frame, level, message, processed=False, skip_reason=reason,
+                            alarm_active=state.active, alarm_state=state.name, cause=state.cause)
+
+    def _alarm_level(self) -> int:
+        return ERROR if self.config.alarm_level == "ERROR" else WARN
+
+    # --- the pipeline ----------------------------------------------------------------------
+    def skip_reason(self, frame: Frame) -> str | None:
+        """Why a frame cannot be evaluated (metadata problems, unusable image), else None."""
+        cfg = self.config
+        if frame.metadata_error:
+            return f"metadata invalid: {frame.metadata_error}"
+        if frame.metadata is None:
+            if frame.missing:
+                return f"metadata missing: {', '.join(frame.missing)}"
+            return "no metadata for this image"
+        if frame.metadata_age_s is not None and abs(frame.metadata_age_s) > cfg.metadata_timeout_s:
+            return (f"metadata stale: {abs(frame.metadata_age_s):.2f} s between image and metadata "
+                    f"(timeout {cfg.metadata_timeout_s:g} s)")
+        img = frame.image_dn
+        if img.ndim != 2:
+            return f"image must be 2-D gray, got shape {img.shape}"
+        if img.shape[0] < self.patch_size or img.shape[1] < self.patch_size:
+            return f"image {img.shape[1]}x{img.shape[0]} is smaller than the patch size {self.patch_size}"
+        if not np.all(np.isfinite(img)):
+            return "image contains NaN or inf"
+        return None
+
+    def process(self, frame: Frame, received_ns: int | None = None) -> FrameResult:
+        """Evaluate one frame. ``received_ns``: arrival time on the clock used by :meth:`idle_report`
+        (default: the frame stamp)."""
+        t0 = time.perf_counter()
+        self.counters["frames_received"] += 1
+        self.last_received_ns = frame.stamp_ns if received_ns is None else received_ns
+        reason = self.skip_reason(frame)
+        if reason:
+            return self._skip(frame, reason)
+        cfg = self.config
+        meta = frame.metadata
+        selection = select_patches(frame.image_dn, self.patch_size, cfg)
+        if len(selection.corners) < cfg.min_patches:
+            return self._skip(frame, f"{len(selection.corners)} usable patches (need {cfg.min_patches}): "
+                                     f"{selection.describe_rejections()}")
+        patches = selection.extract(frame.image_dn)
+        est = self.estimator.predict(patches, meta)
+        per_patch = {k: np.asarray(est[k], dtype=np.float64).reshape(-1) for k in ESTIMATOR_KEYS}
+        smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in patches])
+        pred = self.model.predict(smooth, meta, mode=cfg.model_mode)
+        model_pp = {k: np.atleast_1d(np.asarray(v, dtype=np.float64)) for k, v in pred.items()}
+        sigma = {k: float(np.median(v)) for k, v in per_patch.items()}
+        model = {k: float(np.median(v)) for k, v in model_pp.items()}
+        xi_model = float(np.median(model_pp["total"] - per_patch["total"]))
+        xi = sigma["xi"] if cfg.xi_source == "estimator" else xi_model
+        filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
+        xi_f = filtered.pop("xi")
+        state = self.alarm.update(xi_f)
+        self.counters["frames_processed"] += 1
+        level, message = self._status(xi_f, meta)
+        return self._result(
+            frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
+            xi_model=xi_model, filtered=filtered, alarm_active=state.active, alarm_state=state.name,
+            cause=state.cause, patches=selection, processing_ms=(time.perf_counter() - t0) * 1e3,
+        )
+
+    def _status(self, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
+        cfg, state = self.config, self.alarm.state
+        detail = f"xi {xi_f:+.2f} DN, threshold {cfg.xi_threshold_dn:g} DN"
+        if state.active:
+            return self._alarm_level(), f"xi alarm: {state.cause} ({detail})"
+        outside = meta.outside_paper_ranges()
+        if outside:
+            return WARN, f"metadata outside the estimator's training ranges: {', '.join(outside)} ({detail})"
+        if state.name == "pending":
+            return OK, f"noise matches the model so far; |xi| above threshold for {state.above} frame(s) ({detail})"
+        return OK, f"noise matches the model ({detail})"
+
+    def idle_report(self, now_ns: int) -> StatusReport:
+        """Status when no new frame was processed: STALE after ``image_timeout_s`` without images,
+        otherwise the last frame's status."""
+        timeout = self.config.image_timeout_s
+        if self.last_received_ns is None:
+            return StatusReport(STALE, self.name, "no image received yet", self.hardware_id, dict(
+                {k: str(v) for k, v in self.counters.items()}))
+        age = (now_ns - self.last_received_ns) / 1e9
+        if age > timeout or self.last_result is None:
+            return StatusReport(STALE, self.name, f"no image for {age:.1f} s (timeout {timeout:g} s)",
+                                self.hardware_id, {**{k: str(v) for k, v in self.counters.items()},
+                                                   "image_age_s": _fmt(age)})
+        return self.last_result.report()

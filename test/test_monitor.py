@@ -1,0 +1,221 @@
+"""Monitor pipeline: patch selection, filter + alarm state machine, staleness, outputs.
+
+The estimator here is a test double honouring the estimator contract, built from the real physics
+model (Immerkaer's noise estimate of each patch, split into sources by the model's proportions), so
+the aggregation and alarm logic is tested independently of the trained network (test_node*.py uses
+the real ``noise_monitor.estimator.load``).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from msg_adapters import ERROR, OK, STALE, WARN, reports_from_msg
+from noise_monitor.monitor import (
+    CAUSE_IMAGE_NOISIER,
+    CAUSE_MODEL_NOISIER,
+    Frame,
+    Monitor,
+    MonitorConfig,
+    XiAlarm,
+    select_patches,
+)
+from noise_monitor.monitor.outputs import OUTPUT_TOPICS, output_topics, rclpy_messages, rosbags_messages
+from noise_monitor.physics import NoiseModel, load_profile
+
+_LAPLACE = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+MODEL = NoiseModel()
+META = load_profile("icx285").metadata(gain_db=18.0, exposure_time_s=0.01, sensor_temperature_c=40.0)
+
+
+class PhysicsSplitEstimator:
+    """Contract-compatible estimator: measured total noise split by the physics model's proportions."""
+
+    patch_size = 64
+    name = "physics-split (test double)"
+
+    def predict(self, patches_dn: np.ndarray, metas) -> dict[str, np.ndarray]:
+        measured = np.array([
+            np.sqrt(np.pi / 2) / 6 * np.abs(cv2.filter2D(p, -1, _LAPLACE)[1:-1, 1:-1]).mean() for p in patches_dn
+        ])
+        pred = MODEL.predict(np.stack([cv2.blur(p, (5, 5)) for p in patches_dn]), metas)
+        out = {k: pred[k] * measured / pred["total"] for k in ("pn", "dcsn", "rn")}
+        return {**out, "total": measured, "xi": pred["total"] - measured}
+
+
+def scene(h: int = 256, w: int = 256) -> np.ndarray:
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    return (120 + 60 * np.sin(2 * np.pi * x / w) * np.cos(1.4 * np.pi * y / h) + 20 * x / w).astype(np.float32)
+
+
+def mono8(img: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(img), 0, 255).astype(np.float32)
+
+
+def make_monitor(**cfg) -> Monitor:
+    return Monitor(MonitorConfig(**cfg), PhysicsSplitEstimator(), MODEL, "cam", "icx285/cam")
+
+
+def frames(rng, n, meta=META, extra_sigma=0.0, start=0):
+    clean = scene()
+    for i in range(start, start + n):
+        noisy, truth = MODEL.simulate(clean, meta, rng)
+        if extra_sigma:
+            noisy = noisy + rng.normal(0.0, extra_sigma, noisy.shape).astype(np.float32)
+        yield Frame(i * 33_000_000, mono8(noisy), meta), truth
+
+
+# --- configuration -------------------------------------------------------------------------
+def test_config_validation_and_yaml():
+    cfg = MonitorConfig.from_yaml()  # the package's config/node.yaml
+    assert cfg == MonitorConfig()  # the shipped file states the defaults
+    with pytest.raises(ValueError, match="xi_hysteresis_dn"):
+        MonitorConfig(xi_threshold_dn=1.0, xi_hysteresis_dn=1.5)
+    with pytest.raises(ValueError, match="unknown monitor setting.*patchez"):
+        MonitorConfig.from_mapping({"patchez": 3})
+    with pytest.raises(ValueError, match="patches_per_frame must be an integer"):
+        MonitorConfig(patches_per_frame=2.5)
+    with pytest.raises(ValueError, match="xi_source"):
+        MonitorConfig(xi_source="magic")
+
+
+# --- patch selection -----------------------------------------------------------------------
+def test_patches_avoid_saturated_black_and_flat_regions_and_spread(rng):
+    img = mono8(scene(512, 512) + rng.normal(0, 2.0, (512, 512)))
+    img[:128, :] = 255.0  # saturated band
+    img[384:, :256] = 0.0  # black corner
+    img[384:, 256:] = 200.0  # flat plateau (clipped below 255)
+    cfg = MonitorConfig(patches_per_frame=6)
+    sel = select_patches(img, 64, cfg)
+    assert len(sel.corners) == 6
+    assert sel.rejected["saturated"] >= 16 and sel.rejected["black"] >= 8 and sel.rejected["flat"] >= 8
+    for y, x in sel.corners:
+        patch = img[y : y + 64, x : x + 64]
+        assert 128 <= y and y + 64 <= 384 and 0 < patch.min() and patch.max() < 255
+    pts = np.array(sel.corners, float)
+    dists = np.linalg.norm(pts[:, None] - pts[None], axis=-1)[np.triu_indices(6, 1)]
+    assert dists.min() >= 64  # no two chosen patches overlap
+    assert np.ptp(pts[:, 1]) >= 256  # they spread across the frame's width
+
+
+def test_patches_prefer_smooth_regions(rng):
+    img = mono8(np.full((256, 512), 120.0) + rng.normal(0, 2.0, (256, 512)))
+    img[:, 256:] += np.where((np.arange(256) // 4) % 2 == 0, 40.0, -40.0)[None, :]  # stripes on the right
+    sel = select_patches(img, 64, MonitorConfig(patches_per_frame=4, smooth_fraction=0.5))
+    assert all(x + 64 <= 256 for _, x in sel.corners)
+
+
+def test_no_usable_patches_is_a_warning_naming_the_reason():
+    mon = make_monitor()
+    res = mon.process(Frame(0, np.full((256, 256), 255.0, np.float32), META))
+    assert res.level == WARN and not res.processed and "saturated" in res.message
+    assert res.numeric() == {}
+
+
+# --- alarm state machine -------------------------------------------------------------------
+def test_alarm_needs_min_frames_and_clears_with_hysteresis():
+    alarm = XiAlarm(threshold=1.0, hysteresis=0.3, min_frames=3, clear_frames=2)
+    states = [alarm.update(x).name for x in (1.5, 1.5, 0.5, 1.5, 1.5, 1.5)]
+    assert states == ["pending", "pending", "ok", "pending", "pending", "alarm"]
+    assert alarm.state.cause == CAUSE_MODEL_NOISIER
+    # between clear level (0.7) and threshold: stays active (no flapping)
+    assert [alarm.update(x).active for x in (0.9, 0.8, 0.95, 0.9)] == [True] * 4
+    assert alarm.update(-1.6).cause == CAUSE_IMAGE_NOISIER  # sign change updates the cause
+    assert [alarm.update(x).active for x in (0.5, 0.2)] == [True, False]
+    assert alarm.state.episodes == 1 and alarm.state.cause is None
+
+
+def test_alarm_does_not_flap_on_noisy_xi_near_threshold(rng):
+    mon = make_monitor()
+    alarm = XiAlarm(1.0, 0.3, 5, 10)
+    xi = 0.6 + rng.normal(0.0, 0.5, 400)  # frame-level xi scattering across the threshold
+    xf = mon.filter.update({"xi": xi[0]})["xi"]
+    active = []
+    for v in xi:
+        xf = mon.filter.update({"xi": float(v)})["xi"]
+        active.append(alarm.update(xf).active)
+    assert sum(np.diff(np.asarray(active, int)) != 0) <= 2
+
+
+# --- the pipeline on simulated frames ------------------------------------------------------
+def test_clean_frames_stay_ok_and_sigmas_track_truth(rng):
+    mon = make_monitor()
+    for frame, truth in frames(rng, 40):
+        res = mon.process(frame)
+        assert res.level == OK and not res.alarm_active, res.message
+    for k in ("pn", "rn", "total"):
+        assert res.filtered[k] == pytest.approx(truth[k], rel=0.1)
+    assert abs(res.xi_filtered) < 0.5
+    assert res.counters["frames_processed"] == 40
+    vals = res.report().values
+    assert float(vals["sigma_rn"]) == pytest.approx(res.sigma["rn"], rel=1e-4)
+    assert vals["frames_received"] == "40" and set(vals) >= {"sigma_pn", "sigma_dcsn", "xi", "sigma_model"}
+
+
+def test_extra_image_noise_raises_image_noisier_alarm(rng):
+    mon = make_monitor()
+    for frame, _ in frames(rng, 10):
+        mon.process(frame)
+    for n, (frame, _) in enumerate(frames(rng, 20, extra_sigma=5.0, start=10), 1):
+        res = mon.process(frame)
+        if res.alarm_active:
+            break
+    assert res.alarm_active and n <= 10 and res.level == ERROR
+    assert res.cause == CAUSE_IMAGE_NOISIER and CAUSE_IMAGE_NOISIER in res.message
+    expected = res.model["total"] - np.sqrt(res.model["total"] ** 2 + 25.0)
+    assert res.xi_filtered == pytest.approx(expected, abs=0.6)
+
+
+def test_doubled_thermal_white_noise_metadata_raises_model_noisier_alarm(rng):
+    mon = make_monitor()
+    meta = META.replace(gain_db=24.0)  # readout noise is a visible share of the total at high gain
+    wrong = meta.replace(thermal_white_noise_v_per_sqrt_hz=2 * meta.thermal_white_noise_v_per_sqrt_hz)
+    for n, (frame, _) in enumerate(frames(rng, 20, meta=meta), 1):
+        frame.metadata = wrong  # the image is generated with META, the metadata claims twice the noise
+        res = mon.process(frame)
+        if res.alarm_active:
+            break
+    assert res.alarm_active and n <= 10 and res.cause == CAUSE_MODEL_NOISIER and res.xi_filtered > 0
+
+
+def test_metadata_missing_stale_invalid_give_warnings(rng):
+    mon = make_monitor()
+    img = next(frames(rng, 1))[0].image_dn
+    res = mon.process(Frame(0, img, None, missing=["gain_db", "exposure_time_s"]))
+    assert res.level == WARN and "metadata missing: gain_db, exposure_time_s" in res.message
+    res = mon.process(Frame(1, img, META, metadata_age_s=3.5))
+    assert res.level == WARN and "metadata stale: 3.50 s" in res.message
+    res = mon.process(Frame(2, img, None, metadata_error="gain_db = 99 dB is outside the allowed range"))
+    assert res.level == WARN and "gain_db = 99" in res.message
+    assert mon.counters["frames_skipped"] == 3 and mon.counters["frames_processed"] == 0
+
+
+def test_idle_report_goes_stale(rng):
+    mon = make_monitor(image_timeout_s=1.0)
+    assert mon.idle_report(0).level == STALE
+    frame = next(frames(rng, 1))[0]
+    mon.process(frame, received_ns=10_000_000_000)
+    assert mon.idle_report(10_500_000_000).level == OK
+    stale = mon.idle_report(11_600_000_000)
+    assert stale.level == STALE and "no image for 1.6 s" in stale.message
+    assert stale.hardware_id == "icx285/cam" and stale.name == "noise_monitor: cam"
+
+
+# --- outputs -------------------------------------------------------------------------------
+def test_outputs_same_topics_and_values_for_rclpy_and_rosbags(rng):
+    mon = make_monitor()
+    res = mon.process(next(frames(rng, 1))[0])
+    a, b = rclpy_messages(res), rosbags_messages(res)
+    assert set(a) == set(b) == set(OUTPUT_TOPICS)
+    for topic in OUTPUT_TOPICS:
+        if topic == "/diagnostics":
+            assert reports_from_msg(a[topic]) == reports_from_msg(b[topic]) == [res.report()]
+        else:
+            assert a[topic].data == pytest.approx(b[topic].data)
+    assert a["/noise_monitor/sigma_rn"].data == pytest.approx(res.sigma["rn"], rel=1e-6)
+    skipped = mon.process(Frame(5, np.zeros((256, 256), np.float32), None, missing=["gain_db"]))
+    assert set(rclpy_messages(skipped)) == {"/diagnostics"}
+    idle = rosbags_messages(mon.idle_report(10**12), stamp_ns=10**12)
+    assert reports_from_msg(idle["/diagnostics"])[0].level == STALE
+    assert "/cam_monitor/xi" in output_topics("cam_monitor")
