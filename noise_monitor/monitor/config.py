@@ -23,7 +23,7 @@ DESCRIPTIONS: dict[str, str] = {
     "max_flat_fraction": "max fraction of equal neighbour pixels in a usable patch (flat-clipped plateaus)",
     "smooth_fraction": "when there are more usable patches than needed, keep this least-textured fraction",
     "model_mode": "physics model mode for the predicted sigma: joint (physical camera) or sequential (paper)",
-    "xi_source": "xi driving the alarm: estimator (Full-Meta xi head) or model (analytic sigma_model - estimated total)",
+    "xi_source": "xi driving the alarm: estimator (its xi output) or model (this analytic model - the estimated image noise)",
     "xi_threshold_dn": "alarm when |filtered xi| exceeds this (DN)",
     "xi_hysteresis_dn": "alarm clears only below threshold - hysteresis (DN)",
     "alarm_min_frames": "consecutive processed frames beyond the threshold before the alarm rises",

@@ -61,11 +61,11 @@ class FrameResult:
     message: str
     processed: bool
     skip_reason: str | None = None
-    sigma: dict[str, float] = field(default_factory=dict)  # estimator medians (DN): pn dcsn rn total xi
+    sigma: dict[str, float] = field(default_factory=dict)  # estimator medians (DN): pn dcsn rn total xi image
     model: dict[str, float] = field(default_factory=dict)  # model medians (DN) per effect and total
     xi: float | None = None  # this frame's xi (per config.xi_source)
     xi_filtered: float | None = None
-    xi_model: float | None = None  # analytic sigma_model - estimated total
+    xi_model: float | None = None  # analytic sigma_model (this model, these patches) - estimated image noise
     filtered: dict[str, float] = field(default_factory=dict)
     alarm_active: bool = False
     alarm_state: str = "ok"
@@ -82,6 +82,7 @@ class FrameResult:
         out["xi"] = float(self.xi)
         out["xi_filtered"] = float(self.xi_filtered)
         out["xi_estimator"] = self.sigma["xi"]
+        out["sigma_image"] = self.sigma["image"]
         out["xi_model"] = float(self.xi_model)
         out["sigma_model"] = self.model["total"]
         out.update({f"sigma_model_{k}": v for k, v in self.model.items() if k != "total"})
@@ -140,6 +141,12 @@ class Monitor:
         return self._result(frame, level, message, processed=False, skip_reason=reason,
                             alarm_active=state.active, alarm_state=state.name, cause=state.cause)
 
+    def reject(self, stamp_ns: int, reason: str, received_ns: int | None = None) -> FrameResult:
+        """Count and report an input that never became a Frame (e.g. an unsupported image encoding)."""
+        self.counters["frames_received"] += 1
+        self.last_received_ns = stamp_ns if received_ns is None else received_ns
+        return self._skip(Frame(stamp_ns, np.zeros((0, 0), np.float32), None), reason)
+
     def _alarm_level(self) -> int:
         return ERROR if self.config.alarm_level == "ERROR" else WARN
 
@@ -188,7 +195,10 @@ class Monitor:
         model_pp = {k: np.atleast_1d(np.asarray(v, dtype=np.float64)) for k, v in pred.items()}
         sigma = {k: float(np.median(v)) for k, v in per_patch.items()}
         model = {k: float(np.median(v)) for k, v in model_pp.items()}
-        xi_model = float(np.median(model_pp["total"] - per_patch["total"]))
+        # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
+        image_pp = np.asarray(est.get("sigma_image", est["total"]), dtype=np.float64).reshape(-1)
+        sigma["image"] = float(np.median(image_pp))
+        xi_model = float(np.median(model_pp["total"] - image_pp))
         xi = sigma["xi"] if cfg.xi_source == "estimator" else xi_model
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")

@@ -1,0 +1,95 @@
+"""A small header-stamp synchroniser for images and their metadata (no message_filters needed).
+
+An image is paired with the metadata whose stamp is within ``tolerance_s``. If none has arrived, the
+image waits up to ``wait_s`` (metadata may come slightly later); then it is released with the latest
+metadata stamped before it (sample-and-hold; the caller judges its age) or with none.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+T = TypeVar("T")
+M = TypeVar("M")
+
+
+@dataclass(frozen=True)
+class Matched(Generic[T, M]):
+    """An image payload with the metadata chosen for it (``None`` if there was none)."""
+
+    stamp_ns: int
+    image: T
+    received_ns: int
+    metadata: M | None = None
+    metadata_stamp_ns: int | None = None
+
+    @property
+    def metadata_age_s(self) -> float | None:
+        """Image stamp minus metadata stamp (s); None without metadata."""
+        return None if self.metadata_stamp_ns is None else (self.stamp_ns - self.metadata_stamp_ns) / 1e9
+
+
+class StampSynchronizer(Generic[T, M]):
+    """Pairs images with metadata by header stamp; thread-unsafe (call from one executor thread)."""
+
+    def __init__(self, tolerance_s: float, wait_s: float, history: int = 64, max_pending: int = 4) -> None:
+        if tolerance_s < 0 or wait_s < 0 or history < 1 or max_pending < 1:
+            raise ValueError("tolerance_s and wait_s must be >= 0, history and max_pending >= 1")
+        self.tol_ns = int(tolerance_s * 1e9)
+        self.wait_ns = int(wait_s * 1e9)
+        self.metadata: deque[tuple[int, M]] = deque(maxlen=history)
+        self.pending: deque[tuple[int, T, int]] = deque()
+        self.max_pending = max_pending
+
+    def _exact(self, stamp_ns: int) -> tuple[int, M] | None:
+        best = None
+        for s, m in self.metadata:
+            d = abs(s - stamp_ns)
+            if d <= self.tol_ns and (best is None or d < abs(best[0] - stamp_ns)):
+                best = (s, m)
+        return best
+
+    def _held(self, stamp_ns: int) -> tuple[int, M] | None:
+        older = [(s, m) for s, m in self.metadata if s <= stamp_ns + self.tol_ns]
+        return max(older, key=lambda sm: sm[0]) if older else None
+
+    @staticmethod
+    def _pair(stamp: int, image: T, received: int, meta: tuple[int, M] | None) -> Matched[T, M]:
+        return Matched(stamp, image, received, meta[1] if meta else None, meta[0] if meta else None)
+
+    def add_metadata(self, stamp_ns: int, metadata: M) -> list[Matched[T, M]]:
+        """Store metadata; returns the waiting images it completes."""
+        self.metadata.append((stamp_ns, metadata))
+        out, keep = [], deque()
+        for stamp, image, received in self.pending:
+            if abs(stamp - stamp_ns) <= self.tol_ns:
+                out.append(self._pair(stamp, image, received, (stamp_ns, metadata)))
+            else:
+                keep.append((stamp, image, received))
+        self.pending = keep
+        return out
+
+    def add_image(self, stamp_ns: int, image: T, now_ns: int) -> list[Matched[T, M]]:
+        """Returns the image paired at once, or nothing while it waits (plus any overflowed image)."""
+        exact = self._exact(stamp_ns)
+        if exact is not None or self.wait_ns == 0:
+            return [self._pair(stamp_ns, image, now_ns, exact or self._held(stamp_ns))]
+        self.pending.append((stamp_ns, image, now_ns))
+        out = []
+        while len(self.pending) > self.max_pending:
+            stamp, img, received = self.pending.popleft()
+            out.append(self._pair(stamp, img, received, self._held(stamp)))
+        return out
+
+    def poll(self, now_ns: int) -> list[Matched[T, M]]:
+        """Release images that waited ``wait_s`` without matching metadata."""
+        out = []
+        while self.pending and now_ns - self.pending[0][2] >= self.wait_ns:
+            stamp, image, received = self.pending.popleft()
+            out.append(self._pair(stamp, image, received, self._held(stamp)))
+        return out
+
+    def clear(self) -> None:
+        self.metadata.clear()
+        self.pending.clear()
