@@ -74,7 +74,7 @@ def _coerce(name: str, value: Any, default: Any) -> Any:
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if not isinstance(value, kind) or isinstance(value, bool) != isinstance(default, bool):
-        raise ValueError(f"parameter {name} must be a {kind.__name__}, got {value!r}")
+        raise ValueError(f"parameter {name} must be of type {kind.__name__}, got {value!r}")
     return value
 
 
@@ -281,15 +281,17 @@ def node_class():
 
 
 # --- running it ---------------------------------------------------------------------------------
-def spin(ros_args: list[str], overrides: dict[str, Any], duration_s: float | None = None,
+def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = None,
          json_path: str | None = None) -> int:
-    """Run the node until Ctrl-C (or ``duration_s``); optional JSON summary at exit."""
+    """Run the node until Ctrl-C (or ``duration_s``); optional JSON summary at exit.
+
+    ``argv``: process arguments as rclpy.init expects them (ROS arguments after ``--ros-args``)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     context = rclpy.Context()
-    rclpy.init(args=["noise_monitor", "--ros-args", *ros_args] if ros_args else None, context=context)
+    rclpy.init(args=argv, context=context)
     node = None
     try:
         params = [Parameter(k, value=v) for k, v in overrides.items()]
@@ -345,17 +347,16 @@ def run(args: argparse.Namespace) -> int:
     overrides = {k: getattr(args, k) for k in _CLI_OVERRIDES if getattr(args, k) is not None}
     if args.duration is not None and args.duration <= 0:
         raise ValueError("--duration must be > 0")
-    return spin(["--params-file", str(params_file), *args.ros_args], overrides, args.duration, args.json)
+    argv = ["noise-monitor", "--ros-args", "--params-file", str(params_file), *args.ros_args]
+    return spin(argv, overrides, args.duration, args.json)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Console script ``noise_monitor_node`` (ROS style: configure with --ros-args)."""
     import sys
 
-    args = sys.argv[1:] if argv is None else argv
-    ros_args = args[args.index("--ros-args") + 1:] if "--ros-args" in args else []
     try:
-        return spin(ros_args, {})
+        return spin(list(sys.argv if argv is None else ["noise_monitor_node", *argv]), {})
     except (ValueError, FileNotFoundError) as exc:
         print(f"noise_monitor_node: error: {exc}", file=sys.stderr)
         return 2

@@ -219,3 +219,15 @@ def test_outputs_same_topics_and_values_for_rclpy_and_rosbags(rng):
     idle = rosbags_messages(mon.idle_report(10**12), stamp_ns=10**12)
     assert reports_from_msg(idle["/diagnostics"])[0].level == STALE
     assert "/cam_monitor/xi" in output_topics("cam_monitor")
+
+
+@pytest.mark.parametrize("mode,extra", [("joint", ["prnu"]), ("sequential", None)])
+def test_fast_patch_prediction_equals_model_predict(rng, mode, extra):
+    from noise_monitor.monitor.model_patches import predict_patches
+
+    model = NoiseModel(extra=extra)
+    maps = np.clip(rng.normal(128, 70, (3, 32, 32)), -5, 260).astype(np.float32)  # includes clipping
+    slow, fast = model.predict(maps, META, mode=mode), predict_patches(model, maps, META, mode)
+    assert set(slow) == set(fast)
+    for k in slow:
+        np.testing.assert_allclose(fast[k], slow[k], rtol=1e-9, atol=1e-12)

@@ -58,24 +58,46 @@ def candidate_corners(height: int, width: int, size: int, k: int) -> list[tuple[
     return []
 
 
-def _texture(patch: np.ndarray) -> float:
-    """Mean gradient of the 4x area-downsampled patch (noise is averaged away, structure stays)."""
-    s = max(patch.shape[0] // 4, 2)
-    small = cv2.resize(patch, (s, s), interpolation=cv2.INTER_AREA)
-    return float(np.abs(np.diff(small, axis=0)).mean() + np.abs(np.diff(small, axis=1)).mean())
+class _BoxSums:
+    """Per-candidate sums of pixel statistics via integral images (O(image) for all candidates)."""
+
+    def __init__(self, image: np.ndarray, size: int) -> None:
+        self.size = size
+        img = np.ascontiguousarray(image, dtype=np.float32)
+        self.value = cv2.integral(img, sdepth=cv2.CV_64F)
+        self.low = cv2.integral((img <= _LOW).astype(np.uint8))
+        self.high = cv2.integral((img >= _HIGH).astype(np.uint8))
+        self.eq_x = cv2.integral((img[:, 1:] == img[:, :-1]).astype(np.uint8))
+        self.eq_y = cv2.integral((img[1:] == img[:-1]).astype(np.uint8))
+        # texture: gradients of the 4x area-downsampled image (noise averages out, structure stays)
+        h4, w4 = img.shape[0] // 4, img.shape[1] // 4
+        small = cv2.resize(img[: 4 * h4, : 4 * w4], (w4, h4), interpolation=cv2.INTER_AREA)
+        grad = np.zeros_like(small)
+        grad[:, 1:] += np.abs(np.diff(small, axis=1))
+        grad[1:] += np.abs(np.diff(small, axis=0))
+        self.grad = cv2.integral(grad, sdepth=cv2.CV_64F)
+
+    @staticmethod
+    def _sum(table: np.ndarray, y: int, x: int, h: int, w: int) -> float:
+        return float(table[y + h, x + w] - table[y, x + w] - table[y + h, x] + table[y, x])
+
+    def stats(self, y: int, x: int) -> tuple[float, float, float, float, float]:
+        """(mean, fraction at 0 DN, fraction at 255 DN, fraction of equal neighbours, texture)."""
+        s = self.size
+        n = float(s * s)
+        equal = (self._sum(self.eq_x, y, x, s, s - 1) + self._sum(self.eq_y, y, x, s - 1, s)) / (2.0 * s * (s - 1))
+        s4 = max(s // 4, 1)
+        texture = self._sum(self.grad, y // 4, x // 4, s4, s4) / (s4 * s4)
+        return (self._sum(self.value, y, x, s, s) / n, self._sum(self.low, y, x, s, s) / n,
+                self._sum(self.high, y, x, s, s) / n, equal, texture)
 
 
-def _reject_reason(patch: np.ndarray, cfg: MonitorConfig) -> str | None:
-    mean = float(patch.mean())
-    n = patch.size
-    if mean < cfg.min_patch_mean_dn or np.count_nonzero(patch <= _LOW) > cfg.max_clipped_fraction * n:
+def _reject_reason(mean: float, low: float, high: float, equal: float, cfg: MonitorConfig) -> str | None:
+    if mean < cfg.min_patch_mean_dn or low > cfg.max_clipped_fraction:
         return "black"
-    if mean > cfg.max_patch_mean_dn or np.count_nonzero(patch >= _HIGH) > cfg.max_clipped_fraction * n:
+    if mean > cfg.max_patch_mean_dn or high > cfg.max_clipped_fraction:
         return "saturated"
-    flat = (np.count_nonzero(patch[:, 1:] == patch[:, :-1]) + np.count_nonzero(patch[1:] == patch[:-1])) / (
-        2.0 * patch.shape[0] * (patch.shape[1] - 1)
-    )
-    if flat > cfg.max_flat_fraction:
+    if equal > cfg.max_flat_fraction:
         return "flat"
     return None
 
@@ -98,14 +120,15 @@ def select_patches(image: np.ndarray, size: int, cfg: MonitorConfig) -> PatchSel
     rejected = dict.fromkeys(REJECT_REASONS, 0)
     usable: list[tuple[int, int]] = []
     texture: list[float] = []
+    sums = _BoxSums(image, size) if corners else None
     for y, x in corners:
-        patch = image[y : y + size, x : x + size]
-        reason = _reject_reason(patch, cfg)
+        mean, low, high, equal, tex = sums.stats(y, x)
+        reason = _reject_reason(mean, low, high, equal, cfg)
         if reason:
             rejected[reason] += 1
         else:
             usable.append((y, x))
-            texture.append(_texture(patch))
+            texture.append(tex)
     if len(usable) > k:
         order = np.argsort(texture, kind="stable")
         keep = order[: max(k, int(np.ceil(cfg.smooth_fraction * len(usable))))]

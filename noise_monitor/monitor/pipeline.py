@@ -17,6 +17,7 @@ from noise_monitor.physics import CameraMetadata, NoiseModel
 
 from .alarm import EmaFilter, XiAlarm
 from .config import MonitorConfig
+from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
 
 SOURCES = ("pn", "dcsn", "rn")
@@ -191,8 +192,7 @@ class Monitor:
         est = self.estimator.predict(patches, meta)
         per_patch = {k: np.asarray(est[k], dtype=np.float64).reshape(-1) for k in ESTIMATOR_KEYS}
         smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in patches])
-        pred = self.model.predict(smooth, meta, mode=cfg.model_mode)
-        model_pp = {k: np.atleast_1d(np.asarray(v, dtype=np.float64)) for k, v in pred.items()}
+        model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
         sigma = {k: float(np.median(v)) for k, v in per_patch.items()}
         model = {k: float(np.median(v)) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)

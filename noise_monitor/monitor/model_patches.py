@@ -1,0 +1,41 @@
+"""Fast physics-model prediction for a batch of patches: histogram x tables instead of per-pixel interpolation.
+
+``NoiseModel.predict`` on an (N, H, W) clean-intensity batch interpolates the model's moment tables at
+every pixel. Linear interpolation is linear in the table values, so the patch means of E[n|v] and
+E[n^2|v] equal (linear-weight histogram of the patch on the table grid) @ (table): one bincount per
+patch and a small matrix product, with the same result.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from noise_monitor.physics import CameraMetadata, NoiseModel
+from noise_monitor.physics.model import TABLE_STEP_DN
+
+DN_MAX = 255.0
+
+
+def histogram_weights(maps: np.ndarray) -> np.ndarray:
+    """(N, G) linear-interpolation weights of each map's pixels on the grid 0, step, ..., 255 (rows sum to 1)."""
+    n = maps.shape[0]
+    grid_len = int(round(DN_MAX / TABLE_STEP_DN)) + 1
+    pos = np.clip(maps.reshape(n, -1).astype(np.float64), 0.0, DN_MAX) / TABLE_STEP_DN
+    lo = np.minimum(np.floor(pos).astype(np.int64), grid_len - 2)
+    frac = pos - lo
+    offset = (np.arange(n) * grid_len)[:, None]
+    w = np.bincount((lo + offset).ravel(), (1.0 - frac).ravel(), minlength=n * grid_len)
+    w += np.bincount((lo + 1 + offset).ravel(), frac.ravel(), minlength=n * grid_len)
+    return w.reshape(n, grid_len) / pos.shape[1]
+
+
+def predict_patches(model: NoiseModel, maps: np.ndarray, meta: CameraMetadata, mode: str = "joint") -> dict[str, np.ndarray]:
+    """Predicted sigma (DN) per effect and ``"total"`` for each clean-intensity map of an (N, H, W) batch;
+    equal to ``model.predict(maps, meta, mode)``."""
+    weights = histogram_weights(maps)
+    out: dict[str, np.ndarray] = {}
+    for name, (t1, t2) in model.tables(meta, mode).items():
+        var = weights @ t2 - (weights @ t1) ** 2
+        out[name] = np.sqrt(np.maximum(var, 0.0))
+    if "total" not in out:  # sequential protocol: total = sqrt of the sum of squares
+        out["total"] = np.sqrt(sum(out[e.name] ** 2 for e in model.noise_effects))
+    return out
