@@ -15,7 +15,7 @@ from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter, typestore
 from noise_monitor.physics import load_profile
 
-SMALL = dict(frames=4, width=48, height=32)
+SMALL = dict(frames=4, width=48, height=32, hold_s=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +54,8 @@ def test_rosbag2_directory_without_metadata_yaml_and_inner_file(tmp_path):
 
 
 def test_stated_metadata_is_what_the_reader_sees(tmp_path):
-    bag = simulate_bag(tmp_path / "t.mcap", "ev76c661", "double_thermal_noise", frames=10, width=32, height=32)
+    bag = simulate_bag(tmp_path / "t.mcap", "ev76c661", "double_thermal_noise", frames=10, width=32, height=32,
+                       hold_s=0.0)
     truth = load_truth(bag)
     w = load_profile("ev76c661").values["thermal_white_noise_v_per_sqrt_hz"]
     with open_bag(bag) as reader:
@@ -79,7 +80,7 @@ def test_profile_fills_fields_missing_from_the_bag(tmp_path):
         no_profile = list(reader.frames())
         with_profile = list(reader.frames(profile="icx285"))
     assert no_profile[0].metadata is None and "full_well_e" in no_profile[0].missing
-    assert no_profile[0].skip_reason.startswith("metadata incomplete")
+    assert no_profile[0].skip_reason.startswith("metadata missing: ")
     # the profile has no gain/exposure: still incomplete, the reason names exactly those
     assert with_profile[0].missing == ["gain_db", "exposure_time_s"]
     assert "gain_db, exposure_time_s" in with_profile[0].skip_reason
@@ -135,7 +136,7 @@ def test_bad_image_is_skipped_with_reason(tmp_path):
         w.write("/camera/image_raw", msg, 7)
     with open_bag(path) as reader:
         (frame,) = reader.frames(profile="icx285")
-    assert frame.image_dn is None and "unsupported image encoding" in frame.skip_reason
+    assert frame.image_dn is None and frame.skip_reason.startswith("image unusable: unsupported image encoding")
 
 
 def test_camera_info_mismatch_is_a_skip_reason(tmp_path):

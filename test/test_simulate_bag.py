@@ -56,7 +56,7 @@ def test_scenarios_cover_the_issue_list():
                                                     ("double_thermal_noise", "ev76c661", "+"),
                                                     ("double_temperature", "ev76c661", "+")])
 def test_truth_records_corruption_and_xi_sign(tmp_path, scenario, profile, sign):
-    bag = simulate_bag(tmp_path / "b.mcap", profile, scenario, frames=10, width=64, height=48, seed=2)
+    bag = simulate_bag(tmp_path / "b.mcap", profile, scenario, frames=10, width=64, height=48, seed=2, hold_s=0)
     truth = load_truth(bag)
     (ep,) = truth["episodes"]
     assert ep["xi_sign"] == sign and ep["start_index"] == 4 and ep["end_index"] == 6
@@ -65,6 +65,15 @@ def test_truth_records_corruption_and_xi_sign(tmp_path, scenario, profile, sign)
     if scenario == "image_noise":
         for r in truth["frames"][4:7]:  # the paper's expectation: xi = sigma_model - sqrt(sigma_model^2 + 25)
             assert r["xi"] == pytest.approx(r["sigma_model"] - np.hypot(r["sigma_model"], 5.0), abs=0.25)
+
+
+def test_metadata_is_held_between_updates_while_image_noise_changes_per_frame(tmp_path):
+    bag = simulate_bag(tmp_path / "h.mcap", "icx285", "field", frames=20, width=32, height=32, fps=5.0, hold_s=1.0)
+    frames = load_truth(bag)["frames"]
+    gains = [r["true_metadata"]["gain_db"] for r in frames]
+    assert len(set(gains)) == 4 and gains[:5] == [gains[0]] * 5 and gains[5] > gains[4]
+    noisy = [r["index"] for r in frames if r["image_noise_dn"]]
+    assert noisy == list(range(8, 14))  # the episode follows campaign time, not the metadata updates
 
 
 def test_effect_switched_on_adds_unmodelled_noise(tmp_path):

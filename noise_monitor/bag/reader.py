@@ -48,6 +48,8 @@ class BagFrame:
     missing: list[str] = field(default_factory=list)
     skip_reason: str | None = None
     raw_metadata: dict[str, Any] = field(default_factory=dict)
+    metadata_error: str | None = None  # metadata present but invalid (out of range, not a number)
+    metadata_age_s: float | None = None  # image stamp minus the stamp of the metadata message used
 
 
 def _stamp_ns(msg: Any, log_time: int) -> int:
@@ -79,7 +81,8 @@ class BagReader:
     """An opened bag with its detected topics. Iterate :meth:`frames`; ``len()`` = number of images."""
 
     def __init__(self, path: str | Path, image_topic: str | None = None, metadata_topic: str | None = None,
-                 camera_info_topic: str | None = None, temperature_topic: str | None = None) -> None:
+                 camera_info_topic: str | None = None, temperature_topic: str | None = None,
+                 detect_topics: bool = True) -> None:
         self.path = Path(path)
         self._bag_path = _resolve_bag_path(self.path)
         store = get_typestore(Stores.ROS2_JAZZY)
@@ -93,6 +96,9 @@ class BagReader:
         if not self.topics or self._reader.message_count == 0:
             self.close()
             raise BagError(f"bag {self.path} is empty (no messages)")
+        self.image_topic = self.metadata_topic = self.camera_info_topic = self.temperature_topic = None
+        if not detect_topics:  # raw access only (playback of every topic)
+            return
         try:
             self.image_topic = self._pick("image", image_topic, self._image_candidates(), required=True)
             self.metadata_topic = self._pick("metadata", metadata_topic, self._metadata_candidates())
@@ -142,7 +148,11 @@ class BagReader:
 
     # --- info ------------------------------------------------------------------------------------
     def __len__(self) -> int:
-        return sum(c.msgcount for c in self._conns(self.image_topic))
+        return self.count([self.image_topic]) if self.image_topic else 0
+
+    def count(self, topics: list[str]) -> int:
+        """Number of messages on these topics."""
+        return sum(c.msgcount for c in self._reader.connections if c.topic in topics)
 
     @property
     def start_ns(self) -> int:
@@ -150,7 +160,8 @@ class BagReader:
 
     @property
     def duration_s(self) -> float:
-        return (self._reader.end_time - self._reader.start_time) / 1e9 if len(self) > 1 else 0.0
+        """Log time from the first to the last message of the bag (s)."""
+        return max(0, self._reader.end_time - self._reader.start_time) / 1e9
 
     def _conns(self, topic: str | None) -> list[Connection]:
         return [c for c in self._reader.connections if c.topic == topic]
@@ -168,6 +179,23 @@ class BagReader:
             except _READ_ERRORS as exc:
                 raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
             yield conn.topic, log_time, msg
+
+    def raw_messages(self, topics: list[str] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
+        """(topic, message type, log time ns, CDR bytes) in log-time order, without deserialising."""
+        conns = [c for c in self._reader.connections if topics is None or c.topic in topics]
+        it = self._reader.messages(connections=conns)
+        while True:
+            try:
+                conn, log_time, raw = next(it)
+            except StopIteration:
+                return
+            except _READ_ERRORS as exc:
+                raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
+            yield conn.topic, conn.msgtype, log_time, bytes(raw)
+
+    @property
+    def message_count(self) -> int:
+        return int(self._reader.message_count)
 
     def _metadata_of(self, msg: Any) -> dict[str, Any]:
         mtype = getattr(msg, "__msgtype__", "")
@@ -192,40 +220,49 @@ class BagReader:
         return [s for s, _ in items], [v for _, v in items]
 
     # --- frames ----------------------------------------------------------------------------------
-    def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None) -> Iterator[BagFrame]:
-        """Yield every image as a :class:`BagFrame` in stamp order.
+    def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None,
+               sync_tolerance_s: float = 0.01, color: str = "luma") -> Iterator[BagFrame]:
+        """Yield every image as a :class:`BagFrame` in log-time order, prepared as the node prepares it.
 
-        Metadata is the latest metadata message with a header stamp <= the image stamp (an exact stamp
-        match is the contract), merged over ``profile`` (dynamic values win) and the latest Temperature.
-        Frames that cannot be processed carry ``skip_reason`` (bad image, incomplete or invalid metadata).
+        Metadata is the message whose header stamp is nearest the image stamp within ``sync_tolerance_s``
+        (equal stamps are the contract), else the latest older one; it is merged over ``profile``
+        (dynamic values win) and the latest Temperature. Unusable CameraInfo/Temperature messages are
+        ignored. Frames that cannot be evaluated carry ``skip_reason`` worded like the monitor's:
+        ``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``.
         """
         prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
         depth = bit_depth or (prof.bit_depth if prof else None)
         meta_t, meta_v = self._timeline(self.metadata_topic, self._metadata_of)
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
         info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
+        tol = int(sync_tolerance_s * 1e9)
         for index, (_, log_time, msg) in enumerate(self.messages([self.image_topic])):
             stamp = _stamp_ns(msg, log_time)
-            raw = _latest(meta_t, meta_v, stamp)
-            temp = _latest(temp_t, temp_v, stamp)
-            geom = _latest(info_t, info_v, stamp)
-            frame = BagFrame(index, stamp, None, None, raw_metadata=dict(raw) if isinstance(raw, dict) else {})
+            mi = _match(meta_t, stamp, tol)
+            raw = meta_v[mi] if mi is not None else {}
+            temp = _usable(_at(temp_v, _match(temp_t, stamp, tol)))
+            geom = _usable(_at(info_v, _match(info_t, stamp, tol)))
+            frame = BagFrame(index, stamp, None, None, raw_metadata=dict(raw) if isinstance(raw, dict) else {},
+                             metadata_age_s=(stamp - meta_t[mi]) / 1e9 if mi is not None else None)
             try:
-                for side in (raw, temp, geom):
-                    if isinstance(side, Exception):
-                        raise side
-                frame_depth = depth or (raw.get("bit_depth") if isinstance(raw, dict) else None)
-                frame.image_dn = image_to_gray_dn(msg, bit_depth=frame_depth)
+                frame.image_dn = image_to_gray_dn(msg, bit_depth=depth, color=color)
                 if geom is not None:
-                    geom.check_image(*_raw_size(msg))
-                temp_c = temp["sensor_temperature_c"] if temp else None
-                frame.metadata, frame.missing = resolve_metadata(prof, raw or {}, temp_c)
-                if frame.metadata is None:
-                    frame.skip_reason = "metadata incomplete: missing " + ", ".join(frame.missing)
-            except MetadataError as exc:
-                frame.skip_reason = f"invalid metadata: {exc}"
+                    geom.check_image(int(msg.height), int(msg.width))
             except AdapterError as exc:
-                frame.skip_reason = f"unusable message: {exc}"
+                frame.image_dn = None
+                frame.skip_reason = f"image unusable: {exc}"
+                yield frame
+                continue
+            try:
+                if isinstance(raw, Exception):
+                    raise raw
+                temp_c = temp["sensor_temperature_c"] if temp else None
+                frame.metadata, frame.missing = resolve_metadata(prof, raw, temp_c)
+                if frame.metadata is None:
+                    frame.skip_reason = "metadata missing: " + ", ".join(frame.missing)
+            except (MetadataError, AdapterError) as exc:
+                frame.metadata_error = str(exc)
+                frame.skip_reason = f"metadata invalid: {exc}"
             yield frame
 
     def close(self) -> None:
@@ -239,13 +276,22 @@ class BagReader:
         self.close()
 
 
-def _raw_size(msg: Any) -> tuple[int, int]:
-    return int(msg.height), int(msg.width)
+def _usable(value: Any) -> Any:
+    """A side-topic value, or None when its message could not be converted."""
+    return None if isinstance(value, Exception) else value
 
 
-def _latest(stamps: list[int], values: list[Any], stamp: int) -> Any:
+def _match(stamps: list[int], stamp: int, tolerance_ns: int) -> int | None:
+    """Index of the stamp nearest ``stamp`` within the tolerance, else of the latest older one."""
     i = bisect.bisect_right(stamps, stamp)
-    return values[i - 1] if i else None
+    near = [j for j in (i - 1, i) if 0 <= j < len(stamps) and abs(stamps[j] - stamp) <= tolerance_ns]
+    if near:
+        return min(near, key=lambda j: abs(stamps[j] - stamp))
+    return i - 1 if i else None
+
+
+def _at(values: list[Any], i: int | None) -> Any:
+    return values[i] if i is not None else None
 
 
 def open_bag(path: str | Path, image_topic: str | None = None, metadata_topic: str | None = None,

@@ -60,12 +60,15 @@ def simulate_bag(
     storage: str = "mcap",
     fps: float = 5.0,
     namespace: str = "/camera",
+    hold_s: float = 1.0,
     progress: bool = False,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
     ``effects`` are registered effect specs (``"prnu"``, ``"prnu=2"``, ``"row_offsets:sigma_dn=1"``)
-    added to the profile's own effects and the paper's PN, DCSN, RN in the simulation.
+    added to the profile's own effects and the paper's PN, DCSN, RN in the simulation. Gain, exposure,
+    temperature and the stated-metadata corruptions are updated every ``hold_s`` seconds (a camera's
+    auto-exposure / temperature read-out rate; 0 = every frame); image noise and motion change per frame.
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -74,6 +77,8 @@ def simulate_bag(
         raise ValueError(f"frames must be >= 1, got {frames}")
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps}")
+    if hold_s < 0:
+        raise ValueError(f"hold_s must be >= 0, got {hold_s}")
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
     effect_specs = [*(f"{k}:" + ",".join(f"{p}={v}" for p, v in vals.items()) if vals else k
@@ -83,7 +88,8 @@ def simulate_bag(
     rng = np.random.default_rng(seed)
     world = make_world(rng, height, width)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
-    steps = [scen.step(float(u)) for u in us]
+    held = _held(us, frames, fps, hold_s)
+    steps = [_merge(scen.step(float(u)), scen.step(float(h))) for u, h in zip(us, held)]
     positions = np.stack([camera_path(np.array(u), s.moving) for u, s in zip(us, steps)])
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
@@ -137,6 +143,22 @@ def simulate_bag(
     }
     truth_path(out).write_text(json.dumps(truth, indent=1))
     return out
+
+
+def _held(us: np.ndarray, frames: int, fps: float, hold_s: float) -> np.ndarray:
+    """Campaign time at which each frame's metadata was last updated (sample-and-hold every hold_s)."""
+    if hold_s == 0 or frames < 2:
+        return us
+    t = np.arange(frames) / fps
+    t_held = np.floor(t / hold_s + 1e-9) * hold_s
+    return t_held / t[-1]
+
+
+def _merge(now: Step, held: Step) -> Step:
+    """Per-frame image noise, brightness and motion of ``now`` with the metadata state of ``held``."""
+    return Step(gain_db=held.gain_db, exposure_time_s=held.exposure_time_s,
+                sensor_temperature_c=held.sensor_temperature_c, stated_factors=held.stated_factors,
+                image_noise_dn=now.image_noise_dn, brightness=now.brightness, moving=now.moving)
 
 
 def _episodes(records: list[dict[str, Any]]) -> list[dict[str, Any]]:

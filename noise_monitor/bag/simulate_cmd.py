@@ -24,6 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--height", type=int, default=256)
     parser.add_argument("--fps", type=float, default=5.0, help="frame rate of the stamps (Hz)")
+    parser.add_argument("--hold", type=float, default=1.0, metavar="SECONDS",
+                        help="metadata (gain, exposure, temperature) update period; 0 = every frame")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     parser.add_argument("--namespace", default="/camera", help="topic namespace (default /camera)")
@@ -35,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         load_plugin_file(f)
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
-                       namespace=args.namespace, progress=True)
+                       namespace=args.namespace, hold_s=args.hold, progress=True)
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),
                "profile": truth["profile"], "scenario": truth["scenario"], "effects": truth["effects"],

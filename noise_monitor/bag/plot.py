@@ -1,0 +1,73 @@
+"""PNG plot of a replay: per-source sigma and xi over time, alarm spans shaded, skipped frames marked."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .results import FrameRow  # noqa: E402
+
+SERIES = (("sigma_pn", "PN (photon shot)", "tab:blue"), ("sigma_dcsn", "DCSN (dark current shot)", "tab:orange"),
+          ("sigma_rn", "RN (readout)", "tab:green"), ("sigma_total", "total (estimated)", "black"),
+          ("sigma_model", "model total (stated metadata)", "tab:gray"))
+
+
+def _series(rows: list[FrameRow], key: str) -> tuple[np.ndarray, np.ndarray]:
+    pts = [(r.time_s, r.numbers[key]) for r in rows if r.processed and key in r.numbers]
+    if not pts:
+        return np.empty(0), np.empty(0)
+    t, v = zip(*pts)
+    return np.asarray(t), np.asarray(v)
+
+
+def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path, title: str,
+                threshold_dn: float, frame_period_s: float = 0.0,
+                truth_spans: list[tuple[float, float, str]] = ()) -> Path:
+    """Two stacked panels sharing the time axis (seconds since the first frame).
+
+    ``truth_spans`` (start s, end s, label): known corruptions of a simulated bag, hatched.
+    """
+    fig, (ax_s, ax_x) = plt.subplots(2, 1, figsize=(13, 6.5), sharex=True,
+                                     gridspec_kw={"height_ratios": [3, 2]}, constrained_layout=True)
+    for key, label, color in SERIES:
+        t, v = _series(rows, key)
+        if t.size:
+            style = "--" if key == "sigma_model" else "-"
+            ax_s.plot(t, v, style, color=color, lw=1.3, label=label, marker="." if t.size < 60 else None)
+    t, v = _series(rows, "xi")
+    if t.size:
+        ax_x.plot(t, v, ".", color="tab:purple", ms=4, alpha=0.6, label="xi per frame")
+    t, v = _series(rows, "xi_filtered")
+    if t.size:
+        ax_x.plot(t, v, "-", color="tab:purple", lw=1.6, label="xi filtered")
+    ax_x.axhline(0.0, color="black", lw=0.6)
+    for sgn in (1, -1):
+        ax_x.axhline(sgn * threshold_dn, color="tab:red", ls=":", lw=1.0,
+                     label=f"alarm threshold ±{threshold_dn:g} DN" if sgn > 0 else None)
+    for i, ep in enumerate(episodes):
+        for ax in (ax_s, ax_x):
+            ax.axvspan(ep["start_s"] - frame_period_s / 2, ep["end_s"] + frame_period_s / 2, color="tab:red",
+                       alpha=0.15, lw=0, label=("alarm (xi " + ("< 0" if ep["sign"] == "-" else "> 0") + ")")
+                       if i == 0 and ax is ax_x else None)
+    for i, (a, b, label) in enumerate(truth_spans):
+        ax_x.axvspan(a - frame_period_s / 2, b + frame_period_s / 2, fill=False, hatch="//", ec="tab:gray", lw=0,
+                     label=f"simulated: {label}" if i == 0 else None)
+    skipped = [r.time_s for r in rows if not r.processed]
+    if skipped:
+        ax_x.plot(skipped, np.zeros(len(skipped)), "x", color="tab:gray", ms=5, label="skipped frame")
+    ax_s.set_ylabel("noise sigma [DN]")
+    ax_s.set_ylim(bottom=0)
+    ax_x.set_ylabel("xi = sigma_model - sigma_image [DN]")
+    ax_x.set_xlabel("time since first frame [s]")
+    ax_s.set_title(title)
+    for ax in (ax_s, ax_x):
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
