@@ -21,7 +21,7 @@ def _phi(z: np.ndarray) -> np.ndarray:
 
 
 def clipped_normal_moments(mu, s, lo, hi):
-    """E[Y], E[Y^2] of Y = clip(N(mu, s^2), lo, hi), broadcast over the arguments."""
+    """E[Y], E[Y^2], P(lo < Y < hi) of Y = clip(N(mu, s^2), lo, hi), broadcast over the arguments."""
     s = np.maximum(s, _TINY_SIGMA)
     a = (lo - mu) / s
     b = (hi - mu) / s
@@ -36,7 +36,7 @@ def clipped_normal_moments(mu, s, lo, hi):
         + 2.0 * mu * s * (fa - fb)
         + s * s * (np.where(np.isfinite(a), a, 0.0) * fa - np.where(np.isfinite(b), b, 0.0) * fb)
     )
-    return m1, m2
+    return m1, m2, mid
 
 
 def noise_moments(
@@ -47,8 +47,16 @@ def noise_moments(
     mixtures: list[tuple[float, np.ndarray]] | None = None,
     lo: float = 0.0,
     hi: float = DN_MAX,
-) -> tuple[np.ndarray, np.ndarray]:
-    """E[n], E[n^2] of the clipped noise at clean values ``x`` (1-D); see the module docstring."""
+    lsb: float | None = None,
+    rounding: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """E[n], E[n^2] and P(not clipped) of the clipped noise at clean values ``x`` (1-D).
+
+    With ``lsb`` the output is also rounded to the levels j * lsb (0 and 255 are levels), exactly
+    where the noise is narrow against the step and with Sheppard's correction where it is wide;
+    ``rounding=True`` then returns the moments of the rounding error Q(Y) - Y instead of n.
+    See the module docstring for the noise model.
+    """
     x = np.asarray(x, dtype=float)
     n = x.shape[0]
     lam = np.broadcast_to(np.asarray(lam, dtype=float), (n,)).copy()
@@ -67,24 +75,65 @@ def noise_moments(
     keep = weights > 0
     weights, offsets = weights[keep], offsets[keep]
 
-    lam_max = float(lam.max()) if n else 0.0
-    if lam_max > 0.0:
-        k0 = np.maximum(np.floor(lam - 8.0 * np.sqrt(lam) - 2.0), 0.0)
-        span = int(np.ceil(16.0 * np.sqrt(lam_max) + 16.0))
-        k = k0[None, :] + np.arange(span, dtype=float)[:, None]  # (K, n)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            logp = np.where(lam[None, :] > 0, k * np.log(np.maximum(lam[None, :], 1e-300)), np.where(k == 0, 0.0, -np.inf))
-        pk = np.exp(logp - lam[None, :] - gammaln(k + 1.0))
-        shift = scale * (k - lam[None, :])  # (K, n)
+    if n and float(lam.max()) > 0.0:
+        shift, pk = poisson_terms(lam, scale)  # (K, n)
     else:
         pk = np.ones((1, n))
         shift = np.zeros((1, n))
 
     s = np.sqrt(s2)[None, None, :]
     mu = shift[None, :, :] + offsets[:, None, :]  # (C, K, n)
-    m1, m2 = clipped_normal_moments(mu, s, (lo - x)[None, None, :], (hi - x)[None, None, :])
+    m1, m2, inside = clipped_normal_moments(mu, s, (lo - x)[None, None, :], (hi - x)[None, None, :])
     w = weights[:, None, None] * pk[None, :, :]
-    return np.sum(w * m1, axis=(0, 1)), np.sum(w * m2, axis=(0, 1))
+    e1, e2, p_in = np.sum(w * m1, axis=(0, 1)), np.sum(w * m2, axis=(0, 1)), np.sum(w * inside, axis=(0, 1))
+    if lsb is None:
+        return e1, e2, p_in
+    q1, q2, r1, r2 = quantized_noise_moments(x, e1, e2, p_in, mu, np.sqrt(s2), w, lsb, hi)
+    return (r1, r2, p_in) if rounding else (q1, q2, p_in)
+
+
+def quantized_noise_moments(x, e1, e2, p_in, mu, s, w, lsb, hi):
+    """(E[n], E[n^2], E[r], E[r^2]) after rounding; Sheppard's correction where the noise is wide."""
+    if float(np.min(s)) > 2.0 * lsb or float(np.max(np.sqrt(np.maximum(e2 - e1**2, 0.0)))) > 8.0 * lsb:
+        r2 = lsb**2 / 12.0 * p_in  # error ~exp(-2 pi^2 s^2 / lsb^2): negligible
+        return e1, e2 + r2, np.zeros_like(x), r2
+    return _quantized_moments(x, mu, s, w, lsb, hi)
+
+
+def _quantized_moments(x, mu, s, w, lsb, hi, chunk: int = 64):
+    """Moments of rounding to the levels j * lsb, j = 0..M (M lsb = hi), of Y = clip(x + mu + N(0, s^2)).
+
+    Returns (E[n], E[n^2], E[r], E[r^2]) with n = Q(Y) - x (the quantized noise) and r = Q(Y) - Y (the
+    rounding error). Uses Q(y) = lsb * #{j : y > e_j} with edges e_j = (j + 1/2) lsb, summed over a
+    window of edges around each component (edges far below count fully, far above not at all).
+    """
+    m_edges = int(round(hi / lsb))
+    s_eff = np.maximum(s, 1e-9)
+    half = int(np.ceil(8.0 * float(np.max(s_eff)) / lsb)) + 2
+    offs = np.arange(-half, half + 1)
+    acc = np.zeros((5, x.size))  # E[Q], E[Q^2], E[Y], E[Y^2], E[Q Y]
+    for k0 in range(0, mu.shape[1], chunk):
+        centre = x[None, None, :] + mu[:, k0:k0 + chunk, :]  # (C, k, n)
+        ww = w[:, k0:k0 + chunk, :]
+        sd = s_eff[None, None, :]
+        y1, y2, _ = clipped_normal_moments(centre, sd, 0.0, hi)
+        c0 = np.floor(centre / lsb - 0.5).astype(np.int64)
+        j = c0[..., None] + offs  # (C, k, n, J)
+        valid = (j >= 0) & (j < m_edges)
+        jlo = np.clip(c0 - half, 0, m_edges).astype(float)  # edges below the window: always exceeded
+        a = ((j + 0.5) * lsb - centre[..., None]) / sd[..., None]
+        b = ((hi - centre) / sd)[..., None]
+        above = np.where(valid, 1.0 - ndtr(a), 0.0)
+        # E[Y 1{Y > e}] for Y = clip(Z, 0, hi), 0 < e < hi
+        part = centre[..., None] * (ndtr(b) - ndtr(a)) + sd[..., None] * (_phi(a) - _phi(b)) + hi * (1.0 - ndtr(b))
+        part = np.where(valid & (a < b), part, 0.0)
+        eq = lsb * (jlo + above.sum(-1))
+        eq2 = lsb**2 * (jlo**2 + ((2 * j + 1) * above).sum(-1))
+        eqy = lsb * (jlo * y1 + part.sum(-1))
+        for row, val in enumerate((eq, eq2, y1, y2, eqy)):
+            acc[row] += np.sum(ww * val, axis=(0, 1))
+    eq, eq2, ey, ey2, eqy = acc
+    return eq - x, eq2 - 2.0 * x * eq + x * x, eq - ey, eq2 - 2.0 * eqy + ey2
 
 
 def clipped_pmf(
@@ -93,10 +142,10 @@ def clipped_pmf(
     mean: np.ndarray,
     var: np.ndarray,
     mixtures: list[tuple[float, np.ndarray]] | None = None,
-    lo: float = 0.0,
-    hi: float = DN_MAX,
 ) -> np.ndarray:
     """Distribution of clip(x + noise) on ``grid`` (rows: x), noise Gaussian-approximated per component.
+
+    The grid spans the clip range: mass beyond its ends lands on the end points (the clipped atoms).
 
     Used only to carry the intermediate image of the sequential protocol to the next source; the
     moments themselves come from :func:`noise_moments` (exact).
@@ -119,3 +168,28 @@ def clipped_pmf(
         cdf = ndtr((edges[None, :] - centre) / s)
         pmf += w * np.diff(cdf, axis=1)
     return pmf
+
+
+def poisson_terms(lam: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Atoms (K, n) of the noise scale * (K - lam) and their probabilities (lam <= 1000 exact)."""
+    lam = np.asarray(lam, dtype=float)
+    lam_max = float(lam.max()) if lam.size else 0.0
+    k0 = np.maximum(np.floor(lam - 8.0 * np.sqrt(lam) - 2.0), 0.0)
+    span = int(np.ceil(16.0 * np.sqrt(lam_max) + 16.0))
+    k = k0[None, :] + np.arange(span, dtype=float)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logp = np.where(lam[None, :] > 0, k * np.log(np.maximum(lam[None, :], 1e-300)), np.where(k == 0, 0.0, -np.inf))
+    return scale * (k - lam[None, :]), np.exp(logp - lam[None, :] - gammaln(k + 1.0))
+
+
+def scatter_pmf(x: np.ndarray, shifts: np.ndarray, probs: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Distribution of clip(x + shift) on an evenly spaced grid from atoms (A, n), mean-preserving split."""
+    step = grid[1] - grid[0]
+    pos = np.clip(x[None, :] + shifts, grid[0], grid[-1])
+    u = (pos - grid[0]) / step
+    i0 = np.minimum(np.floor(u).astype(np.int64), grid.size - 2)
+    frac = u - i0
+    row = np.broadcast_to(np.arange(x.size)[None, :], pos.shape) * grid.size
+    flat = np.concatenate([(row + i0).ravel(), (row + i0 + 1).ravel()])
+    mass = np.concatenate([(probs * (1.0 - frac)).ravel(), (probs * frac).ravel()])
+    return np.bincount(flat, weights=mass, minlength=x.size * grid.size).reshape(x.size, grid.size)

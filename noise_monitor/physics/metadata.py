@@ -259,9 +259,10 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
     placeholder = {n: PAPER_RANGES[n][0] if n != "pixel_clock_hz" else 1e7 for n in NUMERIC_FIELDS}
     placeholder["sensor_type"] = "ccd"
     try:
-        CameraMetadata.from_mapping({**placeholder, **doc})
+        checked = CameraMetadata.from_mapping({**placeholder, **doc})
     except MetadataError as exc:
         raise MetadataError(f"{source}: {exc}") from exc
+    doc = {k: getattr(checked, k) for k in doc}  # typed values (YAML may give '90.0e6' as a string)
     if isinstance(effects_spec, (list, tuple)):
         effects = {str(e): {} for e in effects_spec}
     elif isinstance(effects_spec, dict):

@@ -22,6 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from ..sampling import poisson, standard_normal
 from ..sensor import Conditions
 
 DISTRIBUTIONS = ("poisson", "gaussian", "mixture", "quantization", "modifier")
@@ -125,11 +126,13 @@ class Effect:
         Modifiers return 0 here: their contribution is a change of the other effects
         (see :meth:`noise_monitor.physics.NoiseModel.predict`).
         """
-        s = np.asarray(signal_dn, dtype=float)
+        s = np.asarray(signal_dn)
         if self.distribution == "poisson":
-            return cond.dn_per_e**2 * np.broadcast_to(self.electrons(s, cond), s.shape)
+            lam = np.asarray(self.electrons(s, cond))
+            return np.broadcast_to(cond.dn_per_e**2 * (lam.reshape(-1)[0] if _constant(lam) else lam), s.shape)
         if self.distribution == "gaussian":
-            return np.broadcast_to(np.asarray(self.sigma_dn(s, cond), dtype=float) ** 2, s.shape)
+            sig = np.asarray(self.sigma_dn(s, cond))
+            return np.broadcast_to(sig.reshape(-1)[0] ** 2 if _constant(sig) else sig**2, s.shape)
         if self.distribution == "mixture":
             frac, off = self.mixture(s, cond)
             return np.broadcast_to(frac * (1.0 - frac) * np.asarray(off, dtype=float) ** 2, s.shape)
@@ -139,63 +142,63 @@ class Effect:
 
     # --- Monte-Carlo sampling ------------------------------------------------------------------
     def pattern(self, shape: tuple[int, ...], tag: str = "") -> np.ndarray:
-        """A fixed standard-normal pattern for this effect and image shape (same in every frame)."""
+        """A fixed pattern for this effect and image shape (same in every frame).
+
+        Standardised to mean 0 and std 1 exactly, so a camera's fixed-pattern noise has exactly the
+        stated magnitude (a short row/column pattern would otherwise be off by its sampling error).
+        """
         key = (tuple(shape), tag)
         cache = self.__dict__.setdefault("_patterns", {})
         if key not in cache:
             digest = hashlib.sha256(f"{self.name}|{tag}|{shape}|{self.pattern_seed()}".encode()).digest()
             rng = np.random.default_rng(int.from_bytes(digest[:8], "little"))
-            cache[key] = rng.standard_normal(shape, dtype=np.float32)
+            z = rng.standard_normal(shape, dtype=np.float64)
+            if z.size > 1:
+                z = (z - z.mean()) / z.std()
+            cache[key] = z.astype(np.float32)
         return cache[key]
+
+    def hit_mask(self, shape: tuple[int, ...], frac: float) -> np.ndarray:
+        """Fixed set of exactly round(frac * size) affected pixels (fixed-pattern mixture effects)."""
+        z = self.pattern(shape, "hit").reshape(-1)
+        count = int(round(frac * z.size))
+        mask = np.zeros(z.size, dtype=bool)
+        if count:
+            mask[np.argpartition(z, count - 1)[:count]] = True
+        return mask.reshape(shape)
 
     def pattern_seed(self) -> int:
         """Seed of the fixed pattern (fixed-pattern effects); override to give cameras distinct ones."""
         return int(self.values.get("seed", 0))
+
+    #: the simulator's fast path may draw this effect together with the other temporal Gaussian and
+    #: Poisson effects as one normal of the summed variance (true for effects using the default sampler)
+    @classmethod
+    def mergeable(cls) -> bool:
+        return cls.distribution in ("poisson", "gaussian") and cls.temporal and cls.sample is Effect.sample
 
     def sample(self, signal_dn: np.ndarray, cond: Conditions, rng: np.random.Generator) -> np.ndarray:
         """Noise in DN to add to ``signal_dn`` (before clipping); float32, same shape."""
         s = signal_dn
         if self.distribution == "poisson":
             lam = np.broadcast_to(np.asarray(self.electrons(s, cond), dtype=np.float64), s.shape)
-            return (cond.dn_per_e * (poisson_sample(rng, lam) - lam)).astype(np.float32)
+            return (cond.dn_per_e * (poisson(rng, lam) - lam)).astype(np.float32)
         if self.distribution == "gaussian":
             sigma = np.asarray(self.sigma_dn(s, cond), dtype=np.float32)
-            z = rng.standard_normal(s.shape, dtype=np.float32) if self.temporal else self.pattern(s.shape)
+            z = standard_normal(rng, s.shape) if self.temporal else self.pattern(s.shape)
             return z * sigma
         if self.distribution == "mixture":
             frac, off = self.mixture(s, cond)
             if self.temporal:
                 hit = rng.random(s.shape, dtype=np.float32) < frac
             else:
-                hit = self.pattern(s.shape, "hit") < _normal_quantile(frac)
+                hit = self.hit_mask(s.shape, frac)
             return np.where(hit, np.asarray(off, dtype=np.float32), np.float32(0.0)).astype(np.float32)
         if self.distribution == "modifier":
             return np.zeros(s.shape, dtype=np.float32)
         raise EffectError(f"effect {self.name!r}: quantization is applied by the model, not sampled")
 
 
-def _normal_quantile(p: float) -> float:
-    from scipy.special import ndtri
-
-    return float(ndtri(min(max(p, 0.0), 1.0)))
-
-
-POISSON_NORMAL_LAMBDA = 1000.0
-
-
-def poisson_sample(rng: np.random.Generator, lam: np.ndarray) -> np.ndarray:
-    """Poisson draws; a normal draw where lambda > 1000 (skewness < 0.03), much faster."""
-    lam = np.asarray(lam, dtype=np.float64)
-    if lam.ndim == 0 or lam.size == 1:
-        v = float(lam.reshape(-1)[0]) if lam.size else 0.0
-        if v > POISSON_NORMAL_LAMBDA:
-            return v + np.sqrt(v) * rng.standard_normal(lam.shape, dtype=np.float32)
-        return rng.poisson(lam).astype(np.float32)
-    big = lam > POISSON_NORMAL_LAMBDA
-    if not big.any():
-        return rng.poisson(lam).astype(np.float32)
-    out = np.empty(lam.shape, dtype=np.float32)
-    out[big] = lam[big] + np.sqrt(lam[big]) * rng.standard_normal(int(big.sum()), dtype=np.float32)
-    small = ~big
-    out[small] = rng.poisson(lam[small])
-    return out
+def _constant(a: np.ndarray) -> bool:
+    """True for a scalar or a broadcast (zero-stride) array."""
+    return a.ndim == 0 or (a.size > 0 and all(st == 0 for st in a.strides))

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sensor import Conditions, rounded_normal_variance
+from ..sampling import standard_normal
+from ..sensor import Conditions, ktc_sigma_v, rounded_normal_variance
 from .base import Effect, Param
 
 
@@ -14,7 +15,8 @@ class PhotonShotNoise(Effect):
     signature = "variance grows linearly with the signal and with the gain"
 
     def electrons(self, signal_dn, cond: Conditions):
-        return np.maximum(np.asarray(signal_dn, dtype=float), 0.0) / cond.dn_per_e
+        s = np.asarray(signal_dn)
+        return np.maximum(s, 0) * s.dtype.type(1.0 / cond.dn_per_e) if s.dtype.kind == "f" else np.maximum(s, 0) / cond.dn_per_e
 
 
 class DarkCurrentShotNoise(Effect):
@@ -24,7 +26,7 @@ class DarkCurrentShotNoise(Effect):
     signature = "signal-independent variance growing with exposure time and steeply with temperature"
 
     def electrons(self, signal_dn, cond: Conditions):
-        return np.full(np.shape(signal_dn), cond.dark_e)
+        return np.broadcast_to(cond.dark_e, np.shape(signal_dn))
 
 
 class ReadoutNoise(Effect):
@@ -35,17 +37,19 @@ class ReadoutNoise(Effect):
 
     def sigma_dn(self, signal_dn, cond: Conditions):
         var_e = rounded_normal_variance(cond.source_follower_e) + cond.ktc_variance_e2
-        return np.full(np.shape(signal_dn), cond.dn_per_e * np.sqrt(var_e))
+        return np.broadcast_to(cond.dn_per_e * np.sqrt(var_e), np.shape(signal_dn))
+
+    @classmethod
+    def mergeable(cls) -> bool:
+        return True  # rounding and the log-normal kTC only change moments beyond the variance
 
     def sample(self, signal_dn, cond: Conditions, rng):
         shape = np.shape(signal_dn)
-        sf = np.rint(cond.source_follower_e * rng.standard_normal(shape, dtype=np.float32))
+        sf = np.rint(np.float32(cond.source_follower_e) * standard_normal(rng, shape))
         if cond.ktc_variance_e2 > 0.0:
-            from ..sensor import ktc_sigma_v
-
             m = cond.meta
-            sv = ktc_sigma_v(m, cond.temperature_k)
-            volts = m.sense_node_reset_factor * np.expm1(sv * rng.standard_normal(shape, dtype=np.float32))
+            sv = np.float32(ktc_sigma_v(m, cond.temperature_k))
+            volts = np.float32(m.sense_node_reset_factor) * np.expm1(sv * standard_normal(rng, shape))
             sf = sf + volts / np.float32(m.sense_node_gain_v_per_e)
         return (np.float32(cond.dn_per_e) * sf).astype(np.float32)
 
@@ -81,7 +85,7 @@ class DSNU(Effect):
     )
 
     def sigma_dn(self, signal_dn, cond: Conditions):
-        return np.full(np.shape(signal_dn), self.fraction * cond.dark_e * cond.dn_per_e)
+        return np.broadcast_to(self.fraction * cond.dark_e * cond.dn_per_e, np.shape(signal_dn))
 
 
 class _LineOffsets(Effect):
@@ -93,7 +97,7 @@ class _LineOffsets(Effect):
     )
 
     def sigma_dn(self, signal_dn, cond: Conditions):
-        return np.full(np.shape(signal_dn), self.values["sigma_dn"])
+        return np.broadcast_to(self.values["sigma_dn"], np.shape(signal_dn))
 
     def sample(self, signal_dn, cond: Conditions, rng):
         shape = np.shape(signal_dn)
@@ -155,7 +159,7 @@ class HotPixels(Effect):
     )
 
     def mixture(self, signal_dn, cond: Conditions):
-        return self.fraction, np.full(np.shape(signal_dn), self.dark_multiplier * cond.dark_e * cond.dn_per_e)
+        return self.fraction, np.broadcast_to(self.dark_multiplier * cond.dark_e * cond.dn_per_e, np.shape(signal_dn))
 
 
 class ExtraReadNoise(Effect):
@@ -168,7 +172,7 @@ class ExtraReadNoise(Effect):
     )
 
     def sigma_dn(self, signal_dn, cond: Conditions):
-        return np.full(np.shape(signal_dn), self.sigma_e * cond.dn_per_e)
+        return np.broadcast_to(self.sigma_e * cond.dn_per_e, np.shape(signal_dn))
 
 
 class DarkCurrentLaw(Effect):
