@@ -64,12 +64,21 @@ def noise_moments(
     big = lam > POISSON_EXACT_MAX
     s2[big] += scale**2 * lam[big]
     lam[big] = 0.0
+    mixtures = [(f, np.broadcast_to(np.asarray(o, dtype=float), (n,))) for f, o in mixtures or []]
+    exact = lam > 0.0
+    if exact.any() and not exact.all():  # only the exact-Poisson values need the sum over K
+        out = [np.empty(n) for _ in range(3)]
+        for sel in (exact, ~exact):
+            part = noise_moments(x[sel], lam[sel], scale, s2[sel], [(f, o[sel]) for f, o in mixtures],
+                                 lo, hi, lsb, rounding)
+            for arr, val in zip(out, part):
+                arr[sel] = val
+        return out[0], out[1], out[2]
 
     # mixture components: weights (C,) and offsets (C, n)
     weights = np.ones(1)
     offsets = np.zeros((1, n))
-    for frac, off in mixtures or []:
-        off = np.broadcast_to(np.asarray(off, dtype=float), (n,))
+    for frac, off in mixtures:
         weights = np.concatenate([weights * (1.0 - frac), weights * frac])
         offsets = np.concatenate([offsets, offsets + off[None, :]])
     keep = weights > 0
@@ -83,7 +92,12 @@ def noise_moments(
 
     s = np.sqrt(s2)[None, None, :]
     mu = shift[None, :, :] + offsets[:, None, :]  # (C, K, n)
-    m1, m2, inside = clipped_normal_moments(mu, s, (lo - x)[None, None, :], (hi - x)[None, None, :])
+    lo_x, hi_x = (lo - x)[None, None, :], (hi - x)[None, None, :]
+    if not s2.any():  # discrete noise only: clip the atoms directly
+        y = np.clip(mu, lo_x, hi_x)
+        m1, m2, inside = y, y * y, ((mu > lo_x) & (mu < hi_x)).astype(float)
+    else:
+        m1, m2, inside = clipped_normal_moments(mu, s, lo_x, hi_x)
     w = weights[:, None, None] * pk[None, :, :]
     e1, e2, p_in = np.sum(w * m1, axis=(0, 1)), np.sum(w * m2, axis=(0, 1)), np.sum(w * inside, axis=(0, 1))
     if lsb is None:

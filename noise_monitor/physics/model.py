@@ -15,7 +15,7 @@ from .sensor import Conditions
 TABLE_STEP_DN = 0.5
 _V_GRID = np.arange(0.0, DN_MAX + 1e-9, TABLE_STEP_DN)
 #: Grid carrying the intermediate image of the sequential protocol.
-_Y_GRID = np.arange(0.0, DN_MAX + 1e-9, 0.25)
+_Y_GRID = np.arange(0.0, DN_MAX + 1e-9, 0.5)
 MODES = ("joint", "sequential")
 #: The fast simulation path draws Poisson sources exactly below this mean (normal above: skewness < 0.1).
 FAST_POISSON_LAMBDA = 100.0
@@ -108,8 +108,9 @@ class NoiseModel:
         lsbs = [e.lsb_dn(cond) for e in effects if e.distribution == "quantization"]
         if lsbs and len(lsbs) == len(effects):
             # rounding of the previous output alone (sequential protocol): each node of the carried
-            # distribution stands for its 0.25-DN bin, i.e. a spread of 0.25/sqrt(12) DN
-            r1, r2, _ = noise_moments(x, 0.0, 1.0, (0.25**2) / 12.0, None, lsb=max(lsbs), rounding=True)
+            # distribution stands for its bin of the grid step, i.e. a spread of step/sqrt(12) DN
+            step = _Y_GRID[1] - _Y_GRID[0]
+            r1, r2, _ = noise_moments(x, 0.0, 1.0, step**2 / 12.0, None, lsb=max(lsbs), rounding=True)
             return r1, r2
         m1, m2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=max(lsbs) if lsbs else None)
         return m1, m2
