@@ -24,7 +24,7 @@ from msg_adapters import (
     metadata_from_temperature,
     resolve_metadata,
 )
-from noise_monitor.monitor import DESCRIPTIONS, Frame, Matched, Monitor, MonitorConfig, StampSynchronizer
+from noise_monitor.monitor import DESCRIPTIONS, Frame, GapCounter, Matched, Monitor, MonitorConfig, StampSynchronizer
 from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
 from noise_monitor.physics import CameraProfile, MetadataError, NoiseModel, load_profile
 
@@ -44,6 +44,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "color": ("luma", "reduction of colour images to gray: luma or green"),
     "model": ("full_meta", "estimator variant (noise_monitor.estimator.load)"),
     "device": ("cpu", "inference device: cpu, cuda or auto"),
+    "threads": (0, "CPU threads for inference; 0 = all cores but one (keeps one for message handling)"),
     "max_rate_hz": (0.0, "evaluate at most this many frames per second (others are dropped); 0 = no limit"),
     "sync_tolerance_s": (0.01, "image and metadata header stamps closer than this belong together"),
     "sync_wait_s": (0.1, "an image waits this long for its metadata, then takes the latest older one"),
@@ -78,6 +79,15 @@ def _coerce(name: str, value: Any, default: Any) -> Any:
     return value
 
 
+def _set_inference_threads(threads: int) -> None:
+    """torch intra-op threads: ``threads``, or all cores but one when 0."""
+    import os
+
+    import torch
+
+    torch.set_num_threads(threads or max(1, (os.cpu_count() or 2) - 1))
+
+
 def _stamp_ns(msg: Any) -> int:
     s = msg.header.stamp
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
@@ -106,6 +116,9 @@ def _make_node_class():
             config = MonitorConfig.from_mapping({k: p[k] for k in MonitorConfig.field_names()})
             self.profile: CameraProfile | None = load_profile(p["profile"]) if p["profile"] else None
             model = NoiseModel(extra=self.profile.effects if self.profile else None)
+            if p["threads"] < 0:
+                raise ValueError(f"parameter threads must be >= 0, got {p['threads']}")
+            _set_inference_threads(p["threads"])
             if estimator is None:
                 from noise_monitor.estimator import load
 
@@ -123,6 +136,7 @@ def _make_node_class():
                 raise ValueError("parameter diagnostics_rate_hz must be > 0")
             wait = p["sync_wait_s"] if p["metadata_topic"] else 0.0
             self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
+            self.gaps = GapCounter()
             self._temperature_c: float | None = None
             self._geometry = None
             self._lock = threading.Condition()
@@ -159,7 +173,9 @@ def _make_node_class():
             return self.get_clock().now().nanoseconds
 
         def _on_image(self, msg: Any) -> None:
-            for matched in self.sync.add_image(_stamp_ns(msg), msg, self._now()):
+            stamp = _stamp_ns(msg)
+            self.monitor.count_lost(self.gaps.observe(stamp))
+            for matched in self.sync.add_image(stamp, msg, self._now()):
                 self._enqueue(matched)
 
         def _on_metadata(self, msg: Any) -> None:

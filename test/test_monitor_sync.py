@@ -45,3 +45,15 @@ def test_no_wait_pairs_immediately():
     s = StampSynchronizer(tolerance_s=0.001, wait_s=0.0)
     (m,) = s.add_image(5 * MS, "img", now_ns=0)
     assert m.metadata is None
+
+
+def test_gap_counter_infers_lost_frames_from_stamp_gaps(rng):
+    from noise_monitor.monitor import GapCounter
+
+    period = 33_333_333
+    arrived = [i for i in range(200) if i < 20 or rng.random() > 0.4]  # ~40 % lost after warm-up
+    jitter = rng.integers(-500_000, 500_000, 200)
+    counter = GapCounter()
+    lost = sum(counter.observe(i * period + int(jitter[i])) for i in arrived)
+    assert lost == 200 - len(arrived) - (200 - 1 - arrived[-1])
+    assert counter.observe(arrived[-1] * period) == 0  # repeated/old stamps count nothing

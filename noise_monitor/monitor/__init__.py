@@ -3,9 +3,9 @@ from .alarm import CAUSE_IMAGE_NOISIER, CAUSE_MODEL_NOISIER, EmaFilter, XiAlarm,
 from .config import DESCRIPTIONS, MonitorConfig, read_ros_params
 from .patches import PatchSelection, select_patches
 from .pipeline import Estimator, Frame, FrameResult, Monitor
-from .sync import Matched, StampSynchronizer
+from .sync import GapCounter, Matched, StampSynchronizer
 
 __all__ = [
-    "CAUSE_IMAGE_NOISIER", "CAUSE_MODEL_NOISIER", "DESCRIPTIONS", "EmaFilter", "Estimator", "Frame", "FrameResult",
+    "CAUSE_IMAGE_NOISIER", "CAUSE_MODEL_NOISIER", "DESCRIPTIONS", "EmaFilter", "Estimator", "Frame", "FrameResult", "GapCounter",
     "Matched", "Monitor", "MonitorConfig", "PatchSelection", "StampSynchronizer", "XiAlarm", "cause_of", "read_ros_params", "select_patches",
 ]

@@ -117,7 +117,8 @@ class Monitor:
         self.filter = EmaFilter(config.filter_alpha)
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames)
-        self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0}
+        self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
+                         "frames_lost": 0}
         self.last_received_ns: int | None = None
         self.last_result: FrameResult | None = None
 
@@ -125,6 +126,10 @@ class Monitor:
     def count_dropped(self, n: int = 1) -> None:
         """Frames the caller dropped before processing (e.g. the node's worker was busy)."""
         self.counters["frames_dropped"] += n
+
+    def count_lost(self, n: int) -> None:
+        """Frames that never reached the caller (inferred from header-stamp gaps)."""
+        self.counters["frames_lost"] += n
 
     def _result(self, frame: Frame, level: int, message: str, **kw: Any) -> FrameResult:
         res = FrameResult(frame.stamp_ns, self.name, self.hardware_id, level, message,

@@ -1,0 +1,208 @@
+"""End-to-end benchmark of the live node: 1280x1024 mono8 frames, default settings, CPU.
+
+Phase 1 (lockstep): publish a frame, wait for its /diagnostics -> throughput (frames/s) and latency
+(image stamp -> diagnostics received, ms p50/p95) without queueing.
+Phase 2 (30 Hz camera): a publisher process sends frames + metadata at 30 Hz -> diagnostics/s,
+frames dropped by the node (busy worker), latency p50/p95.
+
+Usage: .venv/bin/python bench/bench_node.py [--frames 40] [--seconds 15] [--rate 30] [--json out.json]
+Prints figures; asserts nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import time
+
+import numpy as np
+
+WIDTH, HEIGHT = 1280, 1024
+PROFILE = "icx285"
+DYNAMIC = {"gain_db": 18.0, "exposure_time_s": 0.01, "sensor_temperature_c": 40.0}
+IMAGE_TOPIC, META_TOPIC = "/bench_camera/image_raw", "/bench_camera/metadata"
+
+
+def make_frames(n: int, seed: int = 0) -> list[np.ndarray]:
+    """n noisy mono8 frames of a smooth synthetic scene (the simulator's joint mode)."""
+    from noise_monitor.physics import NoiseModel, load_profile
+
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
+    clean = 120 + 60 * np.sin(2 * np.pi * x / WIDTH * 3) * np.cos(2 * np.pi * y / HEIGHT * 2) + 20 * x / WIDTH
+    meta = load_profile(PROFILE).metadata(**DYNAMIC)
+    model = NoiseModel()
+    return [np.clip(np.rint(model.simulate(clean, meta, rng)[0]), 0, 255).astype(np.uint8) for _ in range(n)]
+
+
+def messages(img: np.ndarray, stamp_ns: int):
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from sensor_msgs.msg import Image
+
+    stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+    meta = DiagnosticArray()
+    meta.header.stamp = stamp
+    meta.status = [DiagnosticStatus(name="bench camera", values=[KeyValue(key=k, value=repr(v)) for k, v in DYNAMIC.items()])]
+    image = Image(height=img.shape[0], width=img.shape[1], encoding="mono8", step=img.shape[1], data=img.tobytes())
+    image.header.stamp = stamp
+    return image, meta
+
+
+def publisher_process(rate_hz: float, seconds: float, ready: mp.Event, go: mp.Event, sent: mp.Value) -> None:
+    """A separate process playing a camera at rate_hz (own GIL, like a real driver)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    frames = make_frames(6, seed=1)
+    rclpy.init()
+    node = rclpy.create_node("bench_camera")
+    pub_img = node.create_publisher(Image, IMAGE_TOPIC, qos_profile_sensor_data)
+    pub_meta = node.create_publisher(DiagnosticArray, META_TOPIC, 10)
+    ready.set()
+    go.wait()
+    period = 1.0 / rate_hz
+    start = time.monotonic()
+    i = 0
+    while time.monotonic() - start < seconds:
+        image, meta = messages(frames[i % len(frames)], time.time_ns())
+        pub_meta.publish(meta)
+        pub_img.publish(image)
+        i += 1
+        time.sleep(max(0.0, start + i * period - time.monotonic()))
+    sent.value = i
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=40, help="lockstep frames")
+    ap.add_argument("--seconds", type=float, default=15.0, help="duration of the 30 Hz phase")
+    ap.add_argument("--rate", type=float, default=30.0, help="publisher rate of phase 2 (Hz)")
+    ap.add_argument("--weights", help="estimator checkpoint to benchmark instead of the bundled full_meta")
+    ap.add_argument("--json", help="write the figures to this JSON file")
+    args = ap.parse_args()
+    os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+    import rclpy
+    import torch
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from msg_adapters import reports_from_msg
+    from noise_monitor.monitor.config import default_params_path
+    from noise_monitor.node import node_class
+
+    ctx = rclpy.Context()
+    rclpy.init(args=["bench", "--ros-args", "--params-file", str(default_params_path())], context=ctx)
+    overrides = [Parameter("image_topic", value=IMAGE_TOPIC), Parameter("metadata_topic", value=META_TOPIC),
+                 Parameter("camera_info_topic", value=""), Parameter("profile", value=PROFILE),
+                 Parameter("device", value="cpu")]
+    t0 = time.perf_counter()
+    estimator = None
+    if args.weights:
+        from noise_monitor.estimator import load
+
+        estimator = load("full_meta", device="cpu", weights=args.weights)
+    node = node_class()(parameter_overrides=overrides, context=ctx, estimator=estimator)
+    startup_s = time.perf_counter() - t0
+    probe = rclpy.create_node("bench_probe", context=ctx)
+    received: list[tuple[int, int, dict]] = []  # (receive ns, image stamp ns, values)
+
+    seen: set[str] = set()
+
+    def on_diag(msg) -> None:  # one record per evaluated frame (the timer may repeat the last status)
+        report = reports_from_msg(msg)[0]
+        if "sigma_rn" in report.values and report.values["frames_processed"] not in seen:
+            seen.add(report.values["frames_processed"])
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            received.append((time.time_ns(), stamp, report.values))
+
+    probe.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 100)
+    pub_img = probe.create_publisher(Image, IMAGE_TOPIC, qos_profile_sensor_data)
+    pub_meta = probe.create_publisher(DiagnosticArray, META_TOPIC, 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(probe)
+
+    def spin_until(pred, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+            if pred():
+                return True
+        return False
+
+    spin_until(lambda: pub_img.get_subscription_count() > 0, 10.0)
+    frames = make_frames(6)
+    # --- phase 1: lockstep ---
+    lat, t_start = [], time.perf_counter()
+    for i in range(args.frames + 3):
+        if i == 3:  # warm-up: first inference and table building
+            lat, t_start = [], time.perf_counter()
+        n0 = len(received)
+        image, meta = messages(frames[i % len(frames)], time.time_ns())
+        pub_meta.publish(meta)
+        pub_img.publish(image)
+        if not spin_until(lambda: len(received) > n0, 30.0):
+            raise SystemExit("no diagnostics within 30 s: is the estimator loadable?")
+        lat.append((received[-1][0] - received[-1][1]) / 1e6)
+    lock_fps = args.frames / (time.perf_counter() - t_start)
+    proc_ms = [float(v["processing_ms"]) for _, _, v in received[-args.frames:]]
+    # --- phase 2: a camera at args.rate Hz in another process ---
+    c0 = dict(node.monitor.counters)
+    received.clear()
+    spawn = mp.get_context("spawn")
+    ready, go, sent = spawn.Event(), spawn.Event(), spawn.Value("i", 0)
+    proc = spawn.Process(target=publisher_process, args=(args.rate, args.seconds, ready, go, sent))
+    proc.start()
+    ready.wait(60)
+    spin_until(lambda: False, 2.0)  # discovery
+    go.set()
+    t_start = time.perf_counter()
+    spin_until(lambda: not proc.is_alive(), args.seconds + 30)
+    spin_until(lambda: False, 1.0)  # let the last frame finish
+    elapsed = time.perf_counter() - t_start
+    proc.join()
+    live_lat = [(r - s) / 1e6 for r, s, _ in received]
+    figures = {
+        "image": f"{WIDTH}x{HEIGHT} mono8", "profile": PROFILE, "torch_threads": torch.get_num_threads(),
+        "estimator": node.monitor.estimator.name, "patch_size": node.monitor.patch_size,
+        "patches_per_frame": node.monitor.config.patches_per_frame, "node_startup_s": round(startup_s, 2),
+        "lockstep_frames_per_s": round(lock_fps, 2),
+        "lockstep_latency_ms_p50": round(pct(lat, 50), 1), "lockstep_latency_ms_p95": round(pct(lat, 95), 1),
+        "processing_ms_p50": round(pct(proc_ms, 50), 1), "processing_ms_p95": round(pct(proc_ms, 95), 1),
+        "publisher_hz": args.rate, "published": int(sent.value),
+        "diagnostics_per_s": round(len(received) / elapsed, 2),
+        "frames_reaching_node": sum(node.monitor.counters[k] - c0[k] for k in ("frames_received", "frames_dropped")),
+        "frames_lost_before_node": node.monitor.counters["frames_lost"] - c0["frames_lost"],
+        "frames_evaluated": len(received), "frames_dropped": node.monitor.counters["frames_dropped"] - c0["frames_dropped"],
+        "live_latency_ms_p50": round(pct(live_lat, 50), 1), "live_latency_ms_p95": round(pct(live_lat, 95), 1),
+        "cpu_cores": os.cpu_count(),
+    }
+    width = max(map(len, figures))
+    for k, v in figures.items():
+        print(f"{k:<{width}}  {v}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(figures, fh, indent=2)
+    ex.shutdown()
+    node.destroy_node()
+    probe.destroy_node()
+    ctx.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,259 @@
+"""The live node on the real middleware (rclpy, Fast DDS) with the real estimator (estimator.load).
+
+A fake camera node publishes simulated frames (NoiseModel.simulate, joint mode, quantised to mono8)
+and their metadata; the test spins one executor with spin_once and timeouts (no sleeps) and reads
+/diagnostics and the numeric topics back.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+import torch
+
+from msg_adapters import ERROR, OK, STALE, WARN, StatusReport, reports_from_msg
+from noise_monitor.monitor import CAUSE_IMAGE_NOISIER, CAUSE_MODEL_NOISIER
+from noise_monitor.physics import NoiseModel, load_profile
+
+torch.set_num_threads(1)
+rclpy = pytest.importorskip("rclpy")
+
+from builtin_interfaces.msg import Time  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from sensor_msgs.msg import Image  # noqa: E402
+from std_msgs.msg import Float32  # noqa: E402
+
+from noise_monitor.estimator import load  # noqa: E402
+from noise_monitor.node import node_class, parameter_table  # noqa: E402
+
+SIZE = 256
+MODEL = NoiseModel()
+PROFILE = load_profile("icx285")
+DYNAMIC = {"gain_db": 18.0, "exposure_time_s": 0.01, "sensor_temperature_c": 40.0}
+TIMEOUT_S = 30.0
+
+
+def scene(h: int = SIZE, w: int = SIZE) -> np.ndarray:
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    return (120 + 60 * np.sin(2 * np.pi * x / w) * np.cos(1.4 * np.pi * y / h) + 20 * x / w).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def estimator():
+    return load("full_meta", device="cpu")
+
+
+class Rig:
+    """The node under test, a fake camera and a /diagnostics listener on one executor."""
+
+    def __init__(self, estimator: Any, topic: str, **params: Any) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        base = {"image_topic": f"/{topic}/image_raw", "metadata_topic": f"/{topic}/metadata",
+                "camera_info_topic": "", "profile": "icx285", "camera_name": topic, "patches_per_frame": 4,
+                "diagnostics_rate_hz": 5.0, "device": "cpu"}
+        base.update(params)
+        overrides = [Parameter(k, value=v) for k, v in base.items()]
+        self.node = node_class()(node_name=f"{topic}_monitor", parameter_overrides=overrides,
+                                 context=self.context, estimator=estimator)
+        self.cam = rclpy.create_node(f"{topic}_camera", context=self.context)
+        self.pub_img = self.cam.create_publisher(Image, base["image_topic"], qos_profile_sensor_data)
+        meta_topic = base["metadata_topic"] or f"/{topic}/unused_metadata"
+        self.pub_meta = self.cam.create_publisher(DiagnosticArray, meta_topic, 10)
+        self.diagnostics: list[tuple[int, StatusReport]] = []
+        self.cam.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
+        self.numbers: dict[str, list[float]] = {}
+        ns = self.node.get_fully_qualified_name()
+        for key in ("sigma_rn", "xi"):
+            self.cam.create_subscription(Float32, f"{ns}/{key}",
+                                         lambda m, k=key: self.numbers.setdefault(k, []).append(m.data), 50)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.cam)
+        self.rng = np.random.default_rng(7)
+        self.clean = scene()
+        assert self.spin_until(lambda: self.pub_img.get_subscription_count() > 0
+                               and self.cam.count_publishers("/diagnostics") > 0, TIMEOUT_S), "no discovery"
+
+    def _on_diag(self, msg: DiagnosticArray) -> None:
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        self.diagnostics.extend((stamp, r) for r in reports_from_msg(msg) if r.name.endswith(self.node.params["camera_name"]))
+
+    def spin_until(self, done: Callable[[], bool], timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.02)
+            if done():
+                return True
+        return False
+
+    def publish(self, i: int, extra_sigma: float = 0.0, metadata: dict | None = None) -> tuple[int, dict]:
+        """Publish frame i (metadata first, same header stamp); returns (stamp ns, simulator truth)."""
+        meta = PROFILE.metadata(**DYNAMIC)
+        noisy, truth = MODEL.simulate(self.clean, meta, self.rng)
+        if extra_sigma:
+            noisy = noisy + self.rng.normal(0.0, extra_sigma, noisy.shape).astype(np.float32)
+        img = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        stamp_ns = 1_000 * 10**9 + i * 33_333_333
+        stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+        values = DYNAMIC if metadata is None else metadata
+        if values:
+            msg = DiagnosticArray(status=[DiagnosticStatus(name="camera", values=[
+                KeyValue(key=k, value=repr(v)) for k, v in values.items()])])
+            msg.header.stamp = stamp
+            self.pub_meta.publish(msg)
+        image = Image(height=SIZE, width=SIZE, encoding="mono8", step=SIZE, data=img.tobytes())
+        image.header.stamp = stamp
+        self.pub_img.publish(image)
+        return stamp_ns, truth
+
+    def status_for(self, stamp_ns: int) -> StatusReport:
+        """Spin until the node's status for this image arrives."""
+        found: list[StatusReport] = []
+
+        def done() -> bool:
+            found.extend(r for s, r in self.diagnostics if s == stamp_ns)
+            return bool(found)
+
+        assert self.spin_until(done, TIMEOUT_S), f"no /diagnostics for image stamp {stamp_ns}"
+        return found[0]
+
+    def step(self, i: int, **kw: Any) -> tuple[StatusReport, dict]:
+        stamp, truth = self.publish(i, **kw)
+        return self.status_for(stamp), truth
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.cam.destroy_node()
+        self.context.try_shutdown()
+
+
+@pytest.fixture
+def rig_factory(estimator):
+    rigs: list[Rig] = []
+
+    def make(topic: str, **params: Any) -> Rig:
+        rigs.append(Rig(estimator, topic, **params))
+        return rigs[-1]
+
+    yield make
+    for r in rigs:
+        r.close()
+
+
+def test_clean_frames_stay_ok_and_sources_match_truth(rig_factory):
+    rig = rig_factory("clean")
+    est = {k: [] for k in ("pn", "dcsn", "rn")}
+    truth = {k: [] for k in est}
+    for i in range(200):
+        report, t = rig.step(i)
+        assert report.level == OK, f"frame {i}: {report.message}"
+        assert report.hardware_id == "ICX285/clean" and report.name == "noise_monitor: clean"
+        for k in est:
+            est[k].append(float(report.values[f"sigma_{k}"]))
+            truth[k].append(t[k])
+    for k in est:
+        assert np.mean(est[k]) == pytest.approx(np.mean(truth[k]), abs=0.25, rel=0.1), k
+    assert int(report.values["frames_processed"]) == 200 and report.values["alarm"] == "0"
+    assert abs(float(report.values["xi_filtered"])) < 0.7
+    # the numeric topics carry the same numbers as /diagnostics
+    assert rig.spin_until(lambda: len(rig.numbers.get("sigma_rn", [])) >= 200, TIMEOUT_S)
+    assert rig.numbers["sigma_rn"][-1] == pytest.approx(float(report.values["sigma_rn"]), rel=1e-5)
+
+
+def test_extra_image_noise_raises_alarm_with_cause(rig_factory):
+    rig = rig_factory("noisy")
+    for i in range(10):
+        report, _ = rig.step(i)
+        assert report.level == OK, report.message
+    pn_clean = float(report.values["sigma_pn"])
+    for n in range(1, 21):
+        report, _ = rig.step(10 + n, extra_sigma=5.0)
+        if report.level == ERROR:
+            break
+    assert report.level == ERROR and n <= 12, report.message
+    assert CAUSE_IMAGE_NOISIER in report.message and float(report.values["xi_filtered"]) < -1.0
+    assert float(report.values["sigma_pn"]) == pytest.approx(pn_clean, rel=0.1)  # sources stay put
+
+
+def test_doubled_thermal_white_noise_metadata_raises_alarm_with_cause(rig_factory):
+    rig = rig_factory("metadata_lies")
+    for i in range(5):
+        report, _ = rig.step(i)
+    rn_clean = float(report.values["sigma_rn"])
+    wrong = {**DYNAMIC, "thermal_white_noise_v_per_sqrt_hz": 2 * PROFILE.values["thermal_white_noise_v_per_sqrt_hz"]}
+    for n in range(1, 21):
+        report, _ = rig.step(5 + n, metadata=wrong)
+        if report.level == ERROR:
+            break
+    assert report.level == ERROR and n <= 12, report.message
+    assert CAUSE_MODEL_NOISIER in report.message and float(report.values["xi_filtered"]) > 1.0
+    assert float(report.values["sigma_rn"]) > 1.5 * rn_clean  # the RN estimate follows the metadata
+
+
+def test_stale_without_images_and_after_they_stop(rig_factory):
+    rig = rig_factory("stale", image_timeout_s=0.5)
+    assert rig.spin_until(lambda: any(r.level == STALE for _, r in rig.diagnostics), TIMEOUT_S)
+    assert "no image received yet" in rig.diagnostics[0][1].message
+    for i in range(3):
+        report, _ = rig.step(i)
+    assert report.level == OK
+    n0 = len(rig.diagnostics)
+    assert rig.spin_until(lambda: any(r.level == STALE for _, r in rig.diagnostics[n0:]), TIMEOUT_S)
+    stale = next(r for _, r in rig.diagnostics[n0:] if r.level == STALE)
+    assert "no image for" in stale.message and stale.hardware_id == "ICX285/stale"
+
+
+def test_diagnostics_published_at_least_at_the_configured_rate(rig_factory):
+    rig = rig_factory("rate", diagnostics_rate_hz=4.0)
+    rig.spin_until(lambda: len(rig.diagnostics) >= 2, TIMEOUT_S)
+    first_ns = rig.node.get_clock().now().nanoseconds
+    assert rig.spin_until(lambda: len(rig.diagnostics) >= 10, TIMEOUT_S)
+    elapsed = (rig.node.get_clock().now().nanoseconds - first_ns) / 1e9
+    assert elapsed < 8 / 4.0 * 1.5 + 1.0  # ~2 s for 8 statuses at 4 Hz (generous: shared CPU)
+
+
+def test_missing_metadata_is_a_warning_naming_the_fields(rig_factory):
+    rig = rig_factory("partial")
+    report, _ = rig.step(0, metadata={"gain_db": 12.0})
+    assert report.level == WARN
+    assert "metadata missing: exposure_time_s, sensor_temperature_c" in report.message
+    rig2 = rig_factory("no_profile", profile="", metadata_topic="", sync_wait_s=0.0)
+    report, _ = rig2.step(0, metadata={})
+    assert report.level == WARN and "gain_db" in report.message and "full_well_e" in report.message
+    assert report.hardware_id == "unknown/no_profile"
+
+
+def test_frames_arriving_while_busy_are_dropped_and_counted(rig_factory):
+    rig = rig_factory("burst")
+    stamps = [rig.publish(i)[0] for i in range(12)]  # faster than the worker evaluates them
+    rig.status_for(stamps[-1])  # the newest frame is always evaluated
+    counters = rig.node.monitor.counters
+    assert counters["frames_dropped"] >= 1
+    assert counters["frames_processed"] + counters["frames_dropped"] <= 12
+
+
+def test_node_loads_the_estimator_itself_and_declares_described_parameters():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = node_class()(node_name="described", context=context,
+                            parameter_overrides=[Parameter("camera_info_topic", value="")])
+        try:
+            assert node.monitor.estimator.name == "full_meta"
+            descriptors = node.describe_parameters(list(parameter_table()))
+            assert all(d.description for d in descriptors)
+            assert node.get_parameter("xi_threshold_dn").value == 1.0
+        finally:
+            node.destroy_node()
+        with pytest.raises(ValueError, match="patches_per_frame"):
+            node_class()(node_name="bad", context=context,
+                         parameter_overrides=[Parameter("patches_per_frame", value="many")])
+    finally:
+        context.try_shutdown()
