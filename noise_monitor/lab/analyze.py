@@ -1,0 +1,163 @@
+"""The lab pipeline: measure a bag (or frames), compare with the camera's model, diagnose missing effects,
+add effects and refit, write the report and an extended profile."""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+from tqdm import tqdm
+
+from ..physics import CameraProfile, Effect, NoiseModel, load_plugin_file, load_profile
+from ..physics.effects import effect_class
+from ..physics.metadata import profile_from_mapping
+from .compare import Comparison, baseline_effects, by_condition, rms_error
+from .diagnose import EffectSpec, candidate_names, diagnose, fit
+from .measure import Measurements, SegmentTolerance, measure_frames
+
+
+def parse_add_effect(text: str) -> EffectSpec:
+    """'NAME' or 'NAME=fit' (fit its fittable parameters), 'NAME=VALUE' (first fittable parameter),
+    'NAME:p=v,q=w' (fixed values; 'fit' as a value fits that parameter)."""
+    text = text.strip()
+    if ":" in text:
+        name, _, items = text.partition(":")
+        cls = effect_class(name.strip())
+        fixed: dict[str, float] = {}
+        free: list[str] = []
+        for item in filter(None, items.split(",")):
+            key, _, val = item.partition("=")
+            if val.strip().lower() == "fit":
+                free.append(key.strip())
+            else:
+                fixed[key.strip()] = _number(cls.name, key.strip(), val)
+        unknown = sorted((set(fixed) | set(free)) - {p.name for p in cls.params})
+        if unknown:
+            raise ValueError(f"effect {cls.name!r} has no parameter(s) {', '.join(unknown)}")
+        cls(**fixed)  # validates values and bounds
+        return EffectSpec(cls, fixed, tuple(free))
+    name, sep, val = text.partition("=")
+    cls = effect_class(name.strip())
+    if not sep or val.strip().lower() == "fit":
+        return EffectSpec.fit_all(cls)
+    fittable = [p for p in cls.params if p.fittable]
+    if not fittable:
+        raise ValueError(f"effect {cls.name!r} has no fittable parameter to set")
+    fixed = {fittable[0].name: _number(cls.name, fittable[0].name, val)}
+    cls(**fixed)
+    return EffectSpec(cls, fixed, ())
+
+
+def _number(effect: str, param: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"{effect}.{param}: expected a number or 'fit', got {text!r}") from None
+
+
+def _frames(source: Any, profile: CameraProfile | None) -> tuple[Iterable[Any], int | None, str]:
+    if isinstance(source, (str, Path)):
+        from ..bag.reader import open_bag
+
+        reader = open_bag(source)
+        return reader.frames(profile), len(reader), str(source)
+    frames = list(source)
+    return frames, len(frames), "frames"
+
+
+def analyze(
+    bag_or_frames: str | Path | Iterable[Any],
+    profile: str | Path | CameraProfile | None = None,
+    add_effects: Sequence[str] = (),
+    plugins: Sequence[str | Path] = (),
+    report_dir: str | Path | None = None,
+    write_profile: str | Path | None = None,
+    candidates: Sequence[str] | None = None,
+    tolerance: SegmentTolerance = SegmentTolerance(),
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Measure, compare, diagnose and (with ``add_effects``) refit; returns the JSON summary.
+
+    Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma), ``by_condition``,
+    ``candidates`` (ranked best first: ``effect``, ``significant``, ``explained_fraction``, ``params``,
+    ...), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
+    ``rms_error_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly).
+    """
+    t0 = time.perf_counter()
+    plugin_names = [n for f in plugins for n in load_plugin_file(f)]
+    prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
+    specs = [parse_add_effect(a) for a in add_effects]
+    frames, n, source = _frames(bag_or_frames, prof)
+    with tqdm(total=n, desc="measure", unit="frame", disable=not progress) as bar:
+        meas = measure_frames(frames, tolerance=tolerance, progress=bar)
+    integer_output = meas.output_step_dn == 1.0
+    base = baseline_effects(prof, meas.segments[0].meta, integer_output)
+    with tqdm(total=len(meas.segments), desc="model", unit="segment", disable=not progress) as bar:
+        comp = Comparison(meas, NoiseModel(base), progress=bar)
+    rows = comp.cell_table()
+    names = list(candidates) if candidates is not None else candidate_names(plugin_names)
+    with tqdm(total=len(names), desc="diagnose", unit="effect", disable=not progress) as bar:
+        cands = diagnose(comp, names, progress=bar)
+    out: dict[str, Any] = {
+        "source": source,
+        "profile": prof.name if prof else None,
+        "model_effects": [e.name for e in base],
+        "measurement": meas.summary(),
+        "rms_error_dn": rms_error(rows),
+        "by_condition": by_condition(rows),
+        "candidates": [c.as_dict() for c in cands],
+        "cells": _strip(rows),
+    }
+    after_model = None
+    if specs:
+        res = fit(comp, specs)
+        after_effects = comp.replaced(res.effects)
+        after_model = NoiseModel(after_effects)
+        rows_after = Comparison(meas, after_model).cell_table()
+        out.update({
+            "added_effects": [
+                {"effect": e.name, "params": dict(e.values), "fitted": res.values[e.name],
+                 "param_errors": res.errors[e.name], "reading": e.reading()}
+                for e in res.effects
+            ],
+            "rms_error_before_dn": out["rms_error_dn"],
+            "rms_error_after_dn": rms_error(rows_after),
+            "by_condition_after": by_condition(rows_after),
+            "cells_after": _strip(rows_after),
+        })
+        if write_profile:
+            out["profile_written"] = str(_write_profile(write_profile, prof, res.effects, meas))
+    elif write_profile:
+        raise ValueError("--write-profile needs at least one --add-effect")
+    out["analysis_time_s"] = round(time.perf_counter() - t0, 3)
+    if report_dir is not None:
+        from .report import write_report
+
+        out["report"] = str(write_report(report_dir, out, comp, cands, after_model))
+    return out
+
+
+def _strip(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()} for r in rows]
+
+
+def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[Effect], meas: Measurements) -> Path:
+    """The profile with the added effects (fitted values) appended to its effect set."""
+    if prof is None:
+        meta = meas.segments[0].meta.as_dict()
+        values = {k: v for k, v in meta.items() if k not in ("gain_db", "exposure_time_s", "sensor_temperature_c")}
+        prof = profile_from_mapping({"name": "analyzed", **values})
+    new = CameraProfile(prof.name, dict(prof.values), {**dict(prof.effects), **{e.name: dict(e.values) for e in effects}})
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(new.to_yaml())
+    load_profile(p)  # the written profile must load again
+    return p
+
+
+def write_json(path: str | Path, summary: dict[str, Any]) -> Path:
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(summary, indent=1, default=float))
+    return p

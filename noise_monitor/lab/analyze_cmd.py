@@ -1,0 +1,53 @@
+"""`noise-monitor analyze`: model vs measurement on a bag, ranked missing effects, add-and-refit, report."""
+from __future__ import annotations
+
+import argparse
+
+from .analyze import analyze, write_json
+
+HELP = "Compare the noise model with the noise measured in a bag, diagnose missing effects, add them, report."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="rosbag2 directory (MCAP or sqlite3) or .mcap file")
+    parser.add_argument("--profile", help="camera profile: bundled name (icx285, ev76c661, generic) or YAML path; "
+                                          "optional if the bag's metadata carries every field")
+    parser.add_argument("--add-effect", action="append", default=[], metavar="NAME[=VALUE|fit]",
+                        help="add an effect to the model and refit: NAME or NAME=fit fits its parameters, "
+                             "NAME=VALUE fixes the first one, NAME:p=v,q=fit mixes (repeatable)")
+    parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE",
+                        help="Python file defining Effect subclasses (candidates and --add-effect names)")
+    parser.add_argument("--report", metavar="DIR", help="write report.html (self-contained) and summary.json here")
+    parser.add_argument("--json", metavar="PATH", help="write the JSON summary to PATH")
+    parser.add_argument("--write-profile", metavar="OUT.yaml",
+                        help="save the profile extended with the added (fitted) effects")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    summary = analyze(
+        args.bag,
+        profile=args.profile,
+        add_effects=args.add_effect,
+        plugins=args.effect_plugin,
+        report_dir=args.report,
+        write_profile=args.write_profile,
+        progress=not args.quiet,
+    )
+    print(f"rms error (model vs measured total sigma): {summary['rms_error_dn']:.4f} DN "
+          f"over {summary['measurement']['cells']} cells, {summary['measurement']['frames_used']} frames")
+    for c in summary["candidates"][:5]:
+        mark = "*" if c["significant"] else " "
+        params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
+        print(f" {mark} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}")
+    sig = [c for c in summary["candidates"] if c["significant"]]
+    print(f"most likely missing effect: {sig[0]['reading']}" if sig else "no candidate effect is significant")
+    if "rms_error_after_dn" in summary:
+        print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN")
+    if "profile_written" in summary:
+        print(f"extended profile: {summary['profile_written']}")
+    if "report" in summary:
+        print(f"report: {summary['report']}")
+    if args.json:
+        write_json(args.json, summary)
+    return 0

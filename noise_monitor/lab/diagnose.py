@@ -1,0 +1,208 @@
+"""Diagnosis: fit every candidate effect to the measurements, rank, test significance.
+
+Each candidate's fittable parameters are fitted by bounded least squares on the normalised residuals
+of all observables (cell variances per component, outlier-pixel counts, quantization step); integer
+parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - k ln N``; explained
+fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
+chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import f as f_dist
+
+from ..physics import Effect, EffectError, Param, available
+from ..physics.effects import PAPER_EFFECTS
+from .compare import Comparison, rms_error
+
+#: F-test p-value below which a candidate's improvement counts as real
+SIGNIFICANCE_P = 1e-6
+#: ... and the fraction of the chi-square it must explain
+MIN_EXPLAINED_FRACTION = 0.1
+MAX_GRID = 32
+
+
+@dataclass
+class FitResult:
+    """A fitted effect set: effect instances, fitted values and their standard errors, chi-square."""
+
+    effects: list[Effect]
+    values: dict[str, dict[str, float]]
+    errors: dict[str, dict[str, float | None]]
+    chi2: float
+    n_free: int
+
+
+@dataclass
+class Candidate:
+    """One candidate effect fitted to the measurements."""
+
+    effect: str
+    params: dict[str, float]
+    param_errors: dict[str, float | None]
+    chi2: float
+    explained_fraction: float
+    delta_bic: float
+    p_value: float
+    significant: bool
+    reading: str
+    rms_error_after_dn: float
+    instance: Effect = field(repr=False, default=None)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "effect": self.effect,
+            "significant": self.significant,
+            "explained_fraction": round(self.explained_fraction, 6),
+            "params": self.params,
+            "param_errors": self.param_errors,
+            "delta_bic": round(self.delta_bic, 3),
+            "p_value": self.p_value,
+            "chi2": round(self.chi2, 3),
+            "rms_error_after_dn": round(self.rms_error_after_dn, 5),
+            "reading": self.reading,
+        }
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """An effect to fit: its class, fixed parameter values and the names of the parameters to fit."""
+
+    cls: type[Effect]
+    fixed: Mapping[str, float]
+    free: tuple[str, ...]
+
+    @classmethod
+    def fit_all(cls, effect_cls: type[Effect]) -> "EffectSpec":
+        return cls(effect_cls, {}, tuple(p.name for p in effect_cls.params if p.fittable))
+
+
+def _starts(p: Param) -> list[float]:
+    lo, hi = p.bounds
+    default = min(max(p.default, lo), hi)
+    if lo < 0.0 < hi:
+        pts = [default, 0.0, 0.2 * hi, 0.2 * lo, 0.02 * hi]
+    elif lo > 0.0:
+        pts = [default] + list(np.geomspace(lo, hi, 6)[1:-1])
+    else:
+        pts = [default] + [lo + f * (hi - lo) for f in (1e-4, 1e-3, 1e-2, 0.1)]
+    return [min(max(x, lo), hi) for x in pts]
+
+
+def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
+    """Jointly fit the free parameters of ``specs`` (continuous: bounded least squares from several
+    starts; integer: grid scan)."""
+    specs = list(specs)
+    cont: list[tuple[int, Param]] = []
+    grid: list[tuple[int, Param]] = []
+    for i, s in enumerate(specs):
+        pmap = {p.name: p for p in s.cls.params}
+        for name in s.free:
+            p = pmap[name]
+            (grid if p.integer and p.bounds[1] - p.bounds[0] < MAX_GRID else cont).append((i, p))
+
+    def build(xc: np.ndarray, xg: tuple[float, ...]) -> list[Effect]:
+        vals = [dict(s.fixed) for s in specs]
+        for (i, p), x in zip(cont, xc):
+            vals[i][p.name] = float(np.clip(x, *p.bounds))
+        for (i, p), x in zip(grid, xg):
+            vals[i][p.name] = x
+        return [s.cls(**v) for s, v in zip(specs, vals)]
+
+    def resid(xc: np.ndarray, xg: tuple[float, ...]) -> np.ndarray:
+        try:
+            r = comp.residuals(build(xc, xg))
+        except (EffectError, ValueError, FloatingPointError):
+            return np.full(n_obs, 1e6)
+        return np.where(np.isfinite(r), r, 1e6)
+
+    n_obs = comp.residuals().size
+    grids = [()]
+    for _, p in grid:
+        grids = [g + (float(v),) for g in grids for v in range(int(p.bounds[0]), int(p.bounds[1]) + 1)]
+    best: tuple[float, np.ndarray, tuple, Any] | None = None
+    for xg in grids:
+        if not cont:
+            r = resid(np.zeros(0), xg)
+            chi2 = float(r @ r)
+            if best is None or chi2 < best[0]:
+                best = (chi2, np.zeros(0), xg, None)
+            continue
+        lo = np.array([p.bounds[0] for _, p in cont])
+        hi = np.array([p.bounds[1] for _, p in cont])
+        starts = list(zip(*[_starts(p) for _, p in cont]))
+        for x0 in starts:
+            x0 = np.clip(np.array(x0, dtype=float), lo, hi)
+            scale = np.maximum(np.abs(x0), 1e-3 * (hi - lo))
+            sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=scale, args=(xg,), max_nfev=200)
+            chi2 = float(sol.fun @ sol.fun)
+            if best is None or chi2 < best[0]:
+                best = (chi2, sol.x, xg, sol.jac)
+    chi2, xc, xg, jac = best
+    effects = build(xc, xg)
+    errs: list[dict[str, float | None]] = [{} for _ in specs]
+    if cont and jac is not None:
+        dof = max(n_obs - len(cont) - len(grid), 1)
+        cov = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2 / dof)
+        for k, (i, p) in enumerate(cont):
+            errs[i][p.name] = float(math.sqrt(max(cov[k, k], 0.0)))
+    for i, p in grid:
+        errs[i][p.name] = None
+    return FitResult(
+        effects=effects,
+        values={e.name: {p.name: e.values[p.name] for p in type(e).params if p.name in s.free}
+                for e, s in zip(effects, specs)},
+        errors={e.name: errs[i] for i, e in enumerate(effects)},
+        chi2=chi2,
+        n_free=len(cont) + len(grid),
+    )
+
+
+def candidate_names(extra: Iterable[str] = ()) -> list[str]:
+    """Every registered effect except the paper's three sources (plus ``extra`` plug-in names)."""
+    names = [n for n in available() if n not in PAPER_EFFECTS]
+    return names + [n for n in extra if n not in names]
+
+
+def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any = None) -> list[Candidate]:
+    """Fit every candidate, rank by BIC gain (best first) and test significance."""
+    r0 = comp.residuals()
+    chi0 = float(r0 @ r0)
+    n = r0.size
+    reg = available()
+    out = []
+    for name in names if names is not None else candidate_names():
+        cls = reg[name]
+        spec = EffectSpec.fit_all(cls)
+        if not spec.free:
+            continue
+        res = fit(comp, [spec])
+        k = res.n_free
+        chi1 = min(res.chi2, chi0)
+        drop = chi0 - chi1
+        dof = max(n - k, 1)
+        p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
+        explained = drop / chi0 if chi0 > 0 else 0.0
+        eff = res.effects[0]
+        out.append(Candidate(
+            effect=name,
+            params=res.values[name],
+            param_errors=res.errors[name],
+            chi2=res.chi2,
+            explained_fraction=explained,
+            delta_bic=drop - k * math.log(n),
+            p_value=p,
+            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION),
+            reading=eff.reading(),
+            rms_error_after_dn=rms_error(comp.cell_table(extra=[eff])),
+            instance=eff,
+        ))
+        if progress is not None:
+            progress.update(1)
+    out.sort(key=lambda c: (-c.delta_bic, c.effect))
+    return out

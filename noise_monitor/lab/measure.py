@@ -1,0 +1,416 @@
+"""Model-independent noise measurement from a frame sequence.
+
+Frames are grouped into *segments*: consecutive frames whose metadata agree within a tolerance. Every
+frame is cut into B x B blocks and a plane is fitted to each block; the residual ``r`` (texture-free
+for flat or smoothly shaded regions) is split into three orthogonal parts:
+
+- the column-constant part (dimension B - 2 after the fit): column offsets,
+- the row-constant part (B - 2): row offsets,
+- the rest ((B - 1)^2 dimensions): pixel-wise (white) noise.
+
+White noise of variance s2 puts ``d * s2`` into a part of dimension d; per-column (per-row) offsets of
+variance c2 put ``B (B - 2) c2`` into the column (row) part. Solving these relations per block gives
+unbiased per-pixel variances. Within a segment the spread of the residuals over frames gives the
+temporal noise, the residual of the segment's mean image the fixed-pattern noise (temporal / K removed).
+Textured blocks (spatially correlated residual, or a robust sigma far above the block's intensity bin),
+blocks disturbed by motion and blocks near the clipping limits are excluded. Every cell (segment x
+intensity bin) carries the standard error of its mean over blocks.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+import numpy as np
+
+from ..physics import CameraMetadata
+
+BLOCK = 8
+BIN_WIDTH_DN = 16.0
+INTENSITY_RANGE_DN = (8.0, 247.0)
+COMPONENTS = ("temporal", "fixed", "column", "row", "single")
+#: a block is textured if its residual is correlated along both axes beyond this lag-1 correlation
+TEXTURE_CORRELATION = 0.3
+#: ... or if its robust sigma (temporal spread) exceeds this multiple of its bin's median
+OUTLIER_BLOCK_FACTOR = 3.0
+#: a pixel of the segment's mean residual beyond this many robust sigmas is an outlier pixel
+OUTLIER_PIXEL_SIGMAS = 6.0
+MIN_BLOCKS_PER_CELL = 3
+_NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
+
+
+@dataclass(frozen=True)
+class SegmentTolerance:
+    """How far metadata may drift inside one segment."""
+
+    gain_db: float = 0.1
+    exposure_rel: float = 0.02
+    temperature_c: float = 1.0
+    max_frames: int = 64
+
+    def same(self, a: CameraMetadata, b: CameraMetadata) -> bool:
+        return (
+            a.replace(**_NO_DYNAMIC) == b.replace(**_NO_DYNAMIC)
+            and abs(a.gain_db - b.gain_db) <= self.gain_db
+            and abs(a.exposure_time_s - b.exposure_time_s) <= self.exposure_rel * a.exposure_time_s
+            and abs(a.sensor_temperature_c - b.sensor_temperature_c) <= self.temperature_c
+        )
+
+
+@dataclass
+class SegmentMeasurement:
+    """Per-block measurements of one segment (accepted blocks only)."""
+
+    index: int
+    meta: CameraMetadata
+    stamp_ns: int
+    frames: list[int]
+    intensity_dn: np.ndarray  # (B,) block mean intensity
+    region: np.ndarray  # (B,) region index 0..8 (3 x 3 grid, row-major)
+    values: dict[str, np.ndarray]  # component -> (B,) variance DN^2 per block
+    robust_sigma_dn: np.ndarray  # (B,) robust sigma of the mean residual (outlier threshold basis)
+    outlier_pixels: int
+    pixels_checked: int
+    blocks_total: int
+    excluded: dict[str, int]
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frames)
+
+    @property
+    def components(self) -> tuple[str, ...]:
+        return tuple(self.values)
+
+
+@dataclass
+class Cell:
+    """One (segment, intensity bin) cell: mean variance per component and its standard error."""
+
+    segment: int
+    bin_index: int
+    intensity_dn: float
+    block_index: np.ndarray  # indices into the segment's block arrays
+    values: dict[str, float]
+    errors: dict[str, float]
+
+
+@dataclass
+class Measurements:
+    """Everything measured from a frame sequence, independent of any model."""
+
+    segments: list[SegmentMeasurement]
+    cells: list[Cell]
+    quant_step_dn: float
+    quant_step_err_dn: float
+    output_step_dn: float
+    histogram: np.ndarray
+    histogram_bin_dn: float
+    frames_total: int
+    frames_used: int
+    skipped: dict[str, int] = field(default_factory=dict)
+    shape: tuple[int, int] = (0, 0)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "frames_total": self.frames_total,
+            "frames_used": self.frames_used,
+            "frames_skipped": dict(self.skipped),
+            "segments": len(self.segments),
+            "cells": len(self.cells),
+            "image_shape": list(self.shape),
+            "quantization_step_dn": round(self.quant_step_dn, 4),
+            "quantization_step_err_dn": round(self.quant_step_err_dn, 4),
+            "outlier_pixel_fraction": (
+                sum(s.outlier_pixels for s in self.segments) / max(1, sum(s.pixels_checked for s in self.segments))
+            ),
+        }
+
+
+# --- block algebra -----------------------------------------------------------------------------
+def _projection(b: int) -> np.ndarray:
+    """Residual projector of a least-squares plane fit on a b x b block (pixels row-major)."""
+    y, x = np.mgrid[0:b, 0:b]
+    design = np.stack([np.ones(b * b), x.ravel() - x.mean(), y.ravel() - y.mean()], axis=1)
+    return np.eye(b * b) - design @ np.linalg.pinv(design)
+
+
+def _blocks(img: np.ndarray, b: int) -> np.ndarray:
+    h, w = (img.shape[0] // b) * b, (img.shape[1] // b) * b
+    return img[:h, :w].reshape(h // b, b, w // b, b).transpose(0, 2, 1, 3).reshape(-1, b * b)
+
+
+def _energies(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(total, column-part, row-part) energies of block residuals r (N, b*b)."""
+    r3 = r.reshape(-1, b, b)
+    col = b * np.sum(r3.mean(axis=1) ** 2, axis=1)
+    row = b * np.sum(r3.mean(axis=2) ** 2, axis=1)
+    return np.sum(r * r, axis=1), col, row
+
+
+def _split(total: np.ndarray, col: np.ndarray, row: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pixel variances (white, column offsets, row offsets) from block energies."""
+    white = (total - col - row) / (b - 1) ** 2
+    line = b * (b - 2)
+    return white, (col - (b - 2) * white) / line, (row - (b - 2) * white) / line
+
+
+def _lag1(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    r3 = r.reshape(-1, b, b)
+    e = np.maximum(np.sum(r * r, axis=1), 1e-12)
+    return np.sum(r3[:, :, 1:] * r3[:, :, :-1], axis=(1, 2)) / e, np.sum(r3[:, 1:, :] * r3[:, :-1, :], axis=(1, 2)) / e
+
+
+def _robust_sigma(r: np.ndarray, b: int) -> np.ndarray:
+    """Robust per-pixel sigma from the MAD of neighbour differences (the smaller of the x and y ones):
+    insensitive to a step edge, to hot pixels and to column or row offsets."""
+    r3 = r.reshape(-1, b, b)
+
+    def mad(d: np.ndarray) -> np.ndarray:
+        d = d.reshape(d.shape[0], -1)
+        return 1.4826 * np.median(np.abs(d - np.median(d, axis=1, keepdims=True)), axis=1) / math.sqrt(2.0)
+
+    return np.minimum(mad(np.diff(r3, axis=2)), mad(np.diff(r3, axis=1)))
+
+
+def _line_ratio(r: np.ndarray, b: int, robust: np.ndarray) -> np.ndarray:
+    """Spread of the column (row) medians relative to the robust sigma: an edge in a block stands out,
+    legitimate column/row offsets do not (they are alike in every block), hot pixels do not move medians."""
+    r3 = r.reshape(-1, b, b)
+    spread = np.maximum(np.median(r3, axis=1).std(axis=1), np.median(r3, axis=2).std(axis=1))
+    return spread / np.maximum(robust, 1e-6)
+
+
+def _bin_outliers(values: np.ndarray, bins: np.ndarray, keep: np.ndarray, factor: float) -> np.ndarray:
+    """Blocks whose value exceeds ``factor`` x the median of their bin (among ``keep``)."""
+    out = np.zeros(values.shape, dtype=bool)
+    for k in np.unique(bins[keep]):
+        sel = keep & (bins == k)
+        out[sel] = values[sel] > factor * np.median(values[sel])
+    return out
+
+
+class _SegmentAccumulator:
+    """Running sums over the frames of one segment."""
+
+    def __init__(self, index: int, meta: CameraMetadata, stamp_ns: int, b: int, proj: np.ndarray) -> None:
+        self.index, self.meta, self.stamp_ns, self.b, self.proj = index, meta, stamp_ns, b, proj
+        self.frames: list[int] = []
+        self.metas: list[CameraMetadata] = []
+        self.s1 = self.s2 = self.mean = self.single = None
+
+    def add(self, frame_index: int, blocks: np.ndarray, meta: CameraMetadata) -> None:
+        r = blocks @ self.proj
+        e_tot, e_col, e_row = _energies(r, self.b)
+        if self.s1 is None:
+            self.s1 = np.zeros_like(r)
+            self.s2 = np.zeros(r.shape[0])
+            self.mean = np.zeros(r.shape[0])
+            self.single = [np.zeros(r.shape[0]) for _ in range(3)]
+        self.s1 += r
+        self.s2 += e_tot
+        self.mean += blocks.mean(axis=1)
+        for acc, e in zip(self.single, (e_tot, e_col, e_row)):
+            acc += e
+        self.frames.append(frame_index)
+        self.metas.append(meta)
+
+    def finish(self, grid: tuple[int, int]) -> SegmentMeasurement:
+        b, k = self.b, len(self.frames)
+        rm = self.s1 / k
+        v = self.mean / k
+        single = _split(*(acc / k for acc in self.single), b)
+        m_white, m_col, m_row = _split(*_energies(rm, b), b)
+        values: dict[str, np.ndarray] = {}
+        if k >= 2:
+            temporal = (self.s2 - np.sum(self.s1 * self.s1, axis=1) / k) / ((k - 1) * (b * b - 3))
+            values = {"temporal": temporal, "fixed": m_white - temporal / k, "column": m_col, "row": m_row}
+        else:
+            temporal = None
+            values = {"single": single[0], "column": single[1], "row": single[2]}
+
+        n = v.size
+        bins = np.floor(v / BIN_WIDTH_DN).astype(int)
+        lo, hi = INTENSITY_RANGE_DN
+        excluded: dict[str, int] = {}
+        keep = (v >= lo) & (v <= hi)
+        excluded["near_clipping"] = int(np.sum(~keep))
+        rho_x, rho_y = _lag1(rm, b)
+        robust = _robust_sigma(rm, b)
+        lines = _line_ratio(rm, b, robust)
+        tex = keep & (
+            (np.minimum(rho_x, rho_y) > TEXTURE_CORRELATION)
+            | _bin_outliers(robust, bins, keep, OUTLIER_BLOCK_FACTOR)
+            | (lines > OUTLIER_BLOCK_FACTOR * np.median(lines[keep]) if keep.any() else False)
+        )
+        excluded["texture"] = int(np.sum(tex))
+        keep &= ~tex
+        if temporal is not None:
+            moving = keep & _bin_outliers(np.maximum(temporal, 0.0), bins, keep, OUTLIER_BLOCK_FACTOR)
+            excluded["motion"] = int(np.sum(moving))
+            keep &= ~moving
+
+        thr = OUTLIER_PIXEL_SIGMAS * robust[keep]
+        centred = rm[keep] - np.median(rm[keep], axis=1, keepdims=True) if keep.any() else rm[keep]
+        outliers = int(np.sum(np.abs(centred) > thr[:, None]))
+
+        gy, gx = grid
+        iy, ix = np.divmod(np.arange(n), gx)
+        region = (3 * iy // max(gy, 1)) * 3 + (3 * ix // max(gx, 1))
+        mid = len(self.metas) // 2
+        return SegmentMeasurement(
+            index=self.index,
+            meta=self.metas[mid],
+            stamp_ns=self.stamp_ns,
+            frames=list(self.frames),
+            intensity_dn=v[keep],
+            region=region[keep],
+            values={c: a[keep] for c, a in values.items()},
+            robust_sigma_dn=robust[keep],
+            outlier_pixels=outliers,
+            pixels_checked=int(keep.sum()) * b * b,
+            blocks_total=n,
+            excluded=excluded,
+        )
+
+
+def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
+    out = []
+    bins = np.floor(seg.intensity_dn / BIN_WIDTH_DN).astype(int)
+    for k in np.unique(bins):
+        idx = np.flatnonzero(bins == k)
+        if idx.size < MIN_BLOCKS_PER_CELL:
+            continue
+        vals = {comp: float(arr[idx].mean()) for comp, arr in seg.values.items()}
+        floor = _theoretical_se(vals, seg.n_frames, b)
+        errs = {
+            comp: max(float(arr[idx].std(ddof=1)), floor[comp]) / math.sqrt(idx.size)
+            for comp, arr in seg.values.items()
+        }
+        out.append(Cell(seg.index, int(k), float(seg.intensity_dn[idx].mean()), idx, vals, errs))
+    return out
+
+
+def _theoretical_se(vals: dict[str, float], k: int, b: int) -> dict[str, float]:
+    """Per-block standard deviation of each estimator for Gaussian noise (floor of the empirical one)."""
+    pos = {c: max(v, 0.0) for c, v in vals.items()}
+    d_rest, d_line = (b - 1) ** 2, b - 2
+    if k >= 2:
+        t, f = pos["temporal"], pos["fixed"]
+        white = f + t / k
+        out = {
+            "temporal": t * math.sqrt(2.0 / ((k - 1) * (b * b - 3))),
+            "fixed": math.sqrt(2.0 * white**2 / d_rest + 2.0 * (t / k) ** 2 / ((k - 1) * (b * b - 3))),
+        }
+    else:
+        white = pos["single"]
+        out = {"single": white * math.sqrt(2.0 / d_rest)}
+    for comp in ("column", "row"):
+        out[comp] = math.sqrt(2.0 / d_line) * (white + b * pos[comp]) / b
+    return out
+
+
+def _quant_step(hist: np.ndarray, bin_dn: float) -> tuple[float, float]:
+    """Quantization step from the gaps between occupied histogram bins (median gap) and its error."""
+    total = hist.sum()
+    if total == 0:
+        return float("nan"), float("nan")
+    occupied = np.flatnonzero(hist >= max(3, 1e-6 * total))
+    gaps = np.diff(occupied) * bin_dn
+    if gaps.size < 3:
+        return float("nan"), float("nan")
+    step = float(np.median(gaps))
+    near = gaps[gaps <= 4 * step]
+    err = float(max(0.1 * bin_dn, near.std() / math.sqrt(near.size))) if near.size else bin_dn
+    return step, err
+
+
+def measure_frames(
+    frames: Iterable[Any],
+    block: int = BLOCK,
+    tolerance: SegmentTolerance = SegmentTolerance(),
+    progress: Any = None,
+) -> Measurements:
+    """Measure noise from frames (objects with ``image_dn``, ``metadata``, ``stamp_ns``).
+
+    Frames without an image or metadata are skipped (counted by reason); the image size must not
+    change. ``progress`` is an optional tqdm-like object updated once per frame.
+    """
+    if block < 4:
+        raise ValueError(f"block size must be >= 4 pixels, got {block}")
+    proj = _projection(block)
+    segments: list[SegmentMeasurement] = []
+    skipped: dict[str, int] = {}
+    acc: _SegmentAccumulator | None = None
+    shape: tuple[int, int] | None = None
+    grid = (0, 0)
+    hist_bin = None
+    hist = None
+    total = used = 0
+    for i, fr in enumerate(frames):
+        total += 1
+        if progress is not None:
+            progress.update(1)
+        reason = _skip_reason(fr)
+        if reason:
+            skipped[reason] = skipped.get(reason, 0) + 1
+            continue
+        img = np.asarray(fr.image_dn, dtype=np.float64)
+        if shape is None:
+            if img.shape[0] < block or img.shape[1] < block:
+                raise ValueError(f"images of {img.shape[1]}x{img.shape[0]} pixels are smaller than one {block}x{block} block")
+            shape = img.shape
+            grid = (img.shape[0] // block, img.shape[1] // block)
+            hist_bin = 1.0 if np.all(img == np.rint(img)) else 1.0 / 64.0
+            hist = np.zeros(int(round(255.0 / hist_bin)) + 1)
+        elif img.shape != shape:
+            skipped["image size changed"] = skipped.get("image size changed", 0) + 1
+            continue
+        used += 1
+        idx = np.clip(np.rint(img / hist_bin).astype(np.int64), 0, hist.size - 1)
+        hist += np.bincount(idx.ravel(), minlength=hist.size)
+        meta = fr.metadata
+        if acc is None or len(acc.frames) >= tolerance.max_frames or not tolerance.same(acc.metas[0], meta):
+            if acc is not None:
+                segments.append(acc.finish(grid))
+            acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, proj)
+        acc.add(i, _blocks(img, block), meta)
+    if acc is not None:
+        segments.append(acc.finish(grid))
+    if not segments:
+        reasons = ", ".join(f"{k}: {v}" for k, v in skipped.items()) or "no frames"
+        raise ValueError(f"no usable frames to measure ({reasons})")
+    cells = [c for s in segments for c in _cells(s, block)]
+    if not cells:
+        raise ValueError("no flat, unclipped image regions to measure noise in (every block is textured or clipped)")
+    step, step_err = _quant_step(hist, hist_bin)
+    return Measurements(
+        segments=segments,
+        cells=cells,
+        quant_step_dn=step,
+        quant_step_err_dn=step_err,
+        output_step_dn=hist_bin if hist_bin == 1.0 else 0.0,
+        histogram=hist,
+        histogram_bin_dn=hist_bin,
+        frames_total=total,
+        frames_used=used,
+        skipped=skipped,
+        shape=tuple(shape),
+    )
+
+
+def _skip_reason(fr: Any) -> str | None:
+    if getattr(fr, "skip_reason", None):
+        return str(fr.skip_reason)
+    if getattr(fr, "image_dn", None) is None:
+        return "no image"
+    if getattr(fr, "metadata", None) is None:
+        missing = getattr(fr, "missing", None)
+        return f"missing metadata ({', '.join(missing)})" if missing else "no metadata"
+    img = np.asarray(fr.image_dn)
+    if img.ndim != 2:
+        return f"not a gray image (shape {img.shape})"
+    if not np.all(np.isfinite(img)):
+        return "image has NaN or inf"
+    return None

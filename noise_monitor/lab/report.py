@@ -1,0 +1,181 @@
+"""Self-contained HTML report of an analysis (plots embedded as base64 PNG) plus its JSON summary."""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+from typing import Any, Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..physics import NoiseModel  # noqa: E402
+from .compare import Comparison, model_curve  # noqa: E402
+from .diagnose import Candidate  # noqa: E402
+
+CONDITION_LABELS = {
+    "intensity_dn": "intensity [DN]",
+    "gain_db": "gain [dB]",
+    "exposure_time_s": "exposure time [s]",
+    "sensor_temperature_c": "sensor temperature [°C]",
+    "time_s": "time since first frame [s]",
+}
+
+
+def _png(fig: plt.Figure) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _nlf_plot(summary: dict[str, Any], comp: Comparison, after: NoiseModel | None) -> str:
+    segs = comp.segments
+    pick = sorted({0, len(segs) - 1, len(segs) // 3, 2 * len(segs) // 3})[:4]
+    fig, axes = plt.subplots(1, len(pick), figsize=(4.2 * len(pick), 3.6), squeeze=False)
+    grid = np.linspace(0.0, 255.0, 103)
+    cells = summary["cells"]
+    for ax, i in zip(axes[0], pick):
+        seg = segs[i].seg
+        rows = [r for r in cells if r["segment"] == seg.index]
+        x = [r["intensity_dn"] for r in rows]
+        ax.errorbar(x, [r["measured_sigma_dn"] for r in rows], yerr=[r["measured_sigma_err_dn"] for r in rows],
+                    fmt="o", ms=4, color="k", label="measured (total)")
+        if "temporal" in rows[0]["measured_var_dn2"]:
+            ax.plot(x, np.sqrt(np.maximum([r["measured_var_dn2"]["temporal"] for r in rows], 0)), "s", ms=3,
+                    mfc="none", color="tab:blue", label="measured (temporal)")
+        ax.plot(grid, model_curve(comp.effects, seg.meta, grid), color="tab:red", label="model")
+        if after is not None:
+            ax.plot(grid, model_curve(after.effects, seg.meta, grid), "--", color="tab:green", label="model + added")
+        ax.set_title(f"g={seg.meta.gain_db:.1f} dB, t={seg.meta.exposure_time_s * 1e3:.3g} ms, "
+                     f"T={seg.meta.sensor_temperature_c:.0f} °C", fontsize=9)
+        ax.set_xlabel("intensity [DN]")
+        ax.set_ylabel("noise sigma [DN]")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle("Noise level function: measurement vs model")
+    return _png(fig)
+
+
+def _condition_plot(summary: dict[str, Any]) -> str:
+    keys = [k for k in CONDITION_LABELS if k in summary["by_condition"]]
+    fig, axes = plt.subplots(1, len(keys), figsize=(3.8 * len(keys), 3.4), squeeze=False)
+    after = summary.get("by_condition_after")
+    for ax, key in zip(axes[0], keys):
+        rows = summary["by_condition"][key]
+        x = np.arange(len(rows))
+        ax.plot(x, [r["measured_sigma_dn"] for r in rows], "o-", color="k", label="measured")
+        ax.plot(x, [r["model_sigma_dn"] for r in rows], "s--", color="tab:red", label="model")
+        if after:
+            ax.plot(x, [r["model_sigma_dn"] for r in after[key]], "^:", color="tab:green", label="model + added")
+        ax.set_xticks(x, [f"{r[key]:.3g}" for r in rows], rotation=45, fontsize=8)
+        ax.set_xlabel(CONDITION_LABELS[key])
+        ax.set_ylabel("rms noise sigma [DN]")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle("Model vs measurement per condition")
+    return _png(fig)
+
+
+def _residual_plot(summary: dict[str, Any]) -> str:
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    cells = summary["cells"]
+    ax.errorbar([r["intensity_dn"] for r in cells], [r["residual_dn"] for r in cells],
+                yerr=[r["measured_sigma_err_dn"] for r in cells], fmt="o", ms=3, alpha=0.7, color="tab:red",
+                label=f"before: rms {summary['rms_error_dn']:.3f} DN")
+    if "cells_after" in summary:
+        after = summary["cells_after"]
+        ax.plot([r["intensity_dn"] for r in after], [r["residual_dn"] for r in after], "^", ms=3,
+                color="tab:green", label=f"after: rms {summary['rms_error_after_dn']:.3f} DN")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xlabel("intensity [DN]")
+    ax.set_ylabel("measured - model sigma [DN]")
+    ax.set_title("Residual per cell (segment x intensity bin)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _png(fig)
+
+
+def _component_plot(summary: dict[str, Any]) -> str:
+    rows = summary["by_condition"]["component"]
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    x = np.arange(len(rows))
+    ax.bar(x - 0.2, [r["measured_sigma_dn"] for r in rows], 0.4, color="0.3", label="measured")
+    ax.bar(x + 0.2, [r["model_sigma_dn"] for r in rows], 0.4, color="tab:red", label="model")
+    ax.set_xticks(x, [r["component"] for r in rows])
+    ax.set_ylabel("rms sigma [DN]")
+    ax.set_title("Temporal vs fixed-pattern (white, column, row) noise")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+    return _png(fig)
+
+
+def _table(rows: Sequence[dict[str, Any]], cols: Sequence[str]) -> str:
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols) + "</tr>" for r in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, bool) or v is None:
+        return str(v)
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k}={_fmt(x)}" for k, x in v.items())
+    return str(v)
+
+
+def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison, candidates: list[Candidate],
+                 after: NoiseModel | None = None) -> Path:
+    """Write ``report.html`` (self-contained) and ``summary.json`` into ``out_dir``; returns the HTML path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    images = {
+        "Noise level function": _nlf_plot(summary, comp, after),
+        "Per condition": _condition_plot(summary),
+        "Residuals": _residual_plot(summary),
+        "Components": _component_plot(summary),
+    }
+    cand_rows = [{**c.as_dict(), "params": c.params} for c in candidates]
+    parts = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'><title>noise_monitor analysis</title>",
+        "<style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;"
+        "font-size:13px}td,th{border:1px solid #bbb;padding:3px 6px;text-align:left}img{max-width:100%}"
+        ".sig{color:#b00;font-weight:bold}</style></head><body>",
+        f"<h1>Model vs measurement: {html.escape(str(summary.get('source')))}</h1>",
+        f"<p>Profile: <b>{html.escape(str(summary.get('profile')))}</b>; model effects: "
+        f"{html.escape(', '.join(summary['model_effects']))}. Frames used {summary['measurement']['frames_used']} of "
+        f"{summary['measurement']['frames_total']}, {summary['measurement']['segments']} segments, "
+        f"{summary['measurement']['cells']} cells. <b>rms error {summary['rms_error_dn']:.4f} DN</b> "
+        "(model vs measured total sigma per cell).</p>",
+    ]
+    if "rms_error_after_dn" in summary:
+        added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
+        parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "
+                     f"after {summary['rms_error_after_dn']:.4f} DN</b></p>")
+    sig = [c for c in candidates if c.significant]
+    parts.append("<h2>Diagnosis</h2>")
+    parts.append(
+        "<p class='sig'>" + html.escape(f"Most likely missing effect: {sig[0].effect}. {sig[0].reading}") + "</p>"
+        if sig else "<p>No candidate effect explains a significant part of the model error.</p>"
+    )
+    parts.append(_table(cand_rows, ["effect", "significant", "explained_fraction", "delta_bic", "p_value", "params",
+                                    "param_errors", "rms_error_after_dn", "reading"]))
+    for title, b64 in images.items():
+        parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{b64}'>")
+    parts.append("<h2>Where the model fails (by condition)</h2>")
+    for key, rows in summary["by_condition"].items():
+        cols = [key, "cells", "measured_sigma_dn", "model_sigma_dn", "mean_residual_dn", "rms_residual_dn"]
+        parts.append(f"<h3>{html.escape(CONDITION_LABELS.get(key, key))}</h3>" + _table(rows, cols))
+    parts.append("<h2>Measurement</h2><pre>" + html.escape(json.dumps(summary["measurement"], indent=1)) + "</pre>")
+    parts.append("</body></html>")
+    path = out / "report.html"
+    path.write_text("\n".join(parts))
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    return path
