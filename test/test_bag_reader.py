@@ -175,3 +175,29 @@ def test_unusable_bags_raise_bag_error(tmp_path, sim_bag):
     (no_msgs / "src.mcap").write_bytes(b"")
     with pytest.raises(BagError):
         open_bag(no_msgs)
+
+
+def test_flir_vendor_metadata_temperature_topic_and_invalid_values(tmp_path):
+    from msg_adapters.vendor import FLIR_IMAGE_METADATA
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(FLIR_IMAGE_METADATA, "flir_camera_msgs/msg/ImageMetaData"))
+    t = store.types
+    path = tmp_path / "flir.mcap"
+    with BagWriter(path, store=store) as w:
+        for i, gain in enumerate((6.0, 99.0)):  # 99 dB is outside the valid range
+            stamp = 1_000_000_000 * (i + 1)
+            w.write("/flir/meta", t["flir_camera_msgs/msg/ImageMetaData"](
+                header=header(stamp), camera_time=0, brightness=0, exposure_time=2500, max_exposure_time=10000,
+                gain=gain), stamp)
+            w.write("/flir/temperature", t["sensor_msgs/msg/Temperature"](header=header(stamp), temperature=31.5,
+                                                                          variance=0.0), stamp)
+            w.write("/flir/image_raw", image_msg(np.full((16, 16), 60, np.uint8), stamp), stamp)
+    with open_bag(path) as reader:
+        assert (reader.metadata_topic, reader.temperature_topic) == ("/flir/meta", "/flir/temperature")
+        ok, bad = reader.frames(profile="icx285")
+    assert ok.raw_metadata == {"exposure_time_s": pytest.approx(0.0025), "gain_db": 6.0}
+    assert ok.skip_reason is None and ok.metadata.sensor_temperature_c == 31.5
+    assert ok.metadata.exposure_time_s == pytest.approx(0.0025)
+    assert bad.metadata is None and "gain_db" in bad.metadata_error
+    assert bad.skip_reason.startswith("metadata invalid")

@@ -28,6 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera-info-topic", help="override the auto-detected CameraInfo topic")
     parser.add_argument("--temperature-topic", help="override the auto-detected Temperature topic")
     parser.add_argument("--bit-depth", type=int, help="bits per pixel of 16-bit images (default: profile)")
+    parser.add_argument("--threads", type=int, default=0, help="CPU threads for inference (0 = torch default)")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG plot")
 
 
@@ -58,6 +59,12 @@ def print_summary(s: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.threads < 0:
+        raise ValueError("--threads must be >= 0")
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
     summary = replay(args.bag, args.profile, out, model_name=args.model, device=args.device, config=args.params,
                      camera_name=args.camera_name, image_topic=args.image_topic, metadata_topic=args.metadata_topic,
