@@ -43,6 +43,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
     "color": ("luma", "reduction of colour images to gray: luma or green"),
     "model": ("full_meta", "estimator variant (noise_monitor.estimator.load)"),
+    "weights": ("", "estimator checkpoint (.pt written by `noise-monitor train`); '' = the bundled weights"),
     "device": ("cpu", "inference device: cpu, cuda or auto"),
     "threads": (0, "CPU threads for inference; 0 = all cores but one (keeps one for message handling)"),
     "max_rate_hz": (0.0, "evaluate at most this many frames per second (others are dropped); 0 = no limit"),
@@ -122,7 +123,7 @@ def _make_node_class():
             if estimator is None:
                 from noise_monitor.estimator import load
 
-                estimator = load(p["model"], device=p["device"])
+                estimator = load(p["model"], device=p["device"], weights=p["weights"] or None)
             profile_name = self.profile.name if self.profile else "unknown"
             hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
             self.monitor = Monitor(config, estimator, model, p["camera_name"], hardware_id)
@@ -334,7 +335,7 @@ def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = 
 
 _CLI_OVERRIDES = {
     "image_topic": str, "metadata_topic": str, "camera_info_topic": str, "temperature_topic": str,
-    "camera_name": str, "hardware_id": str, "profile": str, "model": str, "device": str,
+    "camera_name": str, "hardware_id": str, "profile": str, "model": str, "weights": str, "device": str,
     "patches_per_frame": int, "max_rate_hz": float, "xi_threshold_dn": float,
 }
 
