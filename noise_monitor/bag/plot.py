@@ -8,6 +8,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import FormatStrFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .results import FrameRow  # noqa: E402
@@ -32,8 +33,8 @@ def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path
 
     ``truth_spans`` (start s, end s, label): known corruptions of a simulated bag, hatched.
     """
-    fig, (ax_s, ax_x) = plt.subplots(2, 1, figsize=(13, 6.5), sharex=True,
-                                     gridspec_kw={"height_ratios": [3, 2]}, constrained_layout=True)
+    fig, (ax_s, ax_x, ax_c) = plt.subplots(3, 1, figsize=(13, 8.5), sharex=True,
+                                           gridspec_kw={"height_ratios": [3, 2, 1.4]}, constrained_layout=True)
     for key, label, color in SERIES:
         t, v = _series(rows, key)
         if t.size:
@@ -60,14 +61,38 @@ def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path
     skipped = [r.time_s for r in rows if not r.processed]
     if skipped:
         ax_x.plot(skipped, np.zeros(len(skipped)), "x", color="tab:gray", ms=5, label="skipped frame")
+    _plot_conditions(ax_c, rows)
     ax_s.set_ylabel("noise sigma [DN]")
     ax_s.set_ylim(bottom=0)
     ax_x.set_ylabel("xi = sigma_model - sigma_image [DN]")
-    ax_x.set_xlabel("time since first frame [s]")
+    ax_c.set_xlabel("time since first frame [s]")
     ax_s.set_title(title)
-    for ax in (ax_s, ax_x):
+    for ax in (ax_s, ax_x, ax_c):
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)
-    fig.savefig(path, dpi=110)
+    for ax in (ax_s, ax_x):
+        ax.legend(loc="upper left", bbox_to_anchor=(1.06, 1.0), fontsize=8, borderaxespad=0)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def _plot_conditions(ax: plt.Axes, rows: list[FrameRow]) -> None:
+    """Stated gain and temperature (left axis) and exposure (right axis, log) per frame."""
+    pts = [(r.time_s, r.conditions) for r in rows if r.conditions]
+    if not pts:
+        ax.text(0.5, 0.5, "no usable metadata", transform=ax.transAxes, ha="center", va="center")
+        return
+    t = np.array([p[0] for p in pts])
+    ax.step(t, [p[1]["gain_db"] for p in pts], where="post", color="tab:brown", label="gain [dB]")
+    ax.step(t, [p[1]["sensor_temperature_c"] for p in pts], where="post", color="tab:red", label="temperature [degC]")
+    ax.set_ylabel("gain [dB]\ntemperature [degC]")
+    ax_e = ax.twinx()
+    ax_e.step(t, [1e3 * p[1]["exposure_time_s"] for p in pts], where="post", color="tab:cyan", ls="--",
+              label="exposure [ms]")
+    ax_e.set_yscale("log")
+    ax_e.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    ax_e.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+    ax_e.tick_params(axis="y", which="minor", labelsize=7)
+    ax_e.set_ylabel("exposure [ms]")
+    lines = ax.get_lines() + ax_e.get_lines()
+    ax.legend(lines, [ln.get_label() for ln in lines], loc="upper left", fontsize=8, framealpha=0.8)

@@ -27,7 +27,7 @@ from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
 from .errors import BagError
 from .plot import plot_replay
 from .reader import BagFrame, open_bag
-from .results import FrameRow, alarm_episodes, skip_reasons, source_summaries, write_csv
+from .results import CONDITION_KEYS, FrameRow, alarm_episodes, skip_reasons, source_summaries, write_csv
 from .simulate import truth_path
 from .writer import BagWriter, typestore
 
@@ -42,10 +42,12 @@ def _settings(config: MonitorConfig | str | Path | None) -> tuple[MonitorConfig,
     return MonitorConfig.from_mapping(params, ignore_unknown=True), params
 
 
-def _row(index: int, t0: int, res: FrameResult) -> FrameRow:
-    return FrameRow(index=index, stamp_ns=res.stamp_ns, time_s=(res.stamp_ns - t0) / 1e9, processed=res.processed,
-                    level=res.level, alarm_state=res.alarm_state, alarm_active=res.alarm_active, cause=res.cause,
-                    skip_reason=res.skip_reason, numbers=res.numeric())
+def _row(bf: BagFrame, t0: int, res: FrameResult) -> FrameRow:
+    meta = bf.metadata
+    return FrameRow(index=bf.index, stamp_ns=res.stamp_ns, time_s=(res.stamp_ns - t0) / 1e9,
+                    processed=res.processed, level=res.level, alarm_state=res.alarm_state,
+                    alarm_active=res.alarm_active, cause=res.cause, skip_reason=res.skip_reason,
+                    numbers=res.numeric(), conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {})
 
 
 def evaluate(monitor: Monitor, bf: BagFrame) -> FrameResult:
@@ -132,7 +134,7 @@ def replay(
                         writer.write(topic, msg, t)
                     t += diag_period_ns
             res = evaluate(monitor, bf)
-            rows.append(_row(bf.index, rows[0].stamp_ns if rows else bf.stamp_ns, res))
+            rows.append(_row(bf, rows[0].stamp_ns if rows else bf.stamp_ns, res))
             if writer is not None:
                 for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
                     writer.write(topic, msg, res.stamp_ns)

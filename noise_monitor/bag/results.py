@@ -13,6 +13,8 @@ import numpy as np
 SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigma_model", "xi_filtered")
 #: Leading CSV columns; the numeric columns of processed frames follow in a fixed order.
 BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_state", "alarm", "skip_reason")
+#: Stated operating conditions per frame (from the frame's metadata), CSV columns after the base ones.
+CONDITION_KEYS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
 
 
 @dataclass
@@ -29,11 +31,13 @@ class FrameRow:
     cause: str | None
     skip_reason: str | None
     numbers: dict[str, float] = field(default_factory=dict)
+    conditions: dict[str, float] = field(default_factory=dict)
 
     def csv_row(self) -> dict[str, Any]:
         return {"index": self.index, "stamp_ns": self.stamp_ns, "time_s": f"{self.time_s:.6f}",
                 "processed": int(self.processed), "level": self.level, "alarm_state": self.alarm_state,
                 "alarm": int(self.alarm_active), "skip_reason": self.skip_reason or "",
+                **{k: f"{v:.6g}" for k, v in self.conditions.items()},
                 **{k: f"{v:.6g}" for k, v in self.numbers.items()}}
 
 
@@ -43,7 +47,7 @@ def write_csv(rows: list[FrameRow], path: Path) -> None:
     for r in rows:
         numeric += [k for k in r.numbers if k not in numeric and k not in BASE_COLUMNS]
     with open(path, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=[*BASE_COLUMNS, *numeric], restval="")
+        writer = csv.DictWriter(fh, fieldnames=[*BASE_COLUMNS, *CONDITION_KEYS, *numeric], restval="")
         writer.writeheader()
         for r in rows:
             writer.writerow(r.csv_row())
