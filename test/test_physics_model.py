@@ -5,62 +5,25 @@ import numpy as np
 import pytest
 
 from noise_monitor.physics import CameraMetadata, EffectError, NoiseModel, load_profile, sample_metadata
-from noise_monitor.physics.metadata import factor_to_db
+from noise_monitor.physics.sensitivity import PAPER_NOISE_MODEL_TABLE, REFERENCE_VALUES, SWEEPS, sweep_cells
 
-MAX_CMOS = dict(
-    gain_db=factor_to_db(16.0), exposure_time_s=0.2, sensor_temperature_c=80.0, dark_signal_fom_na_cm2=1.0,
-    full_well_e=100_000.0, pixel_clock_hz=150e6, sense_node_gain_v_per_e=5e-6, sense_node_reset_factor=1.0,
-    pixel_size_m=10e-6, thermal_white_noise_v_per_sqrt_hz=60e-9, sensor_type="cmos",
-)
-
-# Paper, Table "Input-output sensitivity analysis", top half ("Noise Model"), total sigma in DN.
-PAPER_TABLE = {
-    "intensity": [5.54, 9.87, 9.94, 10.0, 10.1, 10.1, 10.2, 10.2, 10.3, 6.1],
-    "gain_db": [0.82, 1.86, 2.88, 3.92, 4.94, 5.96, 6.99, 8.02, 9.02, 10.1],
-    "exposure_time_s": [4.02, 5.06, 5.93, 6.67, 7.35, 7.96, 8.53, 9.08, 9.60, 10.1],
-    "sensor_temperature_c": [3.69, 3.76, 3.86, 4.03, 4.31, 4.77, 5.49, 6.56, 8.05, 10.1],
-    "dark_signal_fom_na_cm2": [3.96, 5.02, 5.89, 6.65, 7.34, 7.95, 8.53, 9.06, 9.57, 10.1],
-    "full_well_e": [118.4, 69.6, 41.4, 28.6, 21.8, 17.6, 14.8, 12.8, 11.3, 10.1],
-    "pixel_clock_hz": [3.33] * 10,
-    "sense_node_gain_v_per_e": [12.9, 11.7, 11.1, 10.8, 10.6, 10.4, 10.3, 10.2, 10.1, 10.1],
-    "sense_node_reset_factor": [9.56, 9.56, 9.58, 9.59, 9.67, 9.71, 9.76, 9.85, 9.95, 10.1],
-    "pixel_size_m": [4.05, 4.34, 4.80, 5.38, 6.05, 6.79, 7.57, 8.39, 9.21, 10.1],
-    "thermal_white_noise_v_per_sqrt_hz": [10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.1, 10.1],
-}
-SAMPLES = {  # the appendix's sampled values: 10 uniform samples of each range (gain as a factor)
-    "gain_db": [factor_to_db(g) for g in np.linspace(1.0, 16.0, 10)],
-    "exposure_time_s": np.linspace(0.001, 0.2, 10),
-    "sensor_temperature_c": np.linspace(0.0, 80.0, 10),
-    "dark_signal_fom_na_cm2": np.linspace(0.0, 1.0, 10),
-    "full_well_e": np.linspace(2_000.0, 100_000.0, 10),
-    "pixel_clock_hz": np.linspace(8e6, 150e6, 10),
-    "sense_node_gain_v_per_e": np.linspace(1e-6, 5e-6, 10),
-    "sense_node_reset_factor": np.linspace(0.0, 1.0, 10),
-    "pixel_size_m": np.linspace(0.9e-6, 10e-6, 10),
-    "thermal_white_noise_v_per_sqrt_hz": np.linspace(1e-9, 60e-9, 10),
-}
+MAX_CMOS = REFERENCE_VALUES
 
 
-@pytest.mark.parametrize("row", list(PAPER_TABLE))
+@pytest.mark.parametrize("row", list(PAPER_NOISE_MODEL_TABLE))
 def test_paper_sensitivity_table_within_5_percent(row: str) -> None:
     model = NoiseModel()
-    meta_max = CameraMetadata(**MAX_CMOS)
-    got = []
-    for i in range(10):
-        if row == "intensity":
-            got.append(model.predict(float(np.round(np.linspace(0, 255, 10)[i])), meta_max)["total"])
-        else:
-            out = model.predict(128.0, meta_max.replace(**{row: float(SAMPLES[row][i])}))
-            # the pixel-clock row is readout noise alone (physics.md)
-            got.append(out["rn"] if row == "pixel_clock_hz" else out["total"])
-    np.testing.assert_allclose(got, PAPER_TABLE[row], rtol=0.05)
+    # the pixel-clock row is readout noise alone (physics.md)
+    key = "rn" if row == "pixel_clock_hz" else "total"
+    got = [model.predict(v, meta)[key] for v, meta in sweep_cells(row)]
+    np.testing.assert_allclose(got, PAPER_NOISE_MODEL_TABLE[row], rtol=0.05)
 
 
 def test_thermal_white_noise_row_as_ccd_gives_the_values_physics_md_names() -> None:
     model = NoiseModel()
     meta = CameraMetadata(**{**MAX_CMOS, "sensor_type": "ccd"})
     got = [model.predict(128.0, meta.replace(thermal_white_noise_v_per_sqrt_hz=float(w)))["total"]
-           for w in SAMPLES["thermal_white_noise_v_per_sqrt_hz"]]
+           for w in SWEEPS["thermal_white_noise_v_per_sqrt_hz"]]
     assert 9.50 < got[0] < 9.56 and 9.55 < got[-1] < 9.60
 
 

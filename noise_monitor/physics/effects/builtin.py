@@ -8,6 +8,10 @@ from ..sensor import Conditions, ktc_sigma_v, rounded_normal_variance
 from .base import Effect, Param
 
 
+#: Seed of a fixed pattern (not fittable): gives cameras distinct patterns.
+SEED_PARAM = Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True, description="pattern seed")
+
+
 class PhotonShotNoise(Effect):
     name = "pn"
     distribution = "poisson"
@@ -59,7 +63,7 @@ class PRNU(Effect):
     temporal = False
     params = (
         Param("sigma_pct", "%", 1.0, (0.0, 20.0), description="pixel gain non-uniformity, std in % of the signal"),
-        Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True, description="pattern seed"),
+        SEED_PARAM,
     )
     description = "Photo-response non-uniformity: each pixel has its own gain."
     signature = (
@@ -76,7 +80,7 @@ class DSNU(Effect):
     temporal = False
     params = (
         Param("fraction", "1", 0.3, (0.0, 10.0), description="std of the pixels' dark signal / mean dark signal"),
-        Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True, description="pattern seed"),
+        SEED_PARAM,
     )
     description = "Dark-signal non-uniformity: pixels differ in dark current (fixed pattern, grows with t and T)."
     signature = (
@@ -93,7 +97,7 @@ class _LineOffsets(Effect):
     axis = 0
     params = (
         Param("sigma_dn", "DN", 0.5, (0.0, 20.0), description="std of the per-line offsets"),
-        Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True, description="pattern seed"),
+        SEED_PARAM,
     )
 
     def sigma_dn(self, signal_dn, cond: Conditions):
@@ -150,7 +154,7 @@ class HotPixels(Effect):
     params = (
         Param("fraction", "1", 1e-3, (0.0, 0.2), description="fraction of hot pixels"),
         Param("dark_multiplier", "1", 1000.0, (0.0, 1e7), description="hot pixels' dark current / mean dark current"),
-        Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True, description="pattern seed"),
+        SEED_PARAM,
     )
     description = "Hot pixels: a few pixels with a dark current many times the mean (heavy tail, grows with t and T)."
     signature = (
