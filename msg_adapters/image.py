@@ -87,7 +87,7 @@ def image_to_gray_dn(msg: Any, bit_depth: int | None = None, color: str = "luma"
     if step < row_bytes:
         raise AdapterError(f"step {step} is smaller than width*channels*bytes = {row_bytes} ({encoding})")
     raw = _raw_bytes(_field(msg, "data"))
-    if raw.size < step * (height - 1) + row_bytes:
+    if raw.size < step * (height - 1) + row_bytes or raw.size > step * height:  # longer: header/data mismatch
         raise AdapterError(
             f"image data has {raw.size} bytes, expected {step * height} for {width}x{height} {encoding} step {step}"
         )

@@ -52,7 +52,10 @@ def metadata_from_mapping(values: Mapping[str, Any]) -> dict[str, float | str]:
         if key == "sensor_type":
             out[key] = str(value).strip().lower()
         elif key == "bit_depth":
-            out[key] = int(_number(key, value))
+            bits = _number(key, value)
+            if not bits.is_integer():
+                raise AdapterError(f"metadata value {key}={value!r} is not an integer")
+            out[key] = int(bits)
         elif key in KNOWN_FIELDS:
             out[key] = _number(key, value)
         elif key in ALIASES:
