@@ -31,7 +31,8 @@ def bench(bag: Path, profile: str, estimator, out: Path | None) -> dict:
     wall = time.perf_counter() - t
     return {"bag": bag.name, "outputs": out is not None, "frames": s["frames_total"],
             "processed": s["frames_processed"], "bag_s": s["bag_duration_s"], "wall_s": round(wall, 2),
-            "frames_per_s": round(s["frames_total"] / wall, 2), "ms_per_frame": round(1e3 * wall / s["frames_total"], 1),
+            "frames_per_s": round(s["frames_total"] / wall, 2),
+            "ms_per_frame": round(1e3 * wall / s["frames_total"], 1),
             "realtime_factor": round(s["bag_duration_s"] / wall, 2), "alarms": len(s["alarms"])}
 
 

@@ -21,7 +21,8 @@ def test_world_has_flat_textured_and_gradient_regions_at_many_levels(rng):
     blocks = [world[r:r + tile, c:c + tile] for r in range(0, world.shape[0] - tile + 1, tile)
               for c in range(0, world.shape[1] - tile + 1, tile)]
     flat = [b for b in blocks if np.ptp(b) == 0]
-    ramps = [b for b in blocks if np.ptp(b) > 0 and (np.ptp(np.diff(b, axis=0)) < 1e-3 or np.ptp(np.diff(b, axis=1)) < 1e-3)]
+    ramps = [b for b in blocks
+             if np.ptp(b) > 0 and (np.ptp(np.diff(b, axis=0)) < 1e-3 or np.ptp(np.diff(b, axis=1)) < 1e-3)]
     textured = [b for b in blocks if np.ptp(np.diff(b, axis=0)) > 1e-3 and np.ptp(np.diff(b, axis=1)) > 1e-3]
     assert flat and ramps and textured
     means = np.array([b.mean() for b in blocks])

@@ -91,7 +91,8 @@ class BagReader:
             self._reader = AnyReader([self._bag_path], default_typestore=store)
             self._reader.open()
         except _READ_ERRORS as exc:
-            raise BagError(f"cannot read bag {self.path}: {exc or type(exc).__name__} (corrupt or truncated?)") from None
+            reason = exc or type(exc).__name__
+            raise BagError(f"cannot read bag {self.path}: {reason} (corrupt or truncated?)") from None
         self.topics: dict[str, str] = {c.topic: c.msgtype for c in self._reader.connections}
         if not self.topics or self._reader.message_count == 0:
             self.close()

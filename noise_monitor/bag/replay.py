@@ -78,6 +78,7 @@ def replay(
     *,
     estimator: Any = None,
     model_name: str | None = None,
+    weights: str | Path | None = None,
     device: str | None = None,
     config: MonitorConfig | str | Path | None = None,
     camera_name: str | None = None,
@@ -93,7 +94,7 @@ def replay(
 ) -> dict[str, Any]:
     """Run the monitor over every image of ``bag``; returns the JSON summary (and writes outputs).
 
-    ``config``: a MonitorConfig or a node params YAML (default config/node.yaml, whose model, device,
+    ``config``: a MonitorConfig or a node params YAML (default config/node.yaml, whose model, weights, device,
     camera_name, hardware_id, bit_depth, color, sync_tolerance_s and diagnostics_rate_hz apply too
     unless given here). ``estimator``: an object honouring the estimator contract (default:
     ``noise_monitor.estimator.load(model_name, device)``).
@@ -103,7 +104,8 @@ def replay(
     if estimator is None:
         from noise_monitor.estimator import load
 
-        estimator = load(model_name or params.get("model", "full_meta"), device=device or params.get("device", "cpu"))
+        estimator = load(model_name or params.get("model", "full_meta"), device=device or params.get("device", "cpu"),
+                         weights=weights or params.get("weights") or None)
     camera = camera_name or params.get("camera_name") or "camera"
     hw = hardware_id or params.get("hardware_id") or f"{prof.name if prof else 'unknown'}/{camera}"
     monitor = Monitor(cfg, estimator, NoiseModel(extra=prof.effects if prof else None), camera, hw)
@@ -155,7 +157,8 @@ def replay(
         "frames_processed": processed,
         "frames_skipped": len(rows) - processed,
         "skip_reasons": skip_reasons(rows),
-        "skipped": [{"index": r.index, "stamp_ns": r.stamp_ns, "reason": r.skip_reason} for r in rows if not r.processed],
+        "skipped": [{"index": r.index, "stamp_ns": r.stamp_ns, "reason": r.skip_reason}
+                    for r in rows if not r.processed],
         "alarms": episodes,
         **source_summaries(rows),
         "levels": {name: sum(r.level == lvl for r in rows) for lvl, name in LEVEL_NAMES.items()},

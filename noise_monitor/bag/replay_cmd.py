@@ -19,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                      "replay.csv, replay.png, summary.json")
     parser.add_argument("--json", metavar="PATH", help="also write the summary JSON here")
     parser.add_argument("--model", help="estimator variant (default: the params file's, full_meta)")
+    parser.add_argument("--weights", metavar="PT", help="estimator checkpoint (default: the params file's, bundled)")
     parser.add_argument("--device", help="cpu, cuda or auto (default: the params file's, cpu)")
     parser.add_argument("--params", metavar="YAML", help="node parameter file with the monitor settings "
                                                          "(default config/node.yaml)")
@@ -66,9 +67,9 @@ def run(args: argparse.Namespace) -> int:
 
         torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
-    summary = replay(args.bag, args.profile, out, model_name=args.model, device=args.device, config=args.params,
-                     camera_name=args.camera_name, image_topic=args.image_topic, metadata_topic=args.metadata_topic,
-                     camera_info_topic=args.camera_info_topic, temperature_topic=args.temperature_topic,
+    summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights, device=args.device,
+                     config=args.params, camera_name=args.camera_name, image_topic=args.image_topic,
+                     metadata_topic=args.metadata_topic, camera_info_topic=args.camera_info_topic, temperature_topic=args.temperature_topic,
                      bit_depth=args.bit_depth, plot=not args.no_plot)
     print_summary(summary)
     if args.json:

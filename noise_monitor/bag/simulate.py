@@ -16,6 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
 from .messages import camera_info_msg, image_msg, metadata_msg
 from .scenarios import SCENARIOS, Step, get_scenario
@@ -45,7 +46,9 @@ def load_truth(bag: str | Path) -> dict[str, Any]:
 
 
 def _stated(meta, step: Step):
-    return meta.replace(**{k: getattr(meta, k) * f for k, f in step.stated_factors.items()}) if step.stated_factors else meta
+    if not step.stated_factors:
+        return meta
+    return meta.replace(**{k: getattr(meta, k) * f for k, f in step.stated_factors.items()})
 
 
 def simulate_bag(
@@ -121,7 +124,7 @@ def simulate_bag(
                 "sigma_image": round(sigma_image, 5),
                 "sigma_model": round(sigma_model, 5),
                 "xi": round(sigma_model - sigma_image, 5),
-                "true_metadata": {k: getattr(true_meta, k) for k in ("gain_db", "exposure_time_s", "sensor_temperature_c")},
+                "true_metadata": {k: getattr(true_meta, k) for k in DYNAMIC_FIELDS},
                 "stated_changes": {k: getattr(stated, k) for k in step.stated_factors},
                 "image_noise_dn": step.image_noise_dn,
                 "corrupted": step.corrupted,

@@ -14,7 +14,8 @@ HELP = "Simulate a camera over a scenario and write a rosbag2 bag (MCAP/sqlite3)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", help="output bag: NAME.mcap (one MCAP file) or a folder name (rosbag2 directory)")
-    parser.add_argument("--profile", required=True, help="camera profile YAML or bundled name (icx285, ev76c661, generic)")
+    parser.add_argument("--profile", required=True,
+                        help="camera profile YAML or bundled name (icx285, ev76c661, generic)")
     parser.add_argument("--scenario", required=True, choices=sorted(SCENARIOS), metavar="NAME",
                         help="; ".join(f"{k}: {v.description}" for k, v in SCENARIOS.items()))
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
