@@ -13,6 +13,7 @@ from noise_monitor.bag.messages import camera_info_msg, header, image_msg
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter, typestore
+from noise_monitor.paths import share_dir
 from noise_monitor.physics import load_profile
 
 SMALL = dict(frames=4, width=48, height=32, hold_s=0.0)
@@ -161,6 +162,14 @@ def test_unusable_bags_raise_bag_error(tmp_path, sim_bag):
     for bad in (empty, garbage, truncated):
         with pytest.raises(BagError, match="cannot read bag"):
             open_bag(bad)
+    flipped = bytearray((share_dir() / "bags" / "icx285_lab.mcap").read_bytes())  # damage a compressed chunk
+    mid = len(flipped) // 2
+    flipped[mid:mid + 2000] = bytes(b ^ 0xFF for b in flipped[mid:mid + 2000])
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(flipped))
+    with pytest.raises(BagError, match="damaged|cannot read"):
+        with open_bag(damaged) as reader:
+            list(reader.frames())
     text = tmp_path / "notes.txt"
     text.write_text("hello")
     with pytest.raises(BagError, match="not a bag"):

@@ -8,17 +8,14 @@ registered (rosbags typesys), so vendor types deserialise without their packages
 from __future__ import annotations
 
 import bisect
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
-from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import ReaderError
-from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, TypesysError, get_typestore
+from rosbags.typesys import Stores, get_typestore
 
 from msg_adapters import AdapterError, camera_geometry, image_to_gray_dn
 from msg_adapters.metadata import KNOWN_FIELDS, ALIASES, metadata_from_diagnostics, metadata_from_mapping
@@ -32,8 +29,9 @@ IMAGE_TYPE = "sensor_msgs/msg/Image"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
-_READ_ERRORS = (AnyReaderError, ReaderError, SerdeError, TypesysError, struct.error, EOFError, KeyError,
-                IndexError, ValueError, OSError)
+#: Any exception raised inside rosbags (its own errors, and struct/zstd/decoding errors on damaged bytes)
+#: means the bag cannot be read; it becomes a BagError naming the bag.
+_READ_ERRORS = (Exception,)
 _METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
 
 
