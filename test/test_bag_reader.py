@@ -121,9 +121,11 @@ def test_topic_overrides_and_ambiguity(tmp_path):
     with BagWriter(path) as w:
         for topic, value in (("/left/image", 10), ("/right/image", 200)):
             w.write(topic, image_msg(np.full((8, 8), value, np.uint8), 5), 5)
+            w.write(topic.replace("image", "camera_info"), camera_info_msg(8, 8, 5), 5)
     with pytest.raises(BagError, match="several image topics.*--image-topic"):
         open_bag(path)
-    with open_bag(path, image_topic="/right/image") as reader:
+    with open_bag(path, image_topic="/right/image") as reader:  # the camera info of the same namespace
+        assert reader.camera_info_topic == "/right/camera_info"
         assert float(next(reader.frames()).image_dn.mean()) == 200.0
     with pytest.raises(BagError, match="'/nope' is not in bag"):
         open_bag(path, image_topic="/nope")

@@ -135,6 +135,10 @@ class BagReader:
             if override not in self.topics:
                 raise BagError(f"{role} topic {override!r} is not in bag {self.path}; topics: {self._listing()}")
             return override
+        if len(candidates) > 1 and self.image_topic:  # prefer the image's namespace (e.g. /left/...)
+            ns = self.image_topic.rsplit("/", 1)[0] + "/"
+            same = [t for t in candidates if t.startswith(ns)]
+            candidates = same if len(same) == 1 else candidates
         if len(candidates) > 1:
             raise BagError(f"several {role} topics in bag {self.path}: {', '.join(candidates)}; "
                            f"choose one with --{role.replace('_', '-')}-topic")
