@@ -20,11 +20,13 @@ from ..physics import CameraMetadata, CameraProfile, Effect, NoiseModel, build_e
 from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
 from ..physics.sensor import Conditions
-from .measure import OUTLIER_PIXEL_SIGMAS, Cell, Measurements, SegmentMeasurement
+from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMeasurement
 
-MEASURED = ("temporal", "fixed", "column", "row")
+MEASURED = ("temporal", "fixed", "column", "row", "outlier")
 #: assumed standard error of the quantization-step measurement beyond its statistical error (DN)
 STEP_SYSTEMATIC_DN = 0.25
+#: outlier pixels a segment needs before their mean amplitude is compared with the model
+MIN_OUTLIERS_FOR_AMPLITUDE = 5
 
 
 def component_of(effect: Effect) -> str | None:
@@ -48,46 +50,57 @@ def baseline_effects(profile: CameraProfile | None, meta: CameraMetadata, intege
     return effects
 
 
-def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) -> dict[str, np.ndarray]:
-    """Unclipped variance (DN^2) per measured component at intensities ``v``."""
+def _conditions(effects: Sequence[Effect], meta: CameraMetadata) -> Conditions:
     cond = Conditions.from_meta(meta)
     for e in effects:
         if e.distribution == "modifier":
             cond = e.modify(cond)
+    return cond
+
+
+def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """A fixed mixture's (fraction, clipped offset, probability that an affected pixel is an outlier)."""
+    frac, off = effect.mixture(v, cond)
+    off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
+    s = np.maximum(sigma, 1e-6)
+    thr = OUTLIER_PIXEL_SIGMAS * s
+    return float(frac), off, ndtr((off - thr) / s) + ndtr((-off - thr) / s)
+
+
+def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray,
+                         sigma: np.ndarray) -> dict[str, np.ndarray]:
+    """Unclipped variance (DN^2) per measured component at block intensities ``v``.
+
+    A fixed mixture (hot pixels) goes to "outlier" where its offset stands out of the block's noise
+    ``sigma`` (robust, DN) and to the white fixed-pattern core elsewhere; its offsets are clipped.
+    """
+    cond = _conditions(effects, meta)
     out = {c: np.zeros(v.shape) for c in MEASURED}
     for e in effects:
         comp = component_of(e)
         if comp is None:
             continue
-        if e.distribution == "mixture":  # offsets cannot push a pixel beyond the clipping limits
-            frac, off = e.mixture(v, cond)
-            var = frac * (1.0 - frac) * _clipped_offset(off, v) ** 2
+        if e.distribution == "mixture" and not e.temporal:
+            frac, off, p = _detection(e, cond, v, sigma)
+            var = frac * (1.0 - frac) * off**2
+            out["outlier"] = out["outlier"] + var * p
+            out[comp] = out[comp] + var * (1.0 - p)
         else:
-            var = e.variance_dn2(v, cond)
-        out[comp] = out[comp] + np.asarray(var, dtype=float)
+            out[comp] = out[comp] + np.asarray(e.variance_dn2(v, cond), dtype=float)
     return out
 
 
-def _clipped_offset(off: Any, v: np.ndarray) -> np.ndarray:
-    return np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
-
-
-def tail_pixels(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray, pixels: int) -> float:
-    """Expected outlier pixels (|residual| > OUTLIER_PIXEL_SIGMAS x sigma) from fixed-pattern mixtures."""
-    cond = Conditions.from_meta(meta)
-    for e in effects:
-        if e.distribution == "modifier":
-            cond = e.modify(cond)
-    s = np.maximum(sigma, 1e-6)
-    thr = OUTLIER_PIXEL_SIGMAS * s
-    total = 0.0
+def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray,
+                        pixels_per_block: int) -> tuple[float, float]:
+    """(expected outlier pixels, their mean |offset| in DN) from the fixed mixtures."""
+    cond = _conditions(effects, meta)
+    count = weighted = 0.0
     for e in effects:
         if e.distribution == "mixture" and not e.temporal:
-            frac, off = e.mixture(v, cond)
-            off = _clipped_offset(off, v)
-            p = ndtr((off - thr) / s) + ndtr((-off - thr) / s)
-            total += float(np.sum(frac * p)) * pixels
-    return total
+            frac, off, p = _detection(e, cond, v, sigma)
+            count += float(np.sum(frac * p)) * pixels_per_block
+            weighted += float(np.sum(frac * p * np.abs(off))) * pixels_per_block
+    return count, (weighted / count if count > 0 else 0.0)
 
 
 def predicted_step(effects: Sequence[Effect], meta: CameraMetadata, output_step: float) -> float:
@@ -104,8 +117,9 @@ def predicted_step(effects: Sequence[Effect], meta: CameraMetadata, output_step:
 
 def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) -> np.ndarray:
     """Model total sigma (DN) at intensities ``v``: clip-aware ``predict`` plus the quantization's LSB^2/12."""
+    v = np.asarray(v, dtype=float)
     clip_model = NoiseModel([e for e in effects if e.distribution != "quantization"])
-    quant = unclipped_components([e for e in effects if e.distribution == "quantization"], meta, np.asarray(v, float))
+    quant = unclipped_components([e for e in effects if e.distribution == "quantization"], meta, v, np.ones_like(v))
     return np.sqrt(np.asarray(clip_model.predict(v, meta)["total"]) ** 2 + sum(quant.values()))
 
 
@@ -113,26 +127,39 @@ def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) 
 class _SegmentBase:
     seg: SegmentMeasurement
     cells: list[Cell]
-    clip_aware: dict[str, np.ndarray]  # component -> per-block variance
-    total: np.ndarray  # per-block clip-aware total variance
+    clip_aware: dict[str, np.ndarray]  # component -> per-block variance (DN^2)
     unclipped: dict[str, np.ndarray]
 
     def __post_init__(self) -> None:
         self.average = np.zeros((len(self.cells), self.seg.intensity_dn.size))
         for i, c in enumerate(self.cells):
             self.average[i, c.block_index] = 1.0 / c.block_index.size
-        self.observed = tuple(self.cells[0].values)
+        # outlier energy is sparse (a few pixels per cell): fitted through the outlier count and amplitude
+        self.observed = tuple(k for k in self.cells[0].values if k != "outlier")
         self.values = np.array([[c.values[k] for k in self.observed] for c in self.cells])
         self.errors = np.maximum(np.array([[c.errors[k] for k in self.observed] for c in self.cells]), 1e-9)
+        self.pixels_per_block = self.seg.pixels_checked // max(1, self.seg.intensity_dn.size)
 
     def model_cells(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        """Model variance per cell (rows) and observed component (columns)."""
-        cols = [comps["temporal"] + comps["fixed"] if k == "single" else comps[k] for k in self.observed]
-        return self.average @ np.stack(cols, axis=1)
+        """Model variance per cell (rows) and observed component (columns), pooled like the measurement."""
+        return np.stack([_cell_values(self.average, comps, k) for k in self.observed], axis=1)
+
+
+def _cell_values(average: np.ndarray, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+    if comp == "single":
+        return average @ (comps["temporal"] + comps["fixed"])
+    if comp in POOLED:
+        return np.full(average.shape[0], float(np.mean(comps[comp])))
+    return average @ comps[comp]
 
 
 class Comparison:
-    """Measurements paired with a model's prediction for the same segments and blocks."""
+    """Measurements paired with a model's prediction for the same segments and blocks.
+
+    Poisson and Gaussian effects come from ``NoiseModel.predict`` (joint mode, clip-aware, each effect's
+    sigma at the block intensity); fixed mixtures (hot pixels) are split between the outlier and the
+    white core components with clipped offsets; quantization adds LSB^2/12.
+    """
 
     def __init__(self, meas: Measurements, model: NoiseModel, progress: Any = None) -> None:
         self.meas = meas
@@ -142,23 +169,19 @@ class Comparison:
         for c in meas.cells:
             by_seg.setdefault(c.segment, []).append(c)
         self.segments: list[_SegmentBase] = []
-        quant = [e for e in self.effects if e.distribution == "quantization"]
-        clip_model = NoiseModel([e for e in self.effects if e.distribution != "quantization"])
+        analytic = [e for e in self.effects if e.distribution in ("poisson", "gaussian")]
+        rest = [e for e in self.effects if e not in analytic]
+        clip_model = NoiseModel(analytic + [e for e in rest if e.distribution == "modifier"])
         for seg in meas.segments:
             if seg.index not in by_seg:
                 continue
-            pred = clip_model.predict(seg.intensity_dn, seg.meta)
-            comps = {c: np.zeros(seg.intensity_dn.shape) for c in MEASURED}
-            for e in clip_model.noise_effects:
+            v = seg.intensity_dn
+            pred = clip_model.predict(v, seg.meta)
+            comps = unclipped_components(rest, seg.meta, v, seg.robust_sigma_dn)
+            for e in analytic:
                 comps[component_of(e)] = comps[component_of(e)] + np.asarray(pred[e.name], dtype=float) ** 2
-            q = unclipped_components(quant, seg.meta, seg.intensity_dn)
-            comps = {c: a + q[c] for c, a in comps.items()}
-            total = np.asarray(pred["total"], dtype=float) ** 2 + sum(q.values())
-            summed = sum(comps.values())
-            scale = np.where(summed > 0, total / np.maximum(summed, 1e-300), 1.0)
-            comps = {c: a * scale for c, a in comps.items()}
-            self.segments.append(_SegmentBase(seg, by_seg[seg.index], comps, total,
-                                              unclipped_components(self.effects, seg.meta, seg.intensity_dn)))
+            self.segments.append(_SegmentBase(seg, by_seg[seg.index], comps,
+                                              unclipped_components(self.effects, seg.meta, v, seg.robust_sigma_dn)))
             if progress is not None:
                 progress.update(1)
 
@@ -176,20 +199,26 @@ class Comparison:
         effects = self.replaced(extra)
         out = []
         for sb in self.segments:
-            new = unclipped_components(effects, sb.seg.meta, sb.seg.intensity_dn)
+            new = unclipped_components(effects, sb.seg.meta, sb.seg.intensity_dn, sb.seg.robust_sigma_dn)
             out.append((sb, {c: np.maximum(sb.clip_aware[c] + new[c] - sb.unclipped[c], 0.0) for c in MEASURED}))
         return out
 
     def residuals(self, extra: Sequence[Effect] = ()) -> np.ndarray:
-        """Normalised residuals (measured - model) / error of every observable, for chi-square fits."""
+        """Normalised residuals (measured - model) / error of every observable, for chi-square fits:
+        cell variances per component, outlier count and amplitude per segment, quantization step."""
         effects = self.replaced(extra) if extra else self.effects
         res = []
         for sb, comps in self.predict_with(extra):
             res.extend(((sb.values - sb.model_cells(comps)) / sb.errors).ravel())
             seg = sb.seg
-            per_block = seg.pixels_checked // max(1, seg.intensity_dn.size)
-            expected = tail_pixels(effects, seg.meta, seg.intensity_dn, seg.robust_sigma_dn, per_block)
-            res.append((seg.outlier_pixels - expected) / math.sqrt(max(expected, seg.outlier_pixels, 1.0)))
+            count, amp = outlier_expectation(effects, seg.meta, seg.intensity_dn, seg.robust_sigma_dn,
+                                             sb.pixels_per_block)
+            res.append((seg.outlier_pixels - count) / math.sqrt(max(count, seg.outlier_pixels, 1.0)))
+            if seg.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE:
+                err = math.hypot(seg.outlier_amplitude_err_dn, 0.05 * seg.outlier_amplitude_dn)
+                res.append((seg.outlier_amplitude_dn - amp) / max(err, 1e-6))
+            else:
+                res.append(0.0)
         if math.isfinite(self.meas.quant_step_dn):
             step = predicted_step(effects, self.segments[0].seg.meta, self.meas.output_step_dn)
             err = math.hypot(self.meas.quant_step_err_dn, STEP_SYSTEMATIC_DN)
@@ -205,8 +234,9 @@ class Comparison:
         t0 = self.meas.segments[0].stamp_ns
         for sb, comps in pairs:
             seg = sb.seg
-            for cell in sb.cells:
-                model = _cell_model(cell, comps)
+            table = {c: _cell_values(sb.average, comps, c) for c in MEASURED + ("single",)}
+            for i, cell in enumerate(sb.cells):
+                model = {c: float(a[i]) for c, a in table.items()}
                 meas_total = sum(cell.values.values())
                 err_total = math.sqrt(sum(e * e for e in cell.errors.values()))
                 model_total = sum(model[c] for c in MEASURED)
@@ -229,13 +259,6 @@ class Comparison:
                     "model_var_dn2": {c: model[c] for c in cell.values},
                 })
         return rows
-
-
-def _cell_model(cell: Cell, comps: dict[str, np.ndarray]) -> dict[str, float]:
-    idx = cell.block_index
-    out = {c: float(np.mean(comps[c][idx])) for c in MEASURED}
-    out["single"] = out["temporal"] + out["fixed"]
-    return out
 
 
 def rms_error(rows: Iterable[dict[str, Any]]) -> float:

@@ -29,7 +29,9 @@ from ..physics import CameraMetadata
 BLOCK = 8
 BIN_WIDTH_DN = 16.0
 INTENSITY_RANGE_DN = (8.0, 247.0)
-COMPONENTS = ("temporal", "fixed", "column", "row", "single")
+#: per-pixel variance components: temporal, fixed-pattern white core, column and row offsets, outlier pixels;
+#: "single" (temporal + fixed core) replaces the first two for single-frame segments
+COMPONENTS = ("temporal", "fixed", "column", "row", "outlier", "single")
 #: a block is textured if its residual is correlated along both axes beyond this lag-1 correlation
 TEXTURE_CORRELATION = 0.3
 #: ... or if its robust sigma (temporal spread) exceeds this multiple of its bin's median
@@ -37,6 +39,8 @@ OUTLIER_BLOCK_FACTOR = 3.0
 #: a pixel of the segment's mean residual beyond this many robust sigmas is an outlier pixel
 OUTLIER_PIXEL_SIGMAS = 6.0
 MIN_BLOCKS_PER_CELL = 3
+#: smallest per-block standard deviation of a variance estimate (DN^2): 8-bit rounding noise scale
+MIN_VAR_ERR_DN2 = 0.01
 _NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
 
 
@@ -71,6 +75,8 @@ class SegmentMeasurement:
     values: dict[str, np.ndarray]  # component -> (B,) variance DN^2 per block
     robust_sigma_dn: np.ndarray  # (B,) robust sigma of the mean residual (outlier threshold basis)
     outlier_pixels: int
+    outlier_amplitude_dn: float  # mean |residual| of the outlier pixels
+    outlier_amplitude_err_dn: float
     pixels_checked: int
     blocks_total: int
     excluded: dict[str, int]
@@ -162,16 +168,31 @@ def _lag1(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     return np.sum(r3[:, :, 1:] * r3[:, :, :-1], axis=(1, 2)) / e, np.sum(r3[:, 1:, :] * r3[:, :-1, :], axis=(1, 2)) / e
 
 
-def _robust_sigma(r: np.ndarray, b: int) -> np.ndarray:
-    """Robust per-pixel sigma from the MAD of neighbour differences (the smaller of the x and y ones):
-    insensitive to a step edge, to hot pixels and to column or row offsets."""
+def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """(residual minus its column and row medians, that line model) per block (N, b*b)."""
     r3 = r.reshape(-1, b, b)
+    col = np.median(r3, axis=1, keepdims=True)
+    row = np.median(r3 - col, axis=2, keepdims=True)
+    lines = np.broadcast_to(col + row, r3.shape).reshape(r.shape)
+    return r - lines, lines
 
-    def mad(d: np.ndarray) -> np.ndarray:
-        d = d.reshape(d.shape[0], -1)
-        return 1.4826 * np.median(np.abs(d - np.median(d, axis=1, keepdims=True)), axis=1) / math.sqrt(2.0)
 
-    return np.minimum(mad(np.diff(r3, axis=2)), mad(np.diff(r3, axis=1)))
+def _robust_sigma(d: np.ndarray) -> np.ndarray:
+    """Robust per-pixel sigma of de-lined residuals: MAD-based, floored at half the plain std so that
+    coarsely quantized blocks (most pixels on one level) do not report zero noise."""
+    mad = np.median(np.abs(d - np.median(d, axis=1, keepdims=True)), axis=1)
+    return np.maximum(1.4826 * mad, 0.5 * d.std(axis=1))
+
+
+def _without_line_pattern(r: np.ndarray, b: int, grid: tuple[int, int]) -> np.ndarray:
+    """Block residuals minus the image-wide column and row profiles (median over the blocks sharing
+    a line): offsets common to a whole image line are removed, an edge inside one block is not."""
+    gy, gx = grid
+    r4 = r.reshape(gy, gx, b, b)
+    col = np.median(r4.mean(axis=2), axis=0)  # (gx, b): per image column
+    r4 = r4 - col[None, :, None, :]
+    row = np.median(r4.mean(axis=3), axis=1)  # (gy, b): per image row
+    return (r4 - row[:, None, :, None]).reshape(r.shape)
 
 
 def _line_ratio(r: np.ndarray, b: int, robust: np.ndarray) -> np.ndarray:
@@ -198,21 +219,17 @@ class _SegmentAccumulator:
         self.index, self.meta, self.stamp_ns, self.b, self.proj = index, meta, stamp_ns, b, proj
         self.frames: list[int] = []
         self.metas: list[CameraMetadata] = []
-        self.s1 = self.s2 = self.mean = self.single = None
+        self.s1 = self.s2 = self.mean = None
 
     def add(self, frame_index: int, blocks: np.ndarray, meta: CameraMetadata) -> None:
         r = blocks @ self.proj
-        e_tot, e_col, e_row = _energies(r, self.b)
         if self.s1 is None:
             self.s1 = np.zeros_like(r)
             self.s2 = np.zeros(r.shape[0])
             self.mean = np.zeros(r.shape[0])
-            self.single = [np.zeros(r.shape[0]) for _ in range(3)]
         self.s1 += r
-        self.s2 += e_tot
+        self.s2 += np.sum(r * r, axis=1)
         self.mean += blocks.mean(axis=1)
-        for acc, e in zip(self.single, (e_tot, e_col, e_row)):
-            acc += e
         self.frames.append(frame_index)
         self.metas.append(meta)
 
@@ -220,15 +237,20 @@ class _SegmentAccumulator:
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
-        single = _split(*(acc / k for acc in self.single), b)
-        m_white, m_col, m_row = _split(*_energies(rm, b), b)
+        # outlier pixels (hot pixels, defects) stand out of the column/row structure and the noise; they
+        # are measured apart (count, amplitude, energy) and replaced by the line model in the rest
+        centred, lines = _delined(rm, b)
+        robust = _robust_sigma(centred)
+        is_out = np.abs(centred) > OUTLIER_PIXEL_SIGMAS * robust[:, None]
+        core, col, row = _split(*_energies(np.where(is_out, lines, rm), b), b)
         values: dict[str, np.ndarray] = {}
         if k >= 2:
             temporal = (self.s2 - np.sum(self.s1 * self.s1, axis=1) / k) / ((k - 1) * (b * b - 3))
-            values = {"temporal": temporal, "fixed": m_white - temporal / k, "column": m_col, "row": m_row}
+            values = {"temporal": temporal, "fixed": core - temporal / k}
         else:
             temporal = None
-            values = {"single": single[0], "column": single[1], "row": single[2]}
+            values = {"single": core}
+        values |= {"column": col, "row": row, "outlier": np.sum(np.where(is_out, centred**2, 0.0), axis=1) / (b * b)}
 
         n = v.size
         bins = np.floor(v / BIN_WIDTH_DN).astype(int)
@@ -236,9 +258,9 @@ class _SegmentAccumulator:
         excluded: dict[str, int] = {}
         keep = (v >= lo) & (v <= hi)
         excluded["near_clipping"] = int(np.sum(~keep))
-        rho_x, rho_y = _lag1(rm, b)
-        robust = _robust_sigma(rm, b)
-        lines = _line_ratio(rm, b, robust)
+        flat = _without_line_pattern(rm, b, grid)  # real column/row offsets removed: edges stand out
+        rho_x, rho_y = _lag1(flat, b)
+        lines = _line_ratio(flat, b, robust)
         tex = keep & (
             (np.minimum(rho_x, rho_y) > TEXTURE_CORRELATION)
             | _bin_outliers(robust, bins, keep, OUTLIER_BLOCK_FACTOR)
@@ -250,10 +272,7 @@ class _SegmentAccumulator:
             moving = keep & _bin_outliers(np.maximum(temporal, 0.0), bins, keep, OUTLIER_BLOCK_FACTOR)
             excluded["motion"] = int(np.sum(moving))
             keep &= ~moving
-
-        thr = OUTLIER_PIXEL_SIGMAS * robust[keep]
-        centred = rm[keep] - np.median(rm[keep], axis=1, keepdims=True) if keep.any() else rm[keep]
-        outliers = int(np.sum(np.abs(centred) > thr[:, None]))
+        amp = np.abs(centred[keep][is_out[keep]])
 
         gy, gx = grid
         iy, ix = np.divmod(np.arange(n), gx)
@@ -268,24 +287,45 @@ class _SegmentAccumulator:
             region=region[keep],
             values={c: a[keep] for c, a in values.items()},
             robust_sigma_dn=robust[keep],
-            outlier_pixels=outliers,
+            outlier_pixels=int(amp.size),
+            outlier_amplitude_dn=float(amp.mean()) if amp.size else 0.0,
+            outlier_amplitude_err_dn=float(amp.std() / math.sqrt(amp.size)) if amp.size > 1 else 0.0,
             pixels_checked=int(keep.sum()) * b * b,
             blocks_total=n,
             excluded=excluded,
         )
 
 
+#: components that are pooled over the whole segment in every cell: line offsets belong to image lines
+#: (a cell covers few of them) and outlier pixels are sparse; both are assumed independent of intensity
+POOLED = ("column", "row", "outlier")
+
+
+#: pooled components whose gross outliers (an edge that slipped through) are trimmed
+TRIMMED = ("column", "row")
+TRIM_MADS = 8.0
+
+
+def _inliers(x: np.ndarray) -> np.ndarray:
+    med = np.median(x)
+    mad = 1.4826 * np.median(np.abs(x - med))
+    return np.flatnonzero(x <= med + TRIM_MADS * max(mad, 1e-9))
+
+
 def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
     out = []
     bins = np.floor(seg.intensity_dn / BIN_WIDTH_DN).astype(int)
+    pooled = {comp: _inliers(arr) if comp in TRIMMED else np.arange(arr.size)
+              for comp, arr in seg.values.items() if comp in POOLED}
     for k in np.unique(bins):
         idx = np.flatnonzero(bins == k)
         if idx.size < MIN_BLOCKS_PER_CELL:
             continue
-        vals = {comp: float(arr[idx].mean()) for comp, arr in seg.values.items()}
+        sel = {comp: pooled.get(comp, idx) for comp in seg.values}
+        vals = {comp: float(arr[sel[comp]].mean()) for comp, arr in seg.values.items()}
         floor = _theoretical_se(vals, seg.n_frames, b)
         errs = {
-            comp: max(float(arr[idx].std(ddof=1)), floor[comp]) / math.sqrt(idx.size)
+            comp: max(float(arr[sel[comp]].std(ddof=1)), floor[comp], MIN_VAR_ERR_DN2) / math.sqrt(sel[comp].size)
             for comp, arr in seg.values.items()
         }
         out.append(Cell(seg.index, int(k), float(seg.intensity_dn[idx].mean()), idx, vals, errs))
@@ -308,6 +348,7 @@ def _theoretical_se(vals: dict[str, float], k: int, b: int) -> dict[str, float]:
         out = {"single": white * math.sqrt(2.0 / d_rest)}
     for comp in ("column", "row"):
         out[comp] = math.sqrt(2.0 / d_line) * (white + b * pos[comp]) / b
+    out["outlier"] = 0.0
     return out
 
 
