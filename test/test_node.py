@@ -92,16 +92,19 @@ class Rig:
                 return True
         return False
 
-    def publish(self, i: int, extra_sigma: float = 0.0, metadata: dict | None = None) -> tuple[int, dict]:
-        """Publish frame i (metadata first, same header stamp); returns (stamp ns, simulator truth)."""
-        meta = PROFILE.metadata(**DYNAMIC)
+    def publish(self, i: int, extra_sigma: float = 0.0, metadata: dict | None = None,
+                dynamic: dict | None = None) -> tuple[int, dict]:
+        """Publish frame i simulated with ``dynamic`` conditions, and ``metadata`` (default: the same
+        conditions) first with the same header stamp; returns (stamp ns, simulator truth)."""
+        dynamic = DYNAMIC if dynamic is None else dynamic
+        meta = PROFILE.metadata(**dynamic)
         noisy, truth = MODEL.simulate(self.clean, meta, self.rng)
         if extra_sigma:
             noisy = noisy + self.rng.normal(0.0, extra_sigma, noisy.shape).astype(np.float32)
         img = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
         stamp_ns = 1_000 * 10**9 + i * 33_333_333
         stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
-        values = DYNAMIC if metadata is None else metadata
+        values = dynamic if metadata is None else metadata
         if values:
             msg = DiagnosticArray(status=[DiagnosticStatus(name="camera", values=[
                 KeyValue(key=k, value=repr(v)) for k, v in values.items()])])
@@ -184,12 +187,14 @@ def test_extra_image_noise_raises_alarm_with_cause(rig_factory):
 
 def test_doubled_thermal_white_noise_metadata_raises_alarm_with_cause(rig_factory):
     rig = rig_factory("metadata_lies")
+    high_gain = {**DYNAMIC, "gain_db": 24.0}  # the paper's setting: readout noise is a visible share
     for i in range(5):
-        report, _ = rig.step(i)
+        report, _ = rig.step(i, dynamic=high_gain)
+        assert report.level == OK, report.message
     rn_clean = float(report.values["sigma_rn"])
-    wrong = {**DYNAMIC, "thermal_white_noise_v_per_sqrt_hz": 2 * PROFILE.values["thermal_white_noise_v_per_sqrt_hz"]}
+    wrong = {**high_gain, "thermal_white_noise_v_per_sqrt_hz": 2 * PROFILE.values["thermal_white_noise_v_per_sqrt_hz"]}
     for n in range(1, 21):
-        report, _ = rig.step(5 + n, metadata=wrong)
+        report, _ = rig.step(5 + n, dynamic=high_gain, metadata=wrong)
         if report.level == ERROR:
             break
     assert report.level == ERROR and n <= 12, report.message
@@ -257,3 +262,15 @@ def test_node_loads_the_estimator_itself_and_declares_described_parameters():
                          parameter_overrides=[Parameter("patches_per_frame", value="many")])
     finally:
         context.try_shutdown()
+
+
+def test_cli_rejects_bad_parameters_with_exit_code_2(tmp_path, capsys):
+    from noise_monitor.cli import main as cli_main
+    from noise_monitor.node import main as node_main
+
+    bad = tmp_path / "node.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    patches_per_frmae: 4\n")
+    assert cli_main(["node", "--params-file", str(bad), "--duration", "1"]) == 2
+    assert "unknown parameter(s) patches_per_frmae" in capsys.readouterr().err
+    assert node_main(["--ros-args", "-p", "xi_threshold_dn:=-1.0"]) == 2
+    assert "xi_threshold_dn must be > 0" in capsys.readouterr().err
