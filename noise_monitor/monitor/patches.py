@@ -51,11 +51,10 @@ def candidate_corners(height: int, width: int, size: int, k: int) -> list[tuple[
     """A centred grid of non-overlapping patch positions (half-overlapping when that gives fewer than k)."""
     if height < size or width < size:
         return []
-    for stride in (size, max(size // 2, 1)):
-        ys, xs = _grid(height, size, stride), _grid(width, size, stride)
-        if len(ys) * len(xs) >= k or stride == max(size // 2, 1):
-            return [(int(y), int(x)) for y in ys for x in xs]
-    return []
+    stride = size
+    if ((height - size) // size + 1) * ((width - size) // size + 1) < k:
+        stride = max(size // 2, 1)
+    return [(int(y), int(x)) for y in _grid(height, size, stride) for x in _grid(width, size, stride)]
 
 
 class _BoxSums:
