@@ -1,8 +1,8 @@
 """Model vs measurement: the noise model's prediction for the measured cells, residuals in DN, tables.
 
 The model is evaluated with ``NoiseModel.predict`` (joint mode, clip-aware) at every accepted block's
-intensity with the segment's metadata (the ADC quantization, whose exact clip-aware tables are costly,
-is added as its LSB^2/12), split into the measured components (temporal, fixed-pattern
+intensity with the segment's metadata (the ADC quantization is added as the temporal variance it
+leaves for the noise in front of it, see :func:`quantized_temporal_variance`), split into the measured components (temporal, fixed-pattern
 white, column, row) by each effect's ``temporal`` flag and line structure, and averaged per cell like
 the measurement. For fitting candidate effects, :meth:`Comparison.predict_with` adds the unclipped
 change of variance a set of effects makes (cheap, no new tables) to this clip-aware baseline.
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -78,7 +79,7 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
     out = {c: np.zeros(v.shape) for c in MEASURED}
     for e in effects:
         comp = component_of(e)
-        if comp is None:
+        if comp is None or e.distribution == "quantization":
             continue
         if e.distribution == "mixture" and not e.temporal:
             frac, off, p = _detection(e, cond, v, sigma)
@@ -87,7 +88,53 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
             out[comp] = out[comp] + var * (1.0 - p)
         else:
             out[comp] = out[comp] + np.asarray(e.variance_dn2(v, cond), dtype=float)
+    added, spread = quantization_variance(effects, cond, out["temporal"])
+    out["temporal"] = out["temporal"] + added
+    out[QUANT_SPREAD] = spread
     return out
+
+
+#: key of the model's own uncertainty of the temporal variance (quantization phase) in component dicts
+QUANT_SPREAD = "quantization_spread"
+
+
+def quantization_variance(effects: Sequence[Effect], cond: Conditions,
+                          temporal_var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(added temporal variance, its spread over the quantization phase) in DN^2 for the coarsest
+    quantization step acting on temporal noise of variance ``temporal_var``."""
+    lsb = max((e.lsb_dn(cond) for e in effects if e.distribution == "quantization"), default=0.0)
+    if lsb <= 0.0:
+        return np.zeros_like(temporal_var), np.zeros_like(temporal_var)
+    return quantized_temporal_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb)
+
+
+@lru_cache(maxsize=1)
+def _quantization_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Added temporal variance / LSB^2 of Q(u + n), n ~ N(0, r^2 LSB^2): mean and std over the phase u."""
+    ratios = np.geomspace(1e-3, 8.0, 160)
+    phases = (np.arange(64) + 0.5) / 64.0
+    mean_added = np.empty(ratios.size)
+    spread = np.empty(ratios.size)
+    for i, r in enumerate(ratios):
+        k = np.arange(-int(np.ceil(8 * r)) - 2, int(np.ceil(8 * r)) + 3, dtype=float)[:, None]
+        p = ndtr((k + 0.5 - phases) / r) - ndtr((k - 0.5 - phases) / r)
+        m = np.sum(k * p, axis=0)
+        var = np.sum(k * k * p, axis=0) - m**2
+        mean_added[i] = var.mean() - r * r
+        spread[i] = var.std()
+    return ratios, mean_added, spread
+
+
+def quantized_temporal_variance(sigma_dn: np.ndarray, lsb_dn: float) -> tuple[np.ndarray, np.ndarray]:
+    """(temporal variance a quantizer of step ``lsb_dn`` adds to Gaussian noise ``sigma_dn``, its std
+    over the quantization phase), DN^2. Phase-averaged: LSB^2/12 when the noise dithers the quantizer,
+    down to -sigma^2 when the noise is far below the step and is erased; a flat region has one phase,
+    hence the spread. The phase-dependent bias is a fixed offset per flat region (not modelled)."""
+    ratios, added, spread = _quantization_table()
+    r = np.asarray(sigma_dn, dtype=float) / lsb_dn
+    big = r >= ratios[-1]
+    return (lsb_dn**2 * np.where(big, 1.0 / 12.0, np.interp(r, ratios, added)),
+            lsb_dn**2 * np.where(big, 0.0, np.interp(r, ratios, spread)))
 
 
 def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray,
@@ -116,11 +163,13 @@ def predicted_step(effects: Sequence[Effect], meta: CameraMetadata, output_step:
 
 
 def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) -> np.ndarray:
-    """Model total sigma (DN) at intensities ``v``: clip-aware ``predict`` plus the quantization's LSB^2/12."""
+    """Model total sigma (DN) at intensities ``v``: clip-aware ``predict`` plus the quantization."""
     v = np.asarray(v, dtype=float)
     clip_model = NoiseModel([e for e in effects if e.distribution != "quantization"])
-    quant = unclipped_components([e for e in effects if e.distribution == "quantization"], meta, v, np.ones_like(v))
-    return np.sqrt(np.asarray(clip_model.predict(v, meta)["total"]) ** 2 + sum(quant.values()))
+    pred = clip_model.predict(v, meta)
+    temporal = sum(np.asarray(pred[e.name]) ** 2 for e in clip_model.noise_effects if e.temporal)
+    quant, _ = quantization_variance(effects, clip_model.conditions(meta), temporal)
+    return np.sqrt(np.maximum(np.asarray(pred["total"]) ** 2 + quant, 0.0))
 
 
 @dataclass
@@ -140,6 +189,12 @@ class _SegmentBase:
         self.errors = np.maximum(np.array([[c.errors[k] for k in self.observed] for c in self.cells]), 1e-9)
         self.pixels_per_block = self.seg.pixels_checked // max(1, self.seg.intensity_dn.size)
 
+    def total_errors(self, comps: dict[str, np.ndarray]) -> np.ndarray:
+        """Measurement errors with the model's quantization-phase spread added to temporal observables."""
+        spread = self.average @ comps[QUANT_SPREAD]
+        extra = np.stack([spread if k in ("temporal", "single") else np.zeros_like(spread) for k in self.observed], 1)
+        return np.sqrt(self.errors**2 + extra**2)
+
     def model_cells(self, comps: dict[str, np.ndarray]) -> np.ndarray:
         """Model variance per cell (rows) and observed component (columns), pooled like the measurement."""
         return np.stack([_cell_values(self.average, comps, k) for k in self.observed], axis=1)
@@ -158,7 +213,7 @@ class Comparison:
 
     Poisson and Gaussian effects come from ``NoiseModel.predict`` (joint mode, clip-aware, each effect's
     sigma at the block intensity); fixed mixtures (hot pixels) are split between the outlier and the
-    white core components with clipped offsets; quantization adds LSB^2/12.
+    white core components with clipped offsets; quantization acts on the temporal noise.
     """
 
     def __init__(self, meas: Measurements, model: NoiseModel, progress: Any = None) -> None:
@@ -177,9 +232,13 @@ class Comparison:
                 continue
             v = seg.intensity_dn
             pred = clip_model.predict(v, seg.meta)
-            comps = unclipped_components(rest, seg.meta, v, seg.robust_sigma_dn)
+            comps = unclipped_components([e for e in rest if e.distribution != "quantization"], seg.meta, v,
+                                         seg.robust_sigma_dn)
             for e in analytic:
                 comps[component_of(e)] = comps[component_of(e)] + np.asarray(pred[e.name], dtype=float) ** 2
+            added, comps[QUANT_SPREAD] = quantization_variance(self.effects, clip_model.conditions(seg.meta),
+                                                               comps["temporal"])
+            comps["temporal"] = comps["temporal"] + added
             self.segments.append(_SegmentBase(seg, by_seg[seg.index], comps,
                                               unclipped_components(self.effects, seg.meta, v, seg.robust_sigma_dn)))
             if progress is not None:
@@ -200,7 +259,9 @@ class Comparison:
         out = []
         for sb in self.segments:
             new = unclipped_components(effects, sb.seg.meta, sb.seg.intensity_dn, sb.seg.robust_sigma_dn)
-            out.append((sb, {c: np.maximum(sb.clip_aware[c] + new[c] - sb.unclipped[c], 0.0) for c in MEASURED}))
+            comps = {c: np.maximum(sb.clip_aware[c] + new[c] - sb.unclipped[c], 0.0) for c in MEASURED}
+            comps[QUANT_SPREAD] = new[QUANT_SPREAD]
+            out.append((sb, comps))
         return out
 
     def residuals(self, extra: Sequence[Effect] = ()) -> np.ndarray:
@@ -209,12 +270,12 @@ class Comparison:
         effects = self.replaced(extra) if extra else self.effects
         res = []
         for sb, comps in self.predict_with(extra):
-            res.extend(((sb.values - sb.model_cells(comps)) / sb.errors).ravel())
+            res.extend(((sb.values - sb.model_cells(comps)) / sb.total_errors(comps)).ravel())
             seg = sb.seg
             count, amp = outlier_expectation(effects, seg.meta, seg.intensity_dn, seg.robust_sigma_dn,
                                              sb.pixels_per_block)
             res.append((seg.outlier_pixels - count) / math.sqrt(max(count, seg.outlier_pixels, 1.0)))
-            if seg.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE:
+            if seg.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE and count >= 1.0:
                 err = math.hypot(seg.outlier_amplitude_err_dn, 0.05 * seg.outlier_amplitude_dn)
                 res.append((seg.outlier_amplitude_dn - amp) / max(err, 1e-6))
             else:

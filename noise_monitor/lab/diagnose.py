@@ -8,6 +8,7 @@ chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum e
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
@@ -25,6 +26,8 @@ SIGNIFICANCE_P = 1e-6
 #: ... and the fraction of the chi-square it must explain
 MIN_EXPLAINED_FRACTION = 0.1
 MAX_GRID = 32
+#: best points of the coarse parameter scan refined by least squares
+N_STARTS = 2
 
 
 @dataclass
@@ -82,21 +85,22 @@ class EffectSpec:
         return cls(effect_cls, {}, tuple(p.name for p in effect_cls.params if p.fittable))
 
 
-def _starts(p: Param) -> list[float]:
+def _scan_values(p: Param) -> np.ndarray:
+    """Coarse scan of a parameter: its default plus log-spaced magnitudes (both signs if allowed)."""
     lo, hi = p.bounds
-    default = min(max(p.default, lo), hi)
     if lo < 0.0 < hi:
-        pts = [default, 0.0, 0.2 * hi, 0.2 * lo, 0.02 * hi]
+        mags = np.geomspace(max(hi, -lo) * 1e-3, max(hi, -lo), 5)
+        pts = np.concatenate([[0.0, p.default], mags, -mags])
     elif lo > 0.0:
-        pts = [default] + list(np.geomspace(lo, hi, 6)[1:-1])
+        pts = np.concatenate([[p.default], np.geomspace(lo, hi, 8)])
     else:
-        pts = [default] + [lo + f * (hi - lo) for f in (1e-4, 1e-3, 1e-2, 0.1)]
-    return [min(max(x, lo), hi) for x in pts]
+        pts = np.concatenate([[p.default, lo], np.geomspace(max(hi * 1e-6, 1e-12), hi, 8)])
+    return np.unique(np.clip(pts, lo, hi))
 
 
 def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
-    """Jointly fit the free parameters of ``specs`` (continuous: bounded least squares from several
-    starts; integer: grid scan)."""
+    """Jointly fit the free parameters of ``specs`` (continuous: coarse log scan, then bounded least
+    squares from the best scan points; integer: grid scan)."""
     specs = list(specs)
     cont: list[tuple[int, Param]] = []
     grid: list[tuple[int, Param]] = []
@@ -135,9 +139,10 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
             continue
         lo = np.array([p.bounds[0] for _, p in cont])
         hi = np.array([p.bounds[1] for _, p in cont])
-        starts = list(zip(*[_starts(p) for _, p in cont]))
-        for x0 in starts:
-            x0 = np.clip(np.array(x0, dtype=float), lo, hi)
+        scan = [np.asarray(x) for x in itertools.product(*[_scan_values(p) for _, p in cont])]
+        chi = [float(np.sum(resid(x, xg) ** 2)) for x in scan]
+        for j in np.argsort(chi)[:N_STARTS]:
+            x0 = scan[j]
             scale = np.maximum(np.abs(x0), 1e-3 * (hi - lo))
             sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=scale, args=(xg,), max_nfev=200)
             chi2 = float(sol.fun @ sol.fun)

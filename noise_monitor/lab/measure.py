@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any, Iterable
 
 import numpy as np
+from scipy.special import ndtri
 
 from ..physics import CameraMetadata
 
@@ -39,6 +40,8 @@ OUTLIER_BLOCK_FACTOR = 3.0
 #: a pixel of the segment's mean residual beyond this many robust sigmas is an outlier pixel
 OUTLIER_PIXEL_SIGMAS = 6.0
 MIN_BLOCKS_PER_CELL = 3
+#: largest |residuals| of a block left out of its robust sigma (room for a few hot pixels)
+TRIM_PIXELS = 4
 #: smallest per-block standard deviation of a variance estimate (DN^2): 8-bit rounding noise scale
 MIN_VAR_ERR_DN2 = 0.01
 _NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
@@ -178,10 +181,14 @@ def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _robust_sigma(d: np.ndarray) -> np.ndarray:
-    """Robust per-pixel sigma of de-lined residuals: MAD-based, floored at half the plain std so that
-    coarsely quantized blocks (most pixels on one level) do not report zero noise."""
-    mad = np.median(np.abs(d - np.median(d, axis=1, keepdims=True)), axis=1)
-    return np.maximum(1.4826 * mad, 0.5 * d.std(axis=1))
+    """Robust per-pixel sigma of de-lined residuals: rms of all but the largest TRIM_PIXELS |values|,
+    rescaled for a Gaussian (not discretized by 8-bit values as a MAD would be)."""
+    n = d.shape[1]
+    keep = n - TRIM_PIXELS
+    small = np.sort(np.abs(d), axis=1)[:, :keep]
+    a = float(ndtri(1.0 - 0.5 * TRIM_PIXELS / n))
+    kept_var = 1.0 - 2.0 * a * math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi) / (1.0 - TRIM_PIXELS / n)
+    return np.sqrt(np.mean(small**2, axis=1) / kept_var)
 
 
 def _without_line_pattern(r: np.ndarray, b: int, grid: tuple[int, int]) -> np.ndarray:
