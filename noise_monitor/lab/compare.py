@@ -25,7 +25,7 @@ from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMe
 
 MEASURED = ("temporal", "fixed", "column", "row", "outlier")
 #: assumed standard error of the quantization-step measurement beyond its statistical error (DN)
-STEP_SYSTEMATIC_DN = 0.25
+STEP_SYSTEMATIC_DN = 0.05
 #: outlier pixels a segment needs before their mean amplitude is compared with the model
 MIN_OUTLIERS_FOR_AMPLITUDE = 5
 
@@ -127,9 +127,9 @@ def _quantization_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def quantized_temporal_variance(sigma_dn: np.ndarray, lsb_dn: float) -> tuple[np.ndarray, np.ndarray]:
     """(temporal variance a quantizer of step ``lsb_dn`` adds to Gaussian noise ``sigma_dn``, its std
-    over the quantization phase), DN^2. Phase-averaged: LSB^2/12 when the noise dithers the quantizer,
-    down to -sigma^2 when the noise is far below the step and is erased; a flat region has one phase,
-    hence the spread. The phase-dependent bias is a fixed offset per flat region (not modelled)."""
+    over the quantization phase), DN^2. Phase-averaged: LSB^2/12 when the noise dithers the quantizer;
+    noise far below the step is mostly erased (the output varies only where the level sits on a decision
+    threshold); a flat region has one phase, hence the spread. The phase-dependent bias is a fixed offset per flat region (not modelled)."""
     ratios, added, spread = _quantization_table()
     r = np.asarray(sigma_dn, dtype=float) / lsb_dn
     big = r >= ratios[-1]
@@ -270,7 +270,10 @@ class Comparison:
         effects = self.replaced(extra) if extra else self.effects
         res = []
         for sb, comps in self.predict_with(extra):
-            res.extend(((sb.values - sb.model_cells(comps)) / sb.total_errors(comps)).ravel())
+            err = sb.total_errors(comps)
+            res.extend(((sb.values - sb.model_cells(comps)) / err).ravel())
+            # Gaussian likelihood: a vaguer model pays log(err^2) (no escape into its own uncertainty)
+            res.extend(np.sqrt(2.0 * np.log(err / sb.errors)).ravel())
             seg = sb.seg
             count, amp = outlier_expectation(effects, seg.meta, seg.intensity_dn, seg.robust_sigma_dn,
                                              sb.pixels_per_block)

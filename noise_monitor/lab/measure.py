@@ -249,7 +249,7 @@ class _SegmentAccumulator:
         centred, lines = _delined(rm, b)
         robust = _robust_sigma(centred)
         is_out = np.abs(centred) > OUTLIER_PIXEL_SIGMAS * robust[:, None]
-        core, col, row = _split(*_energies(np.where(is_out, lines, rm), b), b)
+        core, col, row = _split(*_energies(np.where(is_out, lines, rm) @ self.proj, b), b)  # re-fit the plane
         values: dict[str, np.ndarray] = {}
         if k >= 2:
             temporal = (self.s2 - np.sum(self.s1 * self.s1, axis=1) / k) / ((k - 1) * (b * b - 3))

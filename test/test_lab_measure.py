@@ -1,0 +1,105 @@
+"""Model-independent measurement on in-memory frame sequences (fast, no bags)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import torch
+
+from noise_monitor.lab.compare import Comparison, baseline_effects, outlier_expectation, quantized_temporal_variance
+from noise_monitor.lab.measure import measure_frames
+from noise_monitor.lab.synthetic import simulate_frames
+from noise_monitor.physics import NoiseModel, load_profile
+
+torch.set_num_threads(1)
+PROFILE = load_profile("icx285")
+SWEEP = ((6.0, 0.01, 25.0), (12.0, 0.01, 25.0))
+
+
+def _pooled(meas, comp: str) -> float:
+    vals = [c.values[comp] for c in meas.cells]
+    return float(np.mean(vals))
+
+
+def test_temporal_noise_matches_the_paper_model_on_clean_frames() -> None:
+    frames = simulate_frames(PROFILE, conditions=SWEEP, frames_per_condition=6, seed=1)
+    meas = measure_frames(frames)
+    assert len(meas.segments) == 2 and meas.frames_used == 12
+    model = NoiseModel()
+    z = []
+    for cell in meas.cells:
+        seg = meas.segments[cell.segment]
+        pred = model.predict(seg.intensity_dn[cell.block_index], seg.meta)
+        expected = float(np.mean(pred["total"] ** 2)) + 1.0 / 12.0  # + 8-bit rounding
+        z.append((cell.values["temporal"] - expected) / cell.errors["temporal"])
+        assert abs(cell.values["fixed"]) < 5 * cell.errors["fixed"] + 0.05
+    assert abs(np.mean(z)) < 1.0 and np.std(z) < 2.0
+    assert meas.quant_step_dn == 1.0
+
+
+def test_fixed_pattern_effects_land_in_their_components() -> None:
+    frames = simulate_frames(PROFILE, effects=["prnu=2", "column_offsets=2"], conditions=SWEEP,
+                             frames_per_condition=5, seed=2)
+    meas = measure_frames(frames)
+    # column offsets: pooled per segment, 2 DN -> 4 DN^2 (the realised 160-column pattern varies ~10 %)
+    assert _pooled(meas, "column") == pytest.approx(4.0, rel=0.25)
+    assert abs(_pooled(meas, "row")) < 0.3
+    # PRNU: fixed white variance (0.02 v)^2 per cell
+    for cell in meas.cells:
+        expected = (0.02 * cell.intensity_dn) ** 2
+        assert cell.values["fixed"] == pytest.approx(expected, abs=4 * cell.errors["fixed"] + 0.1 * expected)
+
+
+def test_hot_pixels_are_counted_as_outliers() -> None:
+    hot = "hot_pixels:fraction=0.01,dark_multiplier=10"
+    frames = simulate_frames(PROFILE, effects=[hot], conditions=((6.0, 0.2, 60.0),), frames_per_condition=4, seed=3)
+    meas = measure_frames(frames)
+    seg = meas.segments[0]
+    model = NoiseModel(baseline_effects(PROFILE, seg.meta, True))
+    count, amplitude = outlier_expectation(model.with_effects(hot).effects, seg.meta, seg.intensity_dn,
+                                           seg.robust_sigma_dn, 64)
+    assert count > 50
+    assert seg.outlier_pixels == pytest.approx(count, rel=0.25)
+    assert seg.outlier_amplitude_dn == pytest.approx(amplitude, rel=0.15)
+    base = Comparison(meas, model).residuals()
+    with_hot = Comparison(meas, model.with_effects(hot)).residuals()
+    assert np.sum(base**2) > 2.0 * base.size  # the paper model cannot explain the outliers ...
+    assert np.sum(with_hot**2) < 1.2 * with_hot.size  # ... the model with the true hot pixels can
+
+
+def test_quantization_step_from_the_histogram() -> None:
+    frames = simulate_frames(PROFILE, effects=["quantization=6"], conditions=SWEEP, frames_per_condition=3, seed=4)
+    meas = measure_frames(frames)
+    assert meas.quant_step_dn == 4.0  # 255/63 = 4.05 DN on the 8-bit grid: gaps of 4 (and some 5)
+
+
+def test_quantized_temporal_variance_limits() -> None:
+    added, spread = quantized_temporal_variance(np.array([0.01, 5.0]), 1.0)
+    assert 0.01**2 + added[0] < 0.1 / 12.0  # noise far below the step is (mostly) erased
+    assert spread[0] > added[0]  # ... except where the level sits on a decision threshold
+    assert added[1] == pytest.approx(1.0 / 12.0) and spread[1] < 1e-9  # dithered: LSB^2/12
+
+
+@dataclass
+class _Frame:
+    image_dn: np.ndarray | None
+    metadata: object
+    stamp_ns: int = 0
+    skip_reason: str | None = None
+
+
+def test_unusable_input_gives_clear_errors() -> None:
+    meta = PROFILE.metadata(gain_db=0.0, exposure_time_s=0.01, sensor_temperature_c=25.0)
+    with pytest.raises(ValueError, match="no usable frames.*no metadata: 1"):
+        measure_frames([_Frame(np.zeros((64, 64)), None)])
+    with pytest.raises(ValueError, match="smaller than one"):
+        measure_frames([_Frame(np.zeros((4, 64)), meta)])
+    with pytest.raises(ValueError, match="no usable frames"):
+        measure_frames([])
+    flat = np.full((64, 64), 255.0)  # saturated: nothing measurable
+    with pytest.raises(ValueError, match="no flat, unclipped"):
+        measure_frames([_Frame(flat, meta), _Frame(flat, meta)])
+    good = simulate_frames(PROFILE, conditions=SWEEP[:1], frames_per_condition=2, width=64, height=64)
+    meas = measure_frames([*good, _Frame(np.zeros((32, 32)), meta), _Frame(None, meta, skip_reason="corrupt")])
+    assert meas.skipped == {"image size changed": 1, "corrupt": 1}
