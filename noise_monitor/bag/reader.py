@@ -48,6 +48,7 @@ class BagFrame:
     raw_metadata: dict[str, Any] = field(default_factory=dict)
     metadata_error: str | None = None  # metadata present but invalid (out of range, not a number)
     metadata_age_s: float | None = None  # image stamp minus the stamp of the metadata message used
+    log_time_ns: int | None = None  # when the recorder received the image (bag log time)
 
 
 def _stamp_ns(msg: Any, log_time: int) -> int:
@@ -173,14 +174,19 @@ class BagReader:
         """(topic, log time ns, deserialised message) in log-time order; BagError if data is damaged."""
         conns = [c for t in topics for c in self._conns(t)]
         it = self._reader.messages(connections=conns)
+        expected, seen = self.count(topics), 0
         while True:
             try:
                 conn, log_time, raw = next(it)
                 msg = self._reader.deserialize(raw, conn.msgtype)
             except StopIteration:
+                if seen < expected:  # damaged records are skipped silently by rosbags
+                    raise BagError(f"bag {self.path} is damaged: read {seen} of the {expected} messages its index "
+                                   f"lists on {', '.join(topics)}") from None
                 return
             except _READ_ERRORS as exc:
                 raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
+            seen += 1
             yield conn.topic, log_time, msg
 
     def raw_messages(self, topics: list[str] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
@@ -246,7 +252,8 @@ class BagReader:
             temp = _usable(_at(temp_v, _match(temp_t, stamp, tol)))
             geom = _usable(_at(info_v, _match(info_t, stamp, tol)))
             frame = BagFrame(index, stamp, None, None, raw_metadata=dict(raw) if isinstance(raw, dict) else {},
-                             metadata_age_s=(stamp - meta_t[mi]) / 1e9 if mi is not None else None)
+                             metadata_age_s=(stamp - meta_t[mi]) / 1e9 if mi is not None else None,
+                             log_time_ns=int(log_time))
             try:
                 frame.image_dn = image_to_gray_dn(msg, bit_depth=depth, color=color)
                 if geom is not None:

@@ -127,10 +127,14 @@ def replay(
         frames = reader.frames(prof, bit_depth=depth, sync_tolerance_s=float(params.get("sync_tolerance_s", 0.01)),
                                color=str(params.get("color", "luma")))
         last_pub: int | None = None
+        last_log = 0
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
             if writer is not None and last_pub is not None:  # the node's timer fills gaps (STALE when long)
+                # only while time really passed in the recording: a header stamp jumping by years (out of
+                # order, bogus clock) must not produce years of idle reports
+                end = min(bf.stamp_ns, last_pub + bf.log_time_ns - last_log)
                 t = last_pub + diag_period_ns
-                while t < bf.stamp_ns:
+                while t < end:
                     for topic, msg in rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
                                                        typestore=typestore()).items():
                         writer.write(topic, msg, t)
@@ -140,7 +144,7 @@ def replay(
             if writer is not None:
                 for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
                     writer.write(topic, msg, res.stamp_ns)
-            last_pub = res.stamp_ns
+            last_pub, last_log = res.stamp_ns, bf.log_time_ns
     wall = time.perf_counter() - t_wall
     if len(rows) != n_images:
         raise BagError(f"bag {bag}: read {len(rows)} images but its index lists {n_images}")
