@@ -274,3 +274,12 @@ def test_cli_rejects_bad_parameters_with_exit_code_2(tmp_path, capsys):
     assert "unknown parameter(s) patches_per_frmae" in capsys.readouterr().err
     assert node_main(["--ros-args", "-p", "xi_threshold_dn:=-1.0"]) == 2
     assert "xi_threshold_dn must be > 0" in capsys.readouterr().err
+
+
+def test_unusable_image_is_a_warning_with_the_reason(rig_factory):
+    rig = rig_factory("yuv")
+    image = Image(height=4, width=4, encoding="yuv422", step=8, data=bytes(32))
+    image.header.stamp = Time(sec=5, nanosec=0)
+    rig.pub_img.publish(image)
+    report = rig.status_for(5 * 10**9)
+    assert report.level == WARN and "image unusable: unsupported image encoding 'yuv422'" in report.message
