@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import time
-from contextlib import nullcontext
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
@@ -101,26 +101,30 @@ def replay(
     """
     cfg, params = _settings(config)
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
-    if estimator is None:
-        from noise_monitor.estimator import load
-
-        estimator = load(model_name or params.get("model", "full_meta"), device=device or params.get("device", "cpu"),
-                         weights=weights or params.get("weights") or None)
-    camera = camera_name or params.get("camera_name") or "camera"
-    hw = hardware_id or params.get("hardware_id") or f"{prof.name if prof else 'unknown'}/{camera}"
-    monitor = Monitor(cfg, estimator, NoiseModel(extra=prof.effects if prof else None), camera, hw)
-    depth = bit_depth or int(params.get("bit_depth", 0)) or None
-    diag_period_ns = int(1e9 / float(params.get("diagnostics_rate_hz", 1.0)))
     out = Path(out_dir) if out_dir is not None else None
     mcap_path = out / OUTPUT_FILES["mcap"] if out is not None else None
-    if mcap_path is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        mcap_path.unlink(missing_ok=True)
     rows: list[FrameRow] = []
-    t_wall = time.perf_counter()
-    with open_bag(bag, image_topic=image_topic, metadata_topic=metadata_topic, camera_info_topic=camera_info_topic,
-                  temperature_topic=temperature_topic) as reader, \
-            (BagWriter(mcap_path) if mcap_path else nullcontext()) as writer:
+    with ExitStack() as stack:
+        # the bag first: an unusable bag is reported before the estimator is loaded
+        reader = stack.enter_context(open_bag(bag, image_topic=image_topic, metadata_topic=metadata_topic,
+                                              camera_info_topic=camera_info_topic,
+                                              temperature_topic=temperature_topic))
+        if estimator is None:
+            from noise_monitor.estimator import load
+
+            estimator = load(model_name or params.get("model", "full_meta"),
+                             device=device or params.get("device", "cpu"),
+                             weights=weights or params.get("weights") or None)
+        camera = camera_name or params.get("camera_name") or "camera"
+        hw = hardware_id or params.get("hardware_id") or f"{prof.name if prof else 'unknown'}/{camera}"
+        monitor = Monitor(cfg, estimator, NoiseModel(extra=prof.effects if prof else None), camera, hw)
+        depth = bit_depth or int(params.get("bit_depth", 0)) or None
+        diag_period_ns = int(1e9 / float(params.get("diagnostics_rate_hz", 1.0)))
+        if mcap_path is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            mcap_path.unlink(missing_ok=True)
+        writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
+        t_wall = time.perf_counter()
         n_images, bag_duration = len(reader), reader.duration_s
         topics = {"image": reader.image_topic, "metadata": reader.metadata_topic,
                   "camera_info": reader.camera_info_topic, "temperature": reader.temperature_topic}
