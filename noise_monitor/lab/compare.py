@@ -17,7 +17,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 from scipy.special import ndtr
 
-from ..physics import CameraMetadata, CameraProfile, Effect, NoiseModel, build_effects, make_effect
+from ..physics import CameraMetadata, CameraProfile, Effect, EffectError, NoiseModel, build_effects, make_effect
 from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
 from ..physics.sensor import Conditions
@@ -183,10 +183,14 @@ class _SegmentBase:
         self.average = np.zeros((len(self.cells), self.seg.intensity_dn.size))
         for i, c in enumerate(self.cells):
             self.average[i, c.block_index] = 1.0 / c.block_index.size
-        # outlier energy is sparse (a few pixels per cell): fitted through the outlier count and amplitude
-        self.observed = tuple(k for k in self.cells[0].values if k != "outlier")
+        # per-cell observables; line offsets are pooled per segment (one observable each); the sparse
+        # outlier energy is fitted through the outlier count and amplitude instead
+        self.observed = tuple(k for k in self.cells[0].values if k not in POOLED)
         self.values = np.array([[c.values[k] for k in self.observed] for c in self.cells])
         self.errors = np.maximum(np.array([[c.errors[k] for k in self.observed] for c in self.cells]), 1e-9)
+        self.pooled = tuple(k for k in self.cells[0].values if k in POOLED and k != "outlier")
+        self.pooled_values = np.array([self.cells[0].values[k] for k in self.pooled])
+        self.pooled_errors = np.maximum(np.array([self.cells[0].errors[k] for k in self.pooled]), 1e-9)
         self.pixels_per_block = self.seg.pixels_checked // max(1, self.seg.intensity_dn.size)
 
     def total_errors(self, comps: dict[str, np.ndarray]) -> np.ndarray:
@@ -196,8 +200,11 @@ class _SegmentBase:
         return np.sqrt(self.errors**2 + extra**2)
 
     def model_cells(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        """Model variance per cell (rows) and observed component (columns), pooled like the measurement."""
+        """Model variance per cell (rows) and per-cell observed component (columns)."""
         return np.stack([_cell_values(self.average, comps, k) for k in self.observed], axis=1)
+
+    def model_pooled(self, comps: dict[str, np.ndarray]) -> np.ndarray:
+        return np.array([float(np.mean(comps[k])) for k in self.pooled])
 
 
 def _cell_values(average: np.ndarray, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
@@ -257,8 +264,16 @@ class Comparison:
             return [(sb, sb.clip_aware) for sb in self.segments]
         effects = self.replaced(extra)
         out = []
+        names = ", ".join(e.name for e in extra)
         for sb in self.segments:
-            new = unclipped_components(effects, sb.seg.meta, sb.seg.intensity_dn, sb.seg.robust_sigma_dn)
+            try:
+                new = unclipped_components(effects, sb.seg.meta, sb.seg.intensity_dn, sb.seg.robust_sigma_dn)
+            except EffectError:
+                raise
+            except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
+                raise EffectError(f"effect(s) {names} failed to evaluate: {exc}") from exc
+            if not all(np.all(np.isfinite(a)) for a in new.values()):
+                raise EffectError(f"effect(s) {names} returned a NaN or infinite variance")
             comps = {c: np.maximum(sb.clip_aware[c] + new[c] - sb.unclipped[c], 0.0) for c in MEASURED}
             comps[QUANT_SPREAD] = new[QUANT_SPREAD]
             out.append((sb, comps))
@@ -274,6 +289,7 @@ class Comparison:
             res.extend(((sb.values - sb.model_cells(comps)) / err).ravel())
             # Gaussian likelihood: a vaguer model pays log(err^2) (no escape into its own uncertainty)
             res.extend(np.sqrt(2.0 * np.log(err / sb.errors)).ravel())
+            res.extend((sb.pooled_values - sb.model_pooled(comps)) / sb.pooled_errors)
             seg = sb.seg
             count, amp = outlier_expectation(effects, seg.meta, seg.intensity_dn, seg.robust_sigma_dn,
                                              sb.pixels_per_block)

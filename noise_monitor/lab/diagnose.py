@@ -27,7 +27,8 @@ SIGNIFICANCE_P = 1e-6
 MIN_EXPLAINED_FRACTION = 0.1
 MAX_GRID = 32
 #: best points of the coarse parameter scan refined by least squares
-N_STARTS = 2
+N_STARTS = 3
+SCAN_PER_DECADE = 2
 
 
 @dataclass
@@ -86,16 +87,23 @@ class EffectSpec:
 
 
 def _scan_values(p: Param) -> np.ndarray:
-    """Coarse scan of a parameter: its default plus log-spaced magnitudes (both signs if allowed)."""
+    """Coarse scan of a parameter: its default plus log-spaced magnitudes, about 2 per decade (both
+    signs if allowed)."""
     lo, hi = p.bounds
     if lo < 0.0 < hi:
-        mags = np.geomspace(max(hi, -lo) * 1e-3, max(hi, -lo), 5)
+        top = max(hi, -lo)
+        mags = np.geomspace(top * 1e-3, top, 7)
         pts = np.concatenate([[0.0, p.default], mags, -mags])
     elif lo > 0.0:
-        pts = np.concatenate([[p.default], np.geomspace(lo, hi, 8)])
+        pts = np.concatenate([[p.default], np.geomspace(lo, hi, SCAN_PER_DECADE * _decades(lo, hi) + 1)])
     else:
-        pts = np.concatenate([[p.default, lo], np.geomspace(max(hi * 1e-6, 1e-12), hi, 8)])
+        bottom = max(hi * 1e-9, 1e-12)
+        pts = np.concatenate([[p.default, lo], np.geomspace(bottom, hi, SCAN_PER_DECADE * _decades(bottom, hi) + 1)])
     return np.unique(np.clip(pts, lo, hi))
+
+
+def _decades(lo: float, hi: float) -> int:
+    return max(1, int(np.ceil(np.log10(hi / lo))))
 
 
 def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:

@@ -29,7 +29,7 @@ from ..physics import CameraMetadata
 
 BLOCK = 8
 BIN_WIDTH_DN = 16.0
-INTENSITY_RANGE_DN = (8.0, 247.0)
+INTENSITY_RANGE_DN = (8.0, 240.0)
 #: per-pixel variance components: temporal, fixed-pattern white core, column and row offsets, outlier pixels;
 #: "single" (temporal + fixed core) replaces the first two for single-frame segments
 COMPONENTS = ("temporal", "fixed", "column", "row", "outlier", "single")
@@ -40,6 +40,8 @@ OUTLIER_BLOCK_FACTOR = 3.0
 #: a pixel of the segment's mean residual beyond this many robust sigmas is an outlier pixel
 OUTLIER_PIXEL_SIGMAS = 6.0
 MIN_BLOCKS_PER_CELL = 3
+#: a block is near clipping if its mean is within this many noise sigmas of 0 or 255
+CLIP_SIGMAS = 3.0
 #: largest |residuals| of a block left out of its robust sigma (room for a few hot pixels)
 TRIM_PIXELS = 4
 #: smallest per-block standard deviation of a variance estimate (DN^2): 8-bit rounding noise scale
@@ -263,7 +265,10 @@ class _SegmentAccumulator:
         bins = np.floor(v / BIN_WIDTH_DN).astype(int)
         lo, hi = INTENSITY_RANGE_DN
         excluded: dict[str, int] = {}
-        keep = (v >= lo) & (v <= hi)
+        # blocks whose noise reaches the clipping limits are left out (their statistics are distorted)
+        white = values["temporal"] + values["fixed"] if k >= 2 else values["single"]
+        reach = CLIP_SIGMAS * np.sqrt(np.maximum(white, 0.0))
+        keep = (v >= lo) & (v <= hi) & (v - reach >= 0.0) & (v + reach <= 255.0)
         excluded["near_clipping"] = int(np.sum(~keep))
         flat = _without_line_pattern(rm, b, grid)  # real column/row offsets removed: edges stand out
         rho_x, rho_y = _lag1(flat, b)
@@ -320,7 +325,9 @@ def _inliers(x: np.ndarray) -> np.ndarray:
 
 
 def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
-    out = []
+    out: list[Cell] = []
+    if seg.intensity_dn.size == 0:
+        return out
     bins = np.floor(seg.intensity_dn / BIN_WIDTH_DN).astype(int)
     pooled = {comp: _inliers(arr) if comp in TRIMMED else np.arange(arr.size)
               for comp, arr in seg.values.items() if comp in POOLED}

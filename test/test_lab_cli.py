@@ -1,0 +1,76 @@
+"""`noise-monitor analyze` end to end: JSON keys, report, extended profile, bad input."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+
+from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.cli import main
+from noise_monitor.lab import parse_add_effect
+from noise_monitor.physics import load_profile
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def prnu_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("lab_cli") / "prnu.mcap"
+    return simulate_bag(out, "icx285", "lab", effects=["prnu=3"], frames=40, width=128, height=96, seed=5)
+
+
+def test_analyze_add_effect_report_and_profile(prnu_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    report, js, prof = tmp_path / "report", tmp_path / "out.json", tmp_path / "icx285_prnu.yaml"
+    rc = main(["analyze", str(prnu_bag), "--profile", "icx285", "--add-effect", "prnu=fit", "--report", str(report),
+               "--json", str(js), "--write-profile", str(prof), "--quiet"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "rms error before" in out and "PRNU" in out
+    summary = json.loads(js.read_text())
+    for key in ("rms_error_dn", "by_condition", "candidates", "rms_error_before_dn", "rms_error_after_dn"):
+        assert key in summary
+    for key in ("intensity_dn", "gain_db", "exposure_time_s", "sensor_temperature_c", "time_s", "component"):
+        assert summary["by_condition"][key]
+    best = summary["candidates"][0]
+    assert set(best) >= {"effect", "significant", "explained_fraction", "params"}
+    assert best["effect"] == "prnu" and best["significant"]
+    assert summary["rms_error_after_dn"] < 0.5 * summary["rms_error_before_dn"]
+    html = (report / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 4 and "<table>" in html
+    assert json.loads((report / "summary.json").read_text())["candidates"][0]["effect"] == "prnu"
+    extended = load_profile(prof)
+    assert extended.effects["prnu"]["sigma_pct"] == pytest.approx(3.0, rel=0.1)
+    assert dict(extended.values) == dict(load_profile("icx285").values)
+
+
+def test_analyze_fixed_value_needs_no_fit(prnu_bag: Path, tmp_path: Path) -> None:
+    js = tmp_path / "fixed.json"
+    assert main(["analyze", str(prnu_bag), "--profile", "icx285", "--add-effect", "prnu=3", "--json", str(js),
+                 "--quiet"]) == 0
+    added = json.loads(js.read_text())["added_effects"][0]
+    assert added["params"]["sigma_pct"] == 3.0 and added["fitted"] == {}
+
+
+def test_analyze_bad_input_exits_2(tmp_path: Path, prnu_bag: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["analyze", str(tmp_path / "missing.mcap"), "--profile", "icx285", "--quiet"]) == 2
+    assert main(["analyze", str(prnu_bag), "--profile", "icx285", "--add-effect", "no_such_effect", "--quiet"]) == 2
+    assert "unknown effect" in capsys.readouterr().err
+    assert main(["analyze", str(prnu_bag), "--profile", "icx285", "--write-profile", str(tmp_path / "p.yaml"),
+                 "--quiet"]) == 2
+
+
+def test_parse_add_effect_forms() -> None:
+    assert parse_add_effect("prnu").free == ("sigma_pct",)
+    assert parse_add_effect("prnu=fit").free == ("sigma_pct",)
+    spec = parse_add_effect("prnu=2")
+    assert spec.fixed == {"sigma_pct": 2.0} and spec.free == ()
+    spec = parse_add_effect("hot_pixels:fraction=0.01,dark_multiplier=fit")
+    assert spec.fixed == {"fraction": 0.01} and spec.free == ("dark_multiplier",)
+    with pytest.raises(ValueError, match="outside"):
+        parse_add_effect("prnu=99")
+    with pytest.raises(ValueError, match="no parameter"):
+        parse_add_effect("prnu:bogus=1")
+    with pytest.raises(ValueError, match="expected a number"):
+        parse_add_effect("prnu=abc")
