@@ -1,0 +1,122 @@
+"""Throughput of the estimator variants: ms per patch and patches/s at batch 1/16/64 (CPU).
+
+Measures the shipped Full-Meta end to end (physics prior + compact network, one metadata per call as in
+a camera frame), the network part under torch eager and ONNX Runtime, the trained paper-family
+variants, and the paper-size network (64 features, 2x5 convolutions, untrained: speed only) at the
+same patch area and at the paper's 128x128.
+
+Usage: .venv/bin/python bench/bench_estimator.py [--threads 2] [--reps 5] [--json out/bench_estimator.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from noise_monitor.estimator import load
+from noise_monitor.estimator.inference import NAMES, WEIGHTS_DIR
+from noise_monitor.estimator.networks import PaperConfig, PaperNet
+from noise_monitor.physics import load_profile
+
+BATCHES = (1, 16, 64)
+
+
+def timeit(fn, reps: int) -> float:
+    """Median seconds of ``reps`` calls after one warm-up call."""
+    fn()
+    times = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def row(name: str, size: int, batch: int, seconds: float) -> dict:
+    return {"variant": name, "patch": f"{size}x{size}", "area_px": size * size, "batch": batch,
+            "ms_per_patch": round(1000.0 * seconds / batch, 3), "patches_per_s": round(batch / seconds, 1)}
+
+
+def onnx_session(net: torch.nn.Module, inputs: tuple[torch.Tensor, ...], threads: int):
+    import onnxruntime as ort
+
+    path = Path(tempfile.mkdtemp()) / "net.onnx"
+    names = [f"in{i}" for i in range(len(inputs))]
+    torch.onnx.export(net, inputs, path, input_names=names, output_names=["out"],
+                      dynamic_axes={n: {0: "batch"} for n in names + ["out"]}, dynamo=False)
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = threads
+    opts.inter_op_num_threads = 1
+    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"]), names
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    meta = load_profile("ev76c661").metadata(gain_db=12.0, exposure_time_s=0.02, sensor_temperature_c=45.0)
+    rng = np.random.default_rng(0)
+    rows: list[dict] = []
+
+    fm = load("full_meta", device="cpu")
+    size = fm.patch_size
+    fm.predict(np.full((1, size, size), 100.0, np.float32), meta)  # build the metadata's tables once
+    for b in BATCHES:
+        x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
+        rows.append(row("full_meta (end to end, torch)", size, b, timeit(lambda: fm.predict(x, meta), args.reps)))
+
+    # network part only: torch eager vs ONNX Runtime
+    from noise_monitor.estimator.features import compact_inputs
+
+    for b in BATCHES:
+        x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
+        tables = fm.prior.tables(meta)[None]
+        maps, scalars, _ = compact_inputs(x, tables, np.zeros(b, np.int64), np.repeat(meta.normalized()[None], b, 0))
+        tm, ts = torch.from_numpy(maps), torch.from_numpy(scalars)
+        with torch.inference_mode():
+            rows.append(row("full_meta net only (torch eager)", size, b, timeit(lambda: fm.net(tm, ts), args.reps)))
+        sess, names = onnx_session(fm.net, (tm, ts), args.threads)
+        feed = {names[0]: maps, names[1]: scalars}
+        rows.append(row("full_meta net only (onnxruntime)", size, b, timeit(lambda: sess.run(None, feed), args.reps)))
+        rows.append(row("full_meta physics+features only", size, b, timeit(
+            lambda: compact_inputs(x, tables, np.zeros(b, np.int64), np.repeat(meta.normalized()[None], b, 0)), args.reps)))
+
+    for name in NAMES[1:]:
+        if not (WEIGHTS_DIR / f"{name}.pt").is_file():
+            continue
+        est = load(name, device="cpu")
+        for b in BATCHES:
+            x = rng.uniform(0, 255, (b, est.patch_size, est.patch_size)).astype(np.float32)
+            rows.append(row(f"{name} (trained size)", est.patch_size, b, timeit(lambda: est.predict(x, meta), args.reps)))
+
+    paper = PaperNet(PaperConfig(variant="full_meta_paper")).eval()
+    for psize in sorted({size, 128}):
+        for b in BATCHES:
+            x = torch.rand(b, 1, psize, psize)
+            m = torch.rand(b, 11)
+            reps = max(1, args.reps // (2 if b > 1 else 1))
+            with torch.inference_mode():
+                rows.append(row("paper-size full_meta_paper (345k, torch)", psize, b, timeit(lambda: paper(x, m), reps)))
+
+    print(f"threads={args.threads}  shipped full_meta patch {size}x{size} ({size * size} px)")
+    print(f"{'variant':<44} {'patch':>8} {'batch':>5} {'ms/patch':>10} {'patches/s':>10}")
+    for r in rows:
+        print(f"{r['variant']:<44} {r['patch']:>8} {r['batch']:>5} {r['ms_per_patch']:>10.3f} {r['patches_per_s']:>10.1f}")
+    ours = max(r["patches_per_s"] for r in rows if r["variant"].startswith("full_meta (end"))
+    ref = max(r["patches_per_s"] for r in rows if r["variant"].startswith("paper-size") and r["area_px"] == size * size)
+    print(f"speed-up of shipped full_meta over the paper-size network at {size}x{size}: {ours / ref:.0f}x (best batch each)")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"threads": args.threads, "rows": rows, "speedup_vs_paper_size": round(ours / ref, 1)}, indent=2))
+
+
+if __name__ == "__main__":
+    main()

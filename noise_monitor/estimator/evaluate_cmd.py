@@ -1,0 +1,84 @@
+"""`noise-monitor evaluate`: the held-out benchmark of the estimators, classical peers and the sweep."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .card import write_card
+from .data import PARTS
+from .evaluate import heldout, peer_predictions, score, sensitivity_sweep, timed_predict
+from .inference import NAMES, WEIGHTS_DIR, load
+from .physics_prior import PhysicsPrior
+
+HELP = "evaluate estimators on the held-out benchmark (parts a/b/c, peers, metadata sensitivity sweep)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--variants", nargs="+", default=None, choices=NAMES,
+                   help="estimators to evaluate (default: every one with weights)")
+    p.add_argument("--weights-dir", type=Path, default=WEIGHTS_DIR)
+    p.add_argument("--patches", type=int, default=600, help="held-out patches per part")
+    p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
+    p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
+    p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
+    p.add_argument("--cache", type=Path, default=Path("out/estimator_eval"), help="held-out data cache directory")
+    p.add_argument("--device", default="auto")
+    p.add_argument("--json", type=Path, default=None, help="write the results here")
+    p.add_argument("--cards", action="store_true", help="write the model card <weights-dir>/<variant>.md of each variant")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.patches < 10:
+        raise ValueError("--patches must be >= 10")
+    names = args.variants or [n for n in NAMES if (args.weights_dir / f"{n}.pt").is_file()]
+    if not names:
+        raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
+    estimators = {n: load(n, args.device, weights=args.weights_dir / f"{n}.pt") for n in names}
+    sizes = {e.patch_size for e in estimators.values()}
+    results: dict = {"patches_per_part": args.patches, "parts": {}, "ms_per_patch": {}}
+    prior = PhysicsPrior()
+    for part in args.parts:
+        results["parts"][part] = {}
+        for size in sorted(sizes):
+            data = heldout(part, args.patches, size, args.cache)
+            for name, est in estimators.items():
+                if est.patch_size != size:
+                    continue
+                pred, dt = timed_predict(est, data)
+                results["parts"][part][name] = score(pred, data, part)
+                results["ms_per_patch"].setdefault(name, []).append(1000.0 * dt / len(data["noisy"]))
+            if not args.no_peers:
+                for peer, pred in peer_predictions(data, prior).items():
+                    results["parts"][part][f"{peer}@{size}"] = score(pred, data, part)
+    results["ms_per_patch"] = {k: round(float(np.mean(v)), 3) for k, v in results["ms_per_patch"].items()}
+    if not args.no_sweep and "full_meta" in estimators:
+        fm = estimators["full_meta"]
+        results["sensitivity_full_meta"] = sensitivity_sweep(
+            lambda x, m: fm.predict(x, m)["total"][0], fm.patch_size, model=fm.prior.model)
+    print(_table(results))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(results, indent=2))
+    if args.cards:
+        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}"
+        for name in names:
+            print(f"model card: {write_card(name, args.weights_dir, results, command)}")
+    return 0
+
+
+def _table(results: dict) -> str:
+    lines = []
+    for part, rows in results["parts"].items():
+        lines.append(f"part ({part})  RMS in DN: {'pn':>6} {'dcsn':>6} {'rn':>6} {'s_img':>6} {'xi':>6}  alarms")
+        for name, r in rows.items():
+            cells = " ".join(f"{r[k]['rms']:6.3f}" if k in r else "     -" for k in ("pn", "dcsn", "rn", "sigma_image", "xi"))
+            rate = r.get("false_alarm_rate", r.get("hit_rate"))
+            lines.append(f"  {name:<28} {cells}  {'' if rate is None else f'{100 * rate:.1f} %'}")
+    sens = results.get("sensitivity_full_meta")
+    if sens:
+        lines.append(f"sensitivity sweep (full_meta): max |estimator - model| = {sens['max_abs_diff_dn']} DN, "
+                     f"{sens['flagged_cells']} cells > 1 DN")
+    return "\n".join(lines)

@@ -1,0 +1,145 @@
+"""Inference: ``load(name, device)`` -> an estimator with ``predict(patches_dn, metas)``.
+
+``full_meta`` (shipped): per-source sigma = the analytic model (sequential protocol) on each patch's
+5x5-smoothed intensity map with the stated metadata; sigma_model = sqrt(PN^2 + DCSN^2 + RN^2);
+sigma_image = the compact network's measurement of the noise actually in the patch; xi = sigma_model -
+sigma_image; total = sigma_model (the paper's total without xi). The paper-family variants return their
+branch outputs (``drne``: total only).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from ..physics import CameraMetadata, NoiseModel
+from .device import resolve_device
+from .features import SIGMA_MODEL_FLOOR, compact_inputs
+from .networks import SIGMA_SCALE
+from .physics_prior import SOURCES, PhysicsPrior, group_by_meta
+from .train import network_from_checkpoint
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")
+MIN_PATCH = 16
+
+
+def validate_patches(patches_dn, min_size: int = MIN_PATCH) -> np.ndarray:
+    """float32 (N, H, W) on 0..255 from (N, H, W) or (H, W); clear ValueError otherwise."""
+    if not isinstance(patches_dn, np.ndarray):
+        raise ValueError(f"patches_dn must be a numpy array, got {type(patches_dn).__name__}")
+    if patches_dn.dtype.kind not in "uif":
+        raise ValueError(f"patches_dn must be real numbers (float32 DN), got dtype {patches_dn.dtype}")
+    x = patches_dn[None] if patches_dn.ndim == 2 else patches_dn
+    if x.ndim != 3 or x.shape[0] == 0:
+        raise ValueError(f"patches_dn must have shape (N, H, W) with N >= 1, got {patches_dn.shape}")
+    if min(x.shape[1:]) < min_size:
+        raise ValueError(f"patches must be at least {min_size}x{min_size} px, got {x.shape[1]}x{x.shape[2]}")
+    x = x.astype(np.float32, copy=False)
+    if not np.all(np.isfinite(x)):
+        raise ValueError("patches_dn contains NaN or inf")
+    lo, hi = float(x.min()), float(x.max())
+    if lo < -1e-3 or hi > 255.0 + 1e-3:
+        raise ValueError(f"patches_dn must be on the 0..255 DN scale, got values in [{lo:g}, {hi:g}] "
+                         "(scale higher bit depths to 8 bit first)")
+    return np.clip(x, 0.0, 255.0)
+
+
+def validate_metas(metas, n: int) -> list[CameraMetadata]:
+    """One CameraMetadata per patch (a single one is shared by all)."""
+    if isinstance(metas, CameraMetadata):
+        return [metas] * n
+    if isinstance(metas, (str, bytes)) or not isinstance(metas, Sequence):
+        raise ValueError(f"metas must be a CameraMetadata or a list of them, got {type(metas).__name__}")
+    if len(metas) != n:
+        raise ValueError(f"got {len(metas)} metadata for {n} patches (give one per patch or a single one)")
+    bad = [i for i, m in enumerate(metas) if not isinstance(m, CameraMetadata)]
+    if bad:
+        raise ValueError(f"metas[{bad[0]}] is {type(metas[bad[0]]).__name__}, not CameraMetadata")
+    return list(metas)
+
+
+class _Base:
+    name: str
+    patch_size: int
+
+    def __init__(self, ckpt: dict, device: torch.device) -> None:
+        self.device = device
+        self.net = network_from_checkpoint(ckpt).to(device).eval()
+        self.patch_size = int(ckpt["config"]["patch_size"])
+        self.name = ckpt["variant"]
+        self.info = {k: ckpt[k] for k in ("step", "elapsed_s", "settings") if k in ckpt}
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name} patch {self.patch_size} on {self.device}>"
+
+
+class FullMetaEstimator(_Base):
+    """Physics-anchored sources plus a learned measurement of the image noise (see module docstring)."""
+
+    def __init__(self, ckpt: dict, device: torch.device, model: NoiseModel | None = None) -> None:
+        super().__init__(ckpt, device)
+        self.prior = PhysicsPrior(model)
+
+    def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | Sequence[CameraMetadata]) -> dict[str, np.ndarray]:
+        x = validate_patches(patches_dn)
+        ms = validate_metas(metas, len(x))
+        groups = group_by_meta(ms)
+        tables = np.stack([self.prior.tables(m) for m in groups])
+        group_of = np.empty(len(x), dtype=np.int64)
+        for g, idx in enumerate(groups.values()):
+            group_of[idx] = g
+        meta_norm = np.stack([m.normalized() for m in groups])[group_of]
+        maps, scalars, phys = compact_inputs(x, tables, group_of, meta_norm)
+        with torch.inference_mode():
+            r = self.net(torch.from_numpy(maps).to(self.device), torch.from_numpy(scalars).to(self.device))
+        r = r.clamp(-6.0, 6.0).cpu().numpy().astype(np.float64)
+        sigma_image = np.maximum(phys["total"], SIGMA_MODEL_FLOOR) * np.exp(r)
+        out = {s: phys[s] for s in SOURCES}
+        out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
+                   total=phys["total"].copy())
+        return out
+
+
+class PaperEstimator(_Base):
+    """A paper-family network (branch outputs in DN; ``drne``: total only)."""
+
+    def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | Sequence[CameraMetadata]) -> dict[str, np.ndarray]:
+        x = validate_patches(patches_dn)
+        ms = validate_metas(metas, len(x))
+        meta = np.stack([m.normalized() for m in ms])
+        with torch.inference_mode():
+            out = self.net(torch.from_numpy(x[:, None] / np.float32(255.0)).to(self.device), torch.from_numpy(meta).to(self.device))
+        res = {k: v.cpu().numpy().astype(np.float64) * SIGMA_SCALE for k, v in out.items()}
+        if "pn" in res:
+            res["total"] = np.sqrt(sum(np.maximum(res[s], 0.0) ** 2 for s in SOURCES))
+            res["sigma_image"] = res["total"] - res["xi"]
+        else:
+            res["sigma_image"] = res["total"]
+        return res
+
+
+def weights_path(name: str, weights_dir: Path | None = None) -> Path:
+    if name not in NAMES:
+        raise ValueError(f"unknown estimator {name!r}; choose from {NAMES}")
+    path = (weights_dir or WEIGHTS_DIR) / f"{name}.pt"
+    if not path.is_file():
+        raise FileNotFoundError(f"no weights for {name!r} at {path} (train them with `noise-monitor train --variant {name}`)")
+    return path
+
+
+def load(name: str = "full_meta", device: str = "auto", weights: str | Path | None = None,
+         model: NoiseModel | None = None) -> FullMetaEstimator | PaperEstimator:
+    """Load a trained estimator (bundled weights, or ``weights`` = a .pt file written by training)."""
+    dev = resolve_device(device)
+    path = Path(weights) if weights is not None else weights_path(name)
+    if not path.is_file():
+        raise FileNotFoundError(f"weights file {path} not found")
+    ckpt = torch.load(path, map_location=dev, weights_only=False)
+    if ckpt.get("variant") not in NAMES:
+        raise ValueError(f"{path} is not an estimator checkpoint")
+    if ckpt["variant"] == "full_meta":
+        return FullMetaEstimator(ckpt, dev, model)
+    return PaperEstimator(ckpt, dev)

@@ -1,0 +1,168 @@
+"""The network family: the paper's DRNE-custom / w/o-Meta / Min-Meta / Full-Meta and the compact
+image-noise network of the shipped Full-Meta.
+
+Paper family (Fig. "Noise level estimator vs. proposed", appendix table "Details of the proposed
+network"): a 3x3 trunk of residual blocks at full resolution (paper: 2 blocks x 5 convolutions, 64
+features), then per output a branch = global max pooling -> concat(metadata subset) -> dense 32-16-8
+-> 1. The xi branch sees its own pooled features and the three source sigmas.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import torch
+from torch import nn
+
+from ..physics import NORMALIZED_ORDER
+
+#: Metadata per branch (names of ``CameraMetadata.normalized()`` entries), as listed in issue 3.
+FULL_META_BRANCHES: dict[str, tuple[str, ...]] = {
+    "pn": ("gain_db", "full_well_e"),
+    "dcsn": ("gain_db", "sensor_temperature_c", "exposure_time_s", "full_well_e", "pixel_size_m",
+             "dark_signal_fom_na_cm2"),
+    "rn": ("gain_db", "sensor_temperature_c", "sensor_type", "full_well_e", "pixel_clock_hz",
+           "sense_node_gain_v_per_e", "thermal_white_noise_v_per_sqrt_hz", "sense_node_reset_factor"),
+}
+MIN_META = ("gain_db", "sensor_temperature_c", "exposure_time_s")
+PAPER_VARIANTS = ("drne", "wo_meta", "min_meta", "full_meta_paper")
+#: Output scale: networks predict sigma / SIGMA_SCALE (DN).
+SIGMA_SCALE = 16.0
+
+
+def branch_metadata(variant: str) -> dict[str, tuple[str, ...]]:
+    """Metadata fields fed to each sigma branch of a paper-family variant."""
+    if variant == "drne":
+        return {"total": ()}
+    if variant == "wo_meta":
+        return {s: () for s in FULL_META_BRANCHES}
+    if variant == "min_meta":
+        return {s: MIN_META for s in FULL_META_BRANCHES}
+    if variant == "full_meta_paper":
+        return dict(FULL_META_BRANCHES)
+    raise ValueError(f"unknown paper variant {variant!r}; choose from {PAPER_VARIANTS}")
+
+
+def _index(names: tuple[str, ...]) -> list[int]:
+    return [NORMALIZED_ORDER.index(n) for n in names]
+
+
+class ResidualBlock(nn.Module):
+    """``convs`` 3x3 convolutions with ReLU and an identity skip (first conv may change channels)."""
+
+    def __init__(self, c_in: int, c: int, convs: int) -> None:
+        super().__init__()
+        self.head = nn.Conv2d(c_in, c, 3, padding=1)
+        self.body = nn.ModuleList(nn.Conv2d(c, c, 3, padding=1) for _ in range(convs - 1))
+        self.act = nn.ReLU(inplace=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h0 = self.act(self.head(x))
+        h = h0
+        for i, conv in enumerate(self.body):
+            h = conv(h)
+            if i < len(self.body) - 1:
+                h = self.act(h)
+        return self.act(h + h0)
+
+
+def dense_block(n_in: int, hidden: tuple[int, ...]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for n in hidden:
+        layers += [nn.Linear(n_in, n), nn.ReLU()]
+        n_in = n
+    layers.append(nn.Linear(n_in, 1))
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class PaperConfig:
+    variant: str = "full_meta_paper"
+    width: int = 64
+    blocks: int = 2
+    convs_per_block: int = 5
+    dense: tuple[int, ...] = (32, 16, 8)
+    patch_size: int = 128
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class PaperNet(nn.Module):
+    """The paper's estimator family; ``forward(patch01 (N,1,H,W), meta (N,11))`` -> dict of sigma/SCALE."""
+
+    def __init__(self, cfg: PaperConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        chans = [1] + [cfg.width] * cfg.blocks
+        self.trunk = nn.Sequential(*(ResidualBlock(chans[i], chans[i + 1], cfg.convs_per_block) for i in range(cfg.blocks)))
+        self.meta_fields = branch_metadata(cfg.variant)
+        self.meta_idx = {k: _index(v) for k, v in self.meta_fields.items()}
+        self.branches = nn.ModuleDict({k: dense_block(cfg.width + len(v), cfg.dense) for k, v in self.meta_fields.items()})
+        self.has_xi = cfg.variant != "drne"
+        if self.has_xi:
+            self.xi = dense_block(cfg.width + len(self.branches), cfg.dense)
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return tuple(self.branches) + (("xi",) if self.has_xi else ())
+
+    def forward(self, patch01: torch.Tensor, meta: torch.Tensor) -> dict[str, torch.Tensor]:
+        feat = self.trunk(patch01 - 0.5).amax(dim=(2, 3))
+        out = {k: b(torch.cat([feat, meta[:, self.meta_idx[k]]], dim=1)).squeeze(1) for k, b in self.branches.items()}
+        if self.has_xi:
+            sig = torch.stack([out[k] for k in self.branches], dim=1)
+            out["xi"] = self.xi(torch.cat([feat, sig], dim=1)).squeeze(1)
+        return out
+
+
+@dataclass
+class CompactConfig:
+    """The shipped Full-Meta's image-noise network (sigma_image relative to the physics prediction)."""
+
+    width: int = 16
+    depth: int = 3
+    hidden: tuple[int, ...] = field(default=(64, 32))
+    patch_size: int = 64
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+#: Scalar inputs of the compact net: normalised metadata (11), log sigma_model, source fractions (3),
+#: log residual energy ratio.
+N_SCALARS = len(NORMALIZED_ORDER) + 5
+
+
+class ImageNoiseNet(nn.Module):
+    """Measures the noise actually in a patch as ``log(sigma_image / sigma_model)``.
+
+    Inputs: ``maps`` (N, 2, H, W) = [residual (patch - 5x5 box) / model sigma map, intensity / 255 - 0.5]
+    and ``scalars`` (N, N_SCALARS). Pooled conv features (mean and mean-square) are fused with the
+    scalars by an MLP. A zero output means "the image holds exactly the modelled noise".
+    """
+
+    def __init__(self, cfg: CompactConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        layers: list[nn.Module] = []
+        c_in = 2
+        for _ in range(cfg.depth):
+            layers += [nn.Conv2d(c_in, cfg.width, 3, padding=1), nn.ReLU()]
+            c_in = cfg.width
+        self.convs = nn.Sequential(*layers)
+        n_in = 2 * cfg.width + N_SCALARS
+        mlp: list[nn.Module] = []
+        for n in cfg.hidden:
+            mlp += [nn.Linear(n_in, n), nn.ReLU()]
+            n_in = n
+        mlp.append(nn.Linear(n_in, 1))
+        self.mlp = nn.Sequential(*mlp)
+
+    def forward(self, maps: torch.Tensor, scalars: torch.Tensor) -> torch.Tensor:
+        f = self.convs(maps)
+        pooled = torch.cat([f.mean(dim=(2, 3)), f.square().mean(dim=(2, 3)).sqrt()], dim=1)
+        return self.mlp(torch.cat([pooled, scalars], dim=1)).squeeze(1)
+
+
+def count_parameters(net: nn.Module) -> int:
+    return sum(p.numel() for p in net.parameters())

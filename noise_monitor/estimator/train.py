@@ -1,0 +1,146 @@
+"""Training of every variant on a generated dataset: checkpoints, resume, seed, progress bar."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from .device import resolve_device
+from .features import SIGMA_MODEL_FLOOR, compact_inputs
+from .networks import PAPER_VARIANTS, SIGMA_SCALE, CompactConfig, ImageNoiseNet, PaperConfig, PaperNet
+
+VARIANTS = ("full_meta",) + PAPER_VARIANTS
+HUBER_DELTA_DN = 1.0
+
+
+@dataclass
+class TrainSettings:
+    variant: str
+    steps: int = 3000
+    batch: int = 32
+    lr: float = 1e-3
+    seed: int = 0
+    width: int | None = None
+    depth: int | None = None
+    checkpoint_every: int = 250
+
+
+def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
+    """Normalised metadata (N, 11) of every patch of a dataset."""
+    from .data import row_to_meta
+
+    by_group = np.stack([row_to_meta(r).normalized() for r in data["meta_rows"]])
+    return by_group[data["group_of"]]
+
+
+def build_network(variant: str, patch_size: int, width: int | None = None, depth: int | None = None) -> torch.nn.Module:
+    """A fresh network of a variant (``width``/``depth`` override the defaults)."""
+    if variant == "full_meta":
+        cfg = CompactConfig(patch_size=patch_size)
+        cfg.width = width or cfg.width
+        cfg.depth = depth or cfg.depth
+        return ImageNoiseNet(cfg)
+    if variant in PAPER_VARIANTS:
+        cfg = PaperConfig(variant=variant, patch_size=patch_size, width=width or 16, blocks=depth or 2, convs_per_block=3)
+        return PaperNet(cfg)
+    raise ValueError(f"unknown variant {variant!r}; choose from {VARIANTS}")
+
+
+def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
+    cfg = dict(ckpt["config"])
+    if ckpt["variant"] == "full_meta":
+        cfg["hidden"] = tuple(cfg["hidden"])
+        net: torch.nn.Module = ImageNoiseNet(CompactConfig(**cfg))
+    else:
+        cfg["dense"] = tuple(cfg["dense"])
+        net = PaperNet(PaperConfig(**cfg))
+    net.load_state_dict(ckpt["state_dict"])
+    return net
+
+
+def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+    """Network inputs and targets of a dataset for a variant."""
+    meta_norm = meta_norm_of(data)
+    if variant == "full_meta":
+        maps, scalars, phys = compact_inputs(data["noisy"], data["tables"], data["group_of"], meta_norm)
+        return {"maps": torch.from_numpy(maps), "scalars": torch.from_numpy(scalars),
+                "sigma_model": torch.from_numpy(np.maximum(phys["total"], SIGMA_MODEL_FLOOR)).float(),
+                "target": torch.from_numpy(data["truth_sigma_image"]).float()}
+    t = {"patch": torch.from_numpy(data["noisy"][:, None] / np.float32(255.0)), "meta": torch.from_numpy(meta_norm)}
+    for k in ("pn", "dcsn", "rn", "xi", "sigma_image"):
+        t[k] = torch.from_numpy(data[f"truth_{k}"] / SIGMA_SCALE).float()
+    t["total"] = t["sigma_image"]  # DRNE measures the total noise in the image
+    return t
+
+
+def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+    if variant == "full_meta":
+        r = net(batch["maps"], batch["scalars"])
+        est = batch["sigma_model"] * torch.exp(r.clamp(-6.0, 6.0))
+        return torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
+    out = net(batch["patch"], batch["meta"])
+    return sum(torch.nn.functional.mse_loss(out[k], batch[k]) for k in out) / len(out)
+
+
+def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, resume: bool = False,
+          device: str = "auto", threads: int = 2, progress: bool = True) -> Path:
+    """Train a variant; writes ``checkpoint.pt`` every ``checkpoint_every`` steps and ``<variant>.pt``."""
+    torch.set_num_threads(threads)
+    dev = resolve_device(device)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    ckpt_path = out_dir / "checkpoint.pt"
+    patch_size = int(data["noisy"].shape[-1])
+    torch.manual_seed(settings.seed)
+    net = build_network(settings.variant, patch_size, settings.width, settings.depth).to(dev)
+    opt = torch.optim.Adam(net.parameters(), lr=settings.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=settings.steps, eta_min=settings.lr * 0.05)
+    step, elapsed = 0, 0.0
+    rng = np.random.default_rng(settings.seed)
+    if resume:
+        if not ckpt_path.is_file():
+            raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
+        ck = torch.load(ckpt_path, map_location=dev, weights_only=False)
+        if ck["variant"] != settings.variant:
+            raise ValueError(f"--resume: checkpoint is for variant {ck['variant']!r}, not {settings.variant!r}")
+        net.load_state_dict(ck["state_dict"])
+        opt.load_state_dict(ck["optimizer"])
+        sched.load_state_dict(ck["scheduler"])
+        step, elapsed = ck["step"], ck["elapsed_s"]
+        rng.bit_generator.state = ck["rng_state"]
+    tensors = tensors_for(settings.variant, data)
+    n = len(data["noisy"])
+    net.train()
+    t0 = time.time() - elapsed
+    bar = tqdm(total=settings.steps, initial=step, desc=f"train {settings.variant}", disable=not progress)
+    running = None
+    while step < settings.steps:
+        idx = torch.from_numpy(rng.integers(0, n, settings.batch))
+        batch = {k: v[idx].to(dev) for k, v in tensors.items()}
+        loss = loss_of(settings.variant, net, batch)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        step += 1
+        running = loss.item() if running is None else 0.98 * running + 0.02 * loss.item()
+        bar.update(1)
+        bar.set_postfix(loss=f"{running:.4g}")
+        if step % settings.checkpoint_every == 0 or step == settings.steps:
+            torch.save(_checkpoint(net, settings, step, time.time() - t0, opt, sched, rng), ckpt_path)
+    bar.close()
+    final = _checkpoint(net, settings, step, time.time() - t0)
+    path = out_dir / f"{settings.variant}.pt"
+    torch.save(final, path)
+    return path
+
+
+def _checkpoint(net, settings: TrainSettings, step: int, elapsed: float, opt=None, sched=None, rng=None) -> dict:
+    ck = {"variant": settings.variant, "config": net.cfg.as_dict(), "state_dict": net.state_dict(),
+          "step": step, "elapsed_s": elapsed, "settings": vars(settings).copy()}
+    if opt is not None:
+        ck.update(optimizer=opt.state_dict(), scheduler=sched.state_dict(), rng_state=rng.bit_generator.state)
+    return ck

@@ -1,0 +1,185 @@
+"""Estimator: physics prior, network family, data, training/resume, inference contract and validation."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from noise_monitor.cli import main as cli_main
+from noise_monitor.estimator import load
+from noise_monitor.estimator.data import Scheme, generate, metas_of
+from noise_monitor.estimator.device import resolve_device
+from noise_monitor.estimator.networks import PAPER_VARIANTS, CompactConfig, ImageNoiseNet, PaperConfig, PaperNet, count_parameters
+from noise_monitor.estimator.peers import PEERS
+from noise_monitor.estimator.physics_prior import PhysicsPrior, box_smooth
+from noise_monitor.estimator.train import TrainSettings, train
+from noise_monitor.physics import load_profile, sample_metadata
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def meta():
+    return load_profile("icx285").metadata(gain_db=12.0, exposure_time_s=0.05, sensor_temperature_c=40.0)
+
+
+@pytest.fixture(scope="module")
+def tiny_data():
+    return generate(16, 32, seed=5, group=8, progress=False)
+
+
+def test_paper_size_parameter_counts():
+    drne = count_parameters(PaperNet(PaperConfig(variant="drne")))
+    full = count_parameters(PaperNet(PaperConfig(variant="full_meta_paper")))
+    assert abs(drne - 336_000) / 336_000 < 0.01
+    assert abs(full - 345_000) / 345_000 < 0.01
+
+
+@pytest.mark.parametrize("variant", PAPER_VARIANTS)
+def test_paper_family_outputs(variant):
+    net = PaperNet(PaperConfig(variant=variant, width=4, blocks=1, convs_per_block=2, patch_size=16))
+    out = net(torch.rand(3, 1, 16, 16), torch.rand(3, 11))
+    expected = {"total"} if variant == "drne" else {"pn", "dcsn", "rn", "xi"}
+    assert set(out) == expected and all(v.shape == (3,) for v in out.values())
+
+
+def test_metadata_reaches_only_its_branch():
+    """Changing a field the PN branch does not see (dark FoM) leaves PN unchanged, moves DCSN."""
+    torch.manual_seed(0)
+    net = PaperNet(PaperConfig(variant="full_meta_paper", width=4, blocks=1, convs_per_block=2, patch_size=16))
+    x, m = torch.rand(1, 1, 16, 16), torch.rand(1, 11)
+    m2 = m.clone()
+    m2[0, 5] += 0.5  # dark_signal_fom_na_cm2 (NORMALIZED_ORDER index 5)
+    a, b = net(x, m), net(x, m2)
+    assert torch.equal(a["pn"], b["pn"]) and not torch.equal(a["dcsn"], b["dcsn"])
+
+
+def test_physics_prior_matches_noise_model(meta):
+    rng = np.random.default_rng(0)
+    smooth = box_smooth(rng.uniform(20, 230, (3, 32, 32)).astype(np.float32))
+    prior = PhysicsPrior()
+    fast = prior.predict(smooth, [meta] * 3, debias=False)
+    for i in range(3):
+        ref = prior.model.predict(smooth[i], meta, mode="sequential")
+        for k in ("pn", "dcsn", "rn", "total"):
+            assert fast[k][i] == pytest.approx(ref[k], rel=1e-9, abs=1e-12)
+
+
+def test_debias_recovers_flat_clipped_level(meta):
+    """A flat black patch: the smoothed noisy map reads > 0 DN; the debiased prediction is closer to the model."""
+    prior = PhysicsPrior()
+    noisy, _ = prior.model.simulate(np.zeros((64, 64), np.float32), meta, np.random.default_rng(1), mode="sequential")
+    ref = prior.model.predict(0.0, meta, mode="sequential")["total"]
+    s = box_smooth(noisy[None])
+    raw = prior.predict(s, [meta], debias=False)["total"][0]
+    fixed = prior.predict(s, [meta])["total"][0]
+    assert abs(fixed - ref) < abs(raw - ref)
+
+
+def test_data_is_seeded_and_consistent(tiny_data):
+    again = generate(16, 32, seed=5, group=8, progress=False)
+    assert np.array_equal(tiny_data["noisy"], again["noisy"])
+    d = tiny_data
+    assert np.allclose(d["truth_xi"], d["truth_sigma_model"] - d["truth_sigma_image"])
+    clean = ~d["overridden"].any(axis=1) & (d["unexpected"] == 0)
+    assert np.allclose(d["truth_xi"][clean], 0.0)
+    assert len(metas_of(d)) == 16 and d["tables"].shape[0] == 2
+
+
+def test_unexpected_noise_makes_xi_negative():
+    d = generate(8, 32, seed=3, scheme=Scheme(p_scheme=0.0, p_unexpected=1.0, unexpected_sigma=5.0), progress=False)
+    assert np.all(d["truth_xi"] < 0) and np.all(np.abs(d["unexpected"] - 5.0) < 1.0)
+
+
+def test_train_resume_and_load(tmp_path, tiny_data, meta):
+    s = TrainSettings("full_meta", steps=4, batch=4, checkpoint_every=2)
+    train(TrainSettings("full_meta", steps=2, batch=4, checkpoint_every=2), tiny_data, tmp_path, threads=1, progress=False)
+    path = train(s, tiny_data, tmp_path, resume=True, threads=1, progress=False)
+    ck = torch.load(path, weights_only=False)
+    assert ck["step"] == 4
+    est = load("full_meta", device="cpu", weights=path)
+    out = est.predict(tiny_data["noisy"][:3], meta)
+    assert set(out) >= {"pn", "dcsn", "rn", "xi", "total"} and all(v.shape == (3,) for v in out.values())
+    assert np.allclose(out["xi"], out["sigma_model"] - out["sigma_image"])
+
+
+def test_shipped_full_meta_contract(meta):
+    est = load("full_meta")
+    assert est.name == "full_meta" and est.patch_size >= 16
+    rng = np.random.default_rng(2)
+    clean = np.full((4, est.patch_size, est.patch_size), 100.0, np.float32)
+    noisy, _ = est.prior.model.simulate(clean, meta, rng, mode="sequential")
+    out = est.predict(noisy, [meta] * 4)
+    ref = est.prior.model.predict(100.0, meta, mode="sequential")
+    assert np.allclose(out["pn"], ref["pn"], atol=0.15) and np.allclose(out["rn"], ref["rn"], atol=0.15)
+    assert np.all(np.abs(out["xi"]) < 1.0)  # flat patch, correct metadata: no alarm
+
+
+def test_shipped_full_meta_detects_unexpected_noise(meta):
+    est = load("full_meta")
+    rng = np.random.default_rng(3)
+    clean = np.full((4, est.patch_size, est.patch_size), 100.0, np.float32)
+    noisy, _ = est.prior.model.simulate(clean, meta, rng, mode="sequential")
+    noisy = np.clip(noisy + rng.normal(0, 5.0, noisy.shape).astype(np.float32), 0, 255)
+    out = est.predict(noisy, meta)
+    expected = out["sigma_model"] - np.sqrt(out["sigma_model"] ** 2 + 25.0)
+    assert np.all(out["xi"] < -1.0) and np.allclose(out["xi"], expected, atol=1.0)
+
+
+@pytest.mark.parametrize("bad, msg", [
+    (np.zeros((2, 8, 8), np.float32), "at least"),
+    (np.full((1, 32, 32), np.nan, np.float32), "NaN"),
+    (np.full((1, 32, 32), 300.0, np.float32), "0..255"),
+    (np.zeros((1, 1, 32, 32), np.float32), "shape"),
+    (np.zeros((1, 32, 32), complex), "dtype"),
+    ([[0.0]], "numpy array"),
+])
+def test_input_validation(bad, msg, meta):
+    with pytest.raises(ValueError, match=msg):
+        load("full_meta", device="cpu").predict(bad, meta)
+
+
+def test_metadata_validation(meta):
+    est = load("full_meta", device="cpu")
+    x = np.zeros((2, 32, 32), np.float32)
+    with pytest.raises(ValueError, match="2 patches"):
+        est.predict(x, [meta])
+    with pytest.raises(ValueError, match="CameraMetadata"):
+        est.predict(x, [meta, {"gain_db": 1}])
+
+
+def test_device_selection():
+    assert resolve_device("cpu").type == "cpu"
+    assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="CUDA"):
+            resolve_device("cuda")
+    with pytest.raises(ValueError, match="device"):
+        resolve_device("tpu")
+
+
+def test_unknown_estimator_name():
+    with pytest.raises(ValueError, match="unknown estimator"):
+        load("nope")
+
+
+def test_peers_measure_white_noise():
+    rng = np.random.default_rng(4)
+    patch = 120.0 + rng.normal(0, 4.0, (64, 64))
+    for name, fn in PEERS.items():
+        assert 3.0 < fn(patch) < 5.0, name
+
+
+def test_train_cli_bad_input(tmp_path, capsys):
+    rc = cli_main(["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "0"])
+    assert rc == 2 and "--steps" in capsys.readouterr().err
+
+
+def test_train_cli_end_to_end(tmp_path):
+    rc = cli_main(["train", "--variant", "drne", "--out", str(tmp_path), "--steps", "2", "--batch", "2",
+                   "--patches", "8", "--patch-size", "16", "--width", "4", "--threads", "1",
+                   "--json", str(tmp_path / "s.json")])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert rc == 0 and (tmp_path / "drne.pt").is_file() and summary["patches"] == 8
