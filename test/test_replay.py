@@ -1,0 +1,148 @@
+"""Replay: every frame accounted, the node's topics in a readable MCAP, CSV, PNG, the JSON contract."""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from mcap.reader import make_reader
+
+from noise_monitor.bag.messages import image_msg, metadata_msg
+from noise_monitor.bag.replay import replay
+from noise_monitor.bag.simulate import load_truth, simulate_bag
+from noise_monitor.bag.writer import BagWriter
+from noise_monitor.cli import main
+from noise_monitor.monitor import MonitorConfig
+from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
+from noise_monitor.physics import load_profile
+
+torch.set_num_threads(1)
+CONFIG = MonitorConfig(patches_per_frame=4, alarm_min_frames=3, clear_min_frames=3)
+
+
+@pytest.fixture(scope="module")
+def estimator():
+    from noise_monitor.estimator import load
+
+    return load("full_meta", device="cpu")
+
+
+@pytest.fixture(scope="module")
+def noisy_bag(tmp_path_factory, estimator) -> Path:
+    """An EV76C661 campaign at constant conditions with +N(0, 5 DN) image noise for frames 8-13."""
+    ps = estimator.patch_size
+    return simulate_bag(tmp_path_factory.mktemp("replay") / "noise.mcap", "ev76c661", "image_noise", frames=20,
+                        width=3 * ps, height=2 * ps, seed=4, hold_s=0)
+
+
+@pytest.fixture(scope="module")
+def replayed(noisy_bag, estimator, tmp_path_factory) -> tuple[dict, Path]:
+    out = tmp_path_factory.mktemp("out")
+    return replay(noisy_bag, "ev76c661", out, estimator=estimator, config=CONFIG, progress=False), out
+
+
+def test_summary_contract_and_accounting(replayed):
+    s, _ = replayed
+    assert s["frames_total"] == 20 and s["frames_processed"] + s["frames_skipped"] == 20
+    assert s["frames_processed"] == 20 and s["skip_reasons"] == {}
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi"):
+        st = s[key]
+        assert st["p5"] <= st["mean"] <= st["p95"] and st["n"] == 20
+    assert s["sigma_pn"]["mean"] > 0 and s["sigma_rn"]["mean"] > 0
+    assert s["topics_out"] == OUTPUT_TOPICS
+    assert s["realtime_factor"] > 0 and s["bag_duration_s"] == pytest.approx(19 / 5.0)
+
+
+def test_unexpected_noise_episode_is_one_alarm_with_negative_xi(replayed, noisy_bag):
+    s, _ = replayed
+    truth = load_truth(noisy_bag)["episodes"][0]
+    (ep,) = s["alarms"]
+    assert ep["sign"] == "-" and ep["peak_xi_dn"] < -1.0
+    assert "image noisier" in ep["cause"]
+    assert truth["start_ns"] <= ep["start_ns"] <= truth["end_ns"]  # raised during the corruption
+    for k in ("start_ns", "end_ns", "start_s", "end_s", "frames"):
+        assert k in ep
+
+
+def test_mcap_has_exactly_the_node_topics_and_is_readable_by_the_mcap_library(replayed):
+    s, out = replayed
+    counts: dict[str, int] = {}
+    schemas: dict[str, str] = {}
+    with open(out / "replay.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        for schema, channel, _ in reader.iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            schemas[channel.topic] = schema.name
+        assert reader.get_header().profile == "ros2"
+    assert schemas == OUTPUT_TOPICS
+    assert counts[DIAGNOSTICS_TOPIC] == 20  # one status per frame (no gaps in this bag)
+    assert all(counts[t] == 20 for t in OUTPUT_TOPICS if t != DIAGNOSTICS_TOPIC)
+
+
+def test_csv_png_and_json_files(replayed):
+    s, out = replayed
+    with open(out / "replay.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 20
+    assert {"sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "xi_filtered", "skip_reason", "gain_db"} <= set(rows[0])
+    assert [int(r["alarm"]) for r in rows].count(1) == s["alarms"][0]["frames"]
+    png = (out / "replay.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+    assert json.loads((out / "summary.json").read_text())["frames_total"] == 20
+
+
+def _bag_with_problems(path: Path, size: int) -> None:
+    """6 frames: no metadata yet, ok, non-numeric metadata, bad encoding, stale metadata after a 5 s gap, ok."""
+    prof = load_profile("icx285")
+    meta = prof.metadata(gain_db=12.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
+    img = np.clip(np.random.default_rng(0).normal(120, 3, (size, size)), 0, 255).astype(np.uint8)
+    stamps = [1_000_000_000 * s for s in (1, 2, 3, 4, 9, 10)]
+    with BagWriter(path) as w:
+        for i, t in enumerate(stamps):
+            if i not in (0, 4):
+                m = metadata_msg(meta, t, "test")
+                if i == 2:
+                    m.status[0].values[0].value = "loud"
+                w.write("/camera/metadata", m, t)
+            msg = image_msg(img, t)
+            if i == 3:
+                msg.encoding = "yuv_unknown"
+            w.write("/camera/image_raw", msg, t)
+
+
+def test_every_frame_accounted_with_reasons_and_stale_gap(tmp_path, estimator):
+    bag = tmp_path / "problems.mcap"
+    _bag_with_problems(bag, 2 * estimator.patch_size)
+    s = replay(bag, None, tmp_path / "o", estimator=estimator, config=CONFIG, progress=False, plot=False)
+    assert (s["frames_total"], s["frames_processed"], s["frames_skipped"]) == (6, 2, 4)
+    reasons = {d["index"]: d["reason"] for d in s["skipped"]}
+    assert reasons[0].startswith("metadata missing: gain_db")
+    assert reasons[2].startswith("metadata invalid") and "gain_db" in reasons[2]
+    assert reasons[3].startswith("image unusable: unsupported image encoding")
+    assert reasons[4].startswith("metadata stale: 5.00 s")
+    assert sum(s["skip_reasons"].values()) == 4 and s["levels"]["WARN"] == 4
+    with open(tmp_path / "o" / "replay.mcap", "rb") as fh:
+        diag = [m for _, c, m in make_reader(fh).iter_messages(topics=[DIAGNOSTICS_TOPIC])]
+    # 6 frame statuses + the node's 1 Hz idle reports in the 5 s gap (STALE after image_timeout_s = 2 s)
+    assert len(diag) == 6 + 4
+
+
+def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):
+    out, js = tmp_path / "cmd", tmp_path / "s.json"
+    params = tmp_path / "params.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    patches_per_frame: 4\n    alarm_min_frames: 3\n"
+                      "    clear_min_frames: 3\n")
+    assert main(["replay", str(noisy_bag), "--profile", "ev76c661", "--out", str(out), "--json", str(js),
+                 "--params", str(params), "--no-plot"]) == 0
+    text = capsys.readouterr().out
+    assert "alarm episodes: 1" in text and "PN" in text and "image noisier" in text
+    assert json.loads(js.read_text())["frames_processed"] == 20 and not (out / "replay.png").exists()
+    assert main(["replay", str(tmp_path / "missing.mcap")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(noisy_bag.read_bytes()[:5000])
+    assert main(["replay", str(broken), "--profile", "ev76c661", "--out", str(tmp_path / "b")]) == 2
+    assert "cannot read bag" in capsys.readouterr().err
