@@ -29,6 +29,7 @@ from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
 from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC
 from noise_monitor.physics import CameraProfile, EffectError, load_plugin_file, load_profile
+from noise_monitor.physics.effects import registry
 
 torch.set_num_threads(1)
 PROFILE = load_profile("icx285")
@@ -378,9 +379,11 @@ class NanEffect(Effect):
 '''
 
 
-@pytest.fixture(scope="module")
-def plugin(tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("plugin") / "failing_effects.py"
+@pytest.fixture
+def plugin(tmp_path, monkeypatch) -> Path:
+    """The failing effects registered for one test only (the registry is process-wide)."""
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    path = tmp_path / "failing_effects.py"
     path.write_text(PLUGIN)
     assert sorted(load_plugin_file(path)) == ["reliability_nan", "reliability_raises"]
     return path

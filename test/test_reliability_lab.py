@@ -1,0 +1,157 @@
+"""Bad-input matrix of the lab and the effect plug-ins: plug-in effects that raise or return NaN (in the
+model, in `noise-monitor analyze --effect-plugin`), plug-in files that are missing, fail to import or
+define nothing, and unusable bags given to analyze.
+
+Expected: an EffectError / ValueError naming the effect and the problem; from the CLI exit code 2 with
+that reason on one line of stderr, never a traceback or a NaN in the results.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.cli import main
+from noise_monitor.physics import EffectError, NoiseModel, load_plugin_file, load_profile
+from noise_monitor.physics.effects import registry
+
+META = load_profile("icx285").metadata(gain_db=12.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
+
+PLUGINS = {
+    "raises.py": '''
+from noise_monitor.physics.effects import Effect, Param
+
+
+class Raises(Effect):
+    name = "rel_raises"
+    distribution = "gaussian"
+    params = (Param("sigma_dn", "DN", 0.5, (0.0, 10.0)),)
+
+    def sigma_dn(self, signal_dn, cond):
+        raise RuntimeError("sensor model not calibrated")
+''',
+    "nan.py": '''
+import numpy as np
+from noise_monitor.physics.effects import Effect, Param
+
+
+class ReturnsNan(Effect):
+    name = "rel_nan"
+    distribution = "gaussian"
+    params = (Param("sigma_dn", "DN", 0.5, (0.0, 10.0)),)
+
+    def sigma_dn(self, signal_dn, cond):
+        return np.where(np.asarray(signal_dn) > 100.0, np.nan, self.values["sigma_dn"])  # NaN above 100 DN
+''',
+    "bad_modifier.py": '''
+from noise_monitor.physics.effects import Effect, Param
+
+
+class BadModifier(Effect):
+    name = "rel_modifier"
+    distribution = "modifier"
+    params = (Param("factor", "1", 1.0, (0.5, 2.0)),)
+
+    def modify(self, cond):
+        raise KeyError("gain_table")
+''',
+    "import_error.py": "import vendor_sdk_that_is_not_installed\n",
+    "nothing.py": "X = 1\n",
+}
+MESSAGES = {
+    "rel_raises": "effect.* rel_raises failed to evaluate: sensor model not calibrated",
+    "rel_nan": "rel_nan.* returned a NaN",
+    "rel_modifier": "rel_modifier.* failed to evaluate: 'gain_table'",
+}
+
+
+@pytest.fixture(autouse=True)
+def _restore_registry(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Plug-ins registered by a test are forgotten afterwards (the registry is process-wide)."""
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+
+
+@pytest.fixture(scope="module")
+def plugins(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("plugins")
+    out = {}
+    for name, text in PLUGINS.items():
+        (d / name).write_text(text)
+        out[name] = d / name
+    return out
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory) -> Path:
+    return simulate_bag(tmp_path_factory.mktemp("lab") / "lab.mcap", "icx285", "gain_sweep", frames=6,
+                        width=64, height=48, seed=5, hold_s=0.0)
+
+
+def run_analyze(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(["analyze", *map(str, args), "--quiet"])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def one_line(err: str) -> str:
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith("noise-monitor analyze: error: "), err
+    return lines[0]
+
+
+@pytest.mark.parametrize("file,effect", [("raises.py", "rel_raises"), ("nan.py", "rel_nan")])
+def test_failing_plugin_effect_in_the_model_is_named(plugins, file, effect):
+    assert load_plugin_file(plugins[file]) == [effect]
+    model = NoiseModel(extra=[effect])
+    with pytest.raises(EffectError, match=effect):
+        model.predict(np.linspace(0, 255, 32), META)
+    with pytest.raises(EffectError, match=effect):
+        model.simulate(np.full((16, 16), 150.0, np.float32), META, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("file,effect,add", [("raises.py", "rel_raises", False), ("nan.py", "rel_nan", False),
+                                             ("bad_modifier.py", "rel_modifier", True)])
+def test_analyze_with_a_failing_plugin_exits_2_naming_the_effect(capsys, tmp_path, bag, plugins, file, effect, add):
+    extra = ["--add-effect", effect] if add else []
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--effect-plugin", plugins[file], *extra,
+                               "--json", tmp_path / "s.json")
+    assert code == 2
+    assert re.search(MESSAGES[effect], one_line(err))
+    assert not (tmp_path / "s.json").exists()  # no partial results with NaN in them
+
+
+@pytest.mark.parametrize("file,match", [
+    ("import_error.py", "effect plug-in .*import_error.py failed to import: No module named 'vendor_sdk_that_is_not_installed'"),
+    ("nothing.py", "effect plug-in .*nothing.py defines no Effect subclass with a name"),
+    ("missing.py", "effect plug-in file .*missing.py does not exist"),
+])
+def test_analyze_with_an_unusable_plugin_file(capsys, bag, plugins, file, match):
+    path = plugins.get(file, bag.parent / file)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--effect-plugin", path)
+    assert code == 2
+    assert re.search(match, one_line(err))
+
+
+def test_analyze_with_unknown_or_out_of_range_added_effects(capsys, bag):
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "no_such_effect")
+    assert code == 2 and "unknown effect 'no_such_effect'; known: " in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu=-5")
+    assert code == 2 and "prnu." in one_line(err) and "is outside" in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu=lots")
+    assert code == 2 and "expected a number or 'fit', got 'lots'" in one_line(err)
+
+
+def test_analyze_on_unusable_bags(capsys, tmp_path, bag):
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    code, _, err = run_analyze(capsys, tmp_path / "empty.mcap", "--profile", "icx285")
+    assert code == 2 and "cannot read bag" in one_line(err)
+    code, _, err = run_analyze(capsys, tmp_path / "missing.mcap", "--profile", "icx285")
+    assert code == 2 and "does not exist" in one_line(err)
+    truncated = tmp_path / "cut.mcap"
+    truncated.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
+    code, _, err = run_analyze(capsys, truncated, "--profile", "icx285")
+    assert code == 2 and "cut.mcap" in one_line(err)
