@@ -8,7 +8,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import FormatStrFormatter  # noqa: E402
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .results import FrameRow  # noqa: E402
@@ -90,9 +90,9 @@ def _plot_conditions(ax: plt.Axes, rows: list[FrameRow]) -> None:
     ax_e.step(t, [1e3 * p[1]["exposure_time_s"] for p in pts], where="post", color="tab:cyan", ls="--",
               label="exposure [ms]")
     ax_e.set_yscale("log")
+    ax_e.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
     ax_e.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-    ax_e.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
-    ax_e.tick_params(axis="y", which="minor", labelsize=7)
+    ax_e.yaxis.set_minor_formatter(NullFormatter())
     ax_e.set_ylabel("exposure [ms]")
     lines = ax.get_lines() + ax_e.get_lines()
     ax.legend(lines, [ln.get_label() for ln in lines], loc="upper left", fontsize=8, framealpha=0.8)

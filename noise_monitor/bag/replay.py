@@ -11,6 +11,7 @@ Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
 from __future__ import annotations
 
 import json
+import os
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -59,6 +60,15 @@ def evaluate(monitor: Monitor, bf: BagFrame) -> FrameResult:
                                  metadata_error=bf.metadata_error))
 
 
+def set_inference_threads(threads: int) -> None:
+    """torch intra-op threads: ``threads``, or all cores but one when 0 (the node's rule)."""
+    import torch
+
+    if threads < 0:
+        raise ValueError(f"threads must be >= 0, got {threads}")
+    torch.set_num_threads(threads or max(1, (os.cpu_count() or 2) - 1))
+
+
 def _truth_spans(bag: str | Path, t0: int) -> list[tuple[float, float, str]]:
     """Corruption episodes of a simulated bag's truth sidecar (none for recorded bags)."""
     p = truth_path(bag)
@@ -89,15 +99,17 @@ def replay(
     camera_info_topic: str | None = None,
     temperature_topic: str | None = None,
     bit_depth: int | None = None,
+    threads: int | None = None,
     progress: bool = True,
     plot: bool = True,
 ) -> dict[str, Any]:
     """Run the monitor over every image of ``bag``; returns the JSON summary (and writes outputs).
 
     ``config``: a MonitorConfig or a node params YAML (default config/node.yaml, whose model, weights, device,
-    camera_name, hardware_id, bit_depth, color, sync_tolerance_s and diagnostics_rate_hz apply too
-    unless given here). ``estimator``: an object honouring the estimator contract (default:
-    ``noise_monitor.estimator.load(model_name, device)``).
+    camera_name, hardware_id, bit_depth, color, sync_tolerance_s, diagnostics_rate_hz and threads apply
+    too unless given here). ``estimator``: an object honouring the estimator contract (default:
+    ``noise_monitor.estimator.load(model_name, device)``). ``threads``: torch CPU threads as the node sets
+    them (0 = all cores but one; more threads than free cores slow inference down several-fold).
     """
     cfg, params = _settings(config)
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
@@ -115,6 +127,7 @@ def replay(
             estimator = load(model_name or params.get("model", "full_meta"),
                              device=device or params.get("device", "cpu"),
                              weights=weights or params.get("weights") or None)
+        set_inference_threads(int(params.get("threads", 0)) if threads is None else threads)
         camera = camera_name or params.get("camera_name") or "camera"
         hw = hardware_id or params.get("hardware_id") or f"{prof.name if prof else 'unknown'}/{camera}"
         monitor = Monitor(cfg, estimator, NoiseModel(extra=prof.effects if prof else None), camera, hw)

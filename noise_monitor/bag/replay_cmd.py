@@ -29,7 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera-info-topic", help="override the auto-detected CameraInfo topic")
     parser.add_argument("--temperature-topic", help="override the auto-detected Temperature topic")
     parser.add_argument("--bit-depth", type=int, help="bits per pixel of 16-bit images (default: profile)")
-    parser.add_argument("--threads", type=int, default=0, help="CPU threads for inference (0 = torch default)")
+    parser.add_argument("--threads", type=int, help="CPU threads for inference (default: the params file's; "
+                                                    "0 = all cores but one)")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG plot")
 
 
@@ -60,17 +61,11 @@ def print_summary(s: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.threads < 0:
-        raise ValueError("--threads must be >= 0")
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
     summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights, device=args.device,
                      config=args.params, camera_name=args.camera_name, image_topic=args.image_topic,
                      metadata_topic=args.metadata_topic, camera_info_topic=args.camera_info_topic, temperature_topic=args.temperature_topic,
-                     bit_depth=args.bit_depth, plot=not args.no_plot)
+                     bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot)
     print_summary(summary)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
