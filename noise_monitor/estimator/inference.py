@@ -137,9 +137,16 @@ def load(name: str = "full_meta", device: str = "auto", weights: str | Path | No
     path = Path(weights) if weights is not None else weights_path(name)
     if not path.is_file():
         raise FileNotFoundError(f"weights file {path} not found")
-    ckpt = torch.load(path, map_location=dev, weights_only=False)
-    if ckpt.get("variant") not in NAMES:
+    try:
+        ckpt = torch.load(path, map_location=dev, weights_only=False)
+    except Exception as exc:  # truncated, empty or not a torch file: unpickling errors of every kind
+        raise ValueError(f"weights file {path} is not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("variant") not in NAMES:
         raise ValueError(f"{path} is not an estimator checkpoint")
-    if ckpt["variant"] == "full_meta":
-        return FullMetaEstimator(ckpt, dev, model)
-    return PaperEstimator(ckpt, dev)
+    try:
+        if ckpt["variant"] == "full_meta":
+            return FullMetaEstimator(ckpt, dev, model)
+        return PaperEstimator(ckpt, dev)
+    except (KeyError, TypeError, RuntimeError) as exc:  # missing entries, wrong layer shapes
+        reason = " ".join(str(exc).split())  # torch's multi-line message on one line
+        raise ValueError(f"{path} is a damaged {ckpt['variant']} checkpoint ({type(exc).__name__}: {reason})") from None
