@@ -5,8 +5,12 @@ Phase 1 (lockstep): publish a frame, wait for its /diagnostics -> throughput (fr
 Phase 2 (30 Hz camera): a publisher process sends frames + metadata at 30 Hz -> diagnostics/s,
 frames dropped by the node (busy worker), latency p50/p95.
 
-Usage: .venv/bin/python bench/bench_node.py [--frames 40] [--seconds 15] [--rate 30] [--json out.json]
-Prints figures; asserts nothing.
+Usage: .venv/bin/python bench/bench_node.py [--frames 40] [--seconds 15] [--rate 30] [--shm-segment-mb 16]
+                                           [--json out.json]
+Prints figures; asserts nothing. Fast DDS's default shared-memory segment (512 KiB) is smaller than a
+1280x1024 image, so such samples go over UDP fragments that a best-effort (sensor-data) subscription
+loses under CPU load; ``--shm-segment-mb`` writes a Fast DDS profile with a larger segment and uses it
+for both processes (how to deploy the node next to a camera driver on the same machine).
 """
 from __future__ import annotations
 
@@ -78,6 +82,30 @@ def publisher_process(rate_hz: float, seconds: float, ready: mp.Event, go: mp.Ev
     rclpy.shutdown()
 
 
+SHM_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>
+    <transport_descriptor><transport_id>shm_large</transport_id><type>SHM</type>
+      <segment_size>{size}</segment_size></transport_descriptor>
+  </transport_descriptors>
+  <participant profile_name="large_images" is_default_profile="true">
+    <rtps><userTransports><transport_id>shm_large</transport_id></userTransports>
+      <useBuiltinTransports>false</useBuiltinTransports></rtps>
+  </participant>
+</profiles>
+"""
+
+
+def write_shm_profile(segment_mb: int) -> str:
+    """A Fast DDS profile (temporary file) with a shared-memory transport of segment_mb MiB segments."""
+    import tempfile
+
+    fd, path = tempfile.mkstemp(prefix="fastdds_shm_", suffix=".xml")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(SHM_PROFILE.format(size=segment_mb * 1024 * 1024))
+    return path
+
+
 def pct(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
@@ -88,10 +116,14 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=15.0, help="duration of the 30 Hz phase")
     ap.add_argument("--rate", type=float, default=30.0, help="publisher rate of phase 2 (Hz)")
     ap.add_argument("--weights", help="estimator checkpoint to benchmark instead of the bundled full_meta")
+    ap.add_argument("--shm-segment-mb", type=int, default=0,
+                    help="use a Fast DDS shared-memory transport with segments of this size (0 = Fast DDS default)")
     ap.add_argument("--json", help="write the figures to this JSON file")
     args = ap.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if args.shm_segment_mb:
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = write_shm_profile(args.shm_segment_mb)
 
     import rclpy
     import torch
@@ -190,7 +222,7 @@ def main() -> None:
         "frames_lost_before_node": node.monitor.counters["frames_lost"] - c0["frames_lost"],
         "frames_evaluated": len(received), "frames_dropped": node.monitor.counters["frames_dropped"] - c0["frames_dropped"],
         "live_latency_ms_p50": round(pct(live_lat, 50), 1), "live_latency_ms_p95": round(pct(live_lat, 95), 1),
-        "cpu_cores": os.cpu_count(),
+        "cpu_cores": os.cpu_count(), "shm_segment_mb": args.shm_segment_mb or "Fast DDS default",
     }
     width = max(map(len, figures))
     for k, v in figures.items():
