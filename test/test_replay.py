@@ -12,6 +12,7 @@ from mcap.reader import make_reader
 
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
+from noise_monitor.bag.results import truth_check
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
@@ -65,6 +66,20 @@ def test_unexpected_noise_episode_is_one_alarm_with_negative_xi(replayed, noisy_
     assert truth["start_ns"] <= ep["start_ns"] <= truth["end_ns"]  # raised during the corruption
     for k in ("start_ns", "end_ns", "start_s", "end_s", "frames"):
         assert k in ep
+    check = s["truth_check"]  # the simulated bag's sidecar is compared automatically
+    assert (check["detected"], check["missed"], check["false_alarms"]) == (1, 0, 0)
+    assert 0 <= check["episodes"][0]["delay_s"] <= (truth["end_ns"] - truth["start_ns"]) / 1e9
+
+
+def test_truth_check_counts_misses_wrong_signs_and_false_alarms():
+    s = 1_000_000_000
+    truth = [{"start_ns": 10 * s, "end_ns": 20 * s, "corrupted": ["a"], "xi_sign": "-"},
+             {"start_ns": 40 * s, "end_ns": 50 * s, "corrupted": ["b"], "xi_sign": "+"}]
+    alarms = [{"start_ns": 12 * s, "sign": "-"}, {"start_ns": 45 * s, "sign": "-"}, {"start_ns": 70 * s, "sign": "+"}]
+    check = truth_check(alarms, truth)
+    assert [e["detected"] for e in check["episodes"]] == [True, False]  # the second alarm has the wrong sign
+    assert check["episodes"][0]["delay_s"] == 2.0
+    assert (check["detected"], check["missed"], check["false_alarms"]) == (1, 1, 1)
 
 
 def test_mcap_has_exactly_the_node_topics_and_is_readable_by_the_mcap_library(replayed):

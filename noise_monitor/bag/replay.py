@@ -28,7 +28,8 @@ from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
 from .errors import BagError
 from .plot import plot_replay
 from .reader import BagFrame, open_bag
-from .results import CONDITION_KEYS, FrameRow, alarm_episodes, skip_reasons, source_summaries, write_csv
+from .results import (CONDITION_KEYS, FrameRow, alarm_episodes, skip_reasons, source_summaries, truth_check,
+                      write_csv)
 from .simulate import truth_path
 from .writer import BagWriter, typestore
 
@@ -69,16 +70,16 @@ def set_inference_threads(threads: int) -> None:
     torch.set_num_threads(threads or max(1, (os.cpu_count() or 2) - 1))
 
 
-def _truth_spans(bag: str | Path, t0: int) -> list[tuple[float, float, str]]:
-    """Corruption episodes of a simulated bag's truth sidecar (none for recorded bags)."""
+def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:
+    """Corruption episodes of a simulated bag's truth sidecar; None for recorded bags (or unreadable truth)."""
     p = truth_path(bag)
     if not p.is_file():
-        return []
+        return None
     try:
-        eps = json.loads(p.read_text()).get("episodes", [])
-        return [((e["start_ns"] - t0) / 1e9, (e["end_ns"] - t0) / 1e9, "; ".join(e["corrupted"])) for e in eps]
+        eps = json.loads(p.read_text())["episodes"]
+        return [{k: e[k] for k in ("start_ns", "end_ns", "corrupted", "xi_sign")} for e in eps]
     except (ValueError, KeyError, TypeError):
-        return []
+        return None
 
 
 def replay(
@@ -189,14 +190,19 @@ def replay(
         "realtime_factor": round(bag_duration / wall, 3) if wall > 0 and bag_duration > 0 else None,
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
     }
+    truth = _truth_episodes(bag)
+    if truth is not None:
+        summary["truth_check"] = truth_check(episodes, truth)
     if out is not None:
         write_csv(rows, out / OUTPUT_FILES["csv"])
         files = {"mcap": str(mcap_path), "csv": str(out / OUTPUT_FILES["csv"])}
         if plot and rows:
             period = bag_duration / (len(rows) - 1) if len(rows) > 1 else 0.0
             title = f"{Path(bag).name}: {summary['estimator']} on {prof.name if prof else 'bag metadata'}"
-            plot_replay(rows, episodes, out / OUTPUT_FILES["png"], title, cfg.xi_threshold_dn, period,
-                        _truth_spans(bag, rows[0].stamp_ns))
+            t0 = rows[0].stamp_ns
+            spans = [((e["start_ns"] - t0) / 1e9, (e["end_ns"] - t0) / 1e9, "; ".join(e["corrupted"]))
+                     for e in truth or []]
+            plot_replay(rows, episodes, out / OUTPUT_FILES["png"], title, cfg.xi_threshold_dn, period, spans)
             files["png"] = str(out / OUTPUT_FILES["png"])
         files["json"] = str(out / OUTPUT_FILES["json"])
         summary["outputs"] = files

@@ -54,6 +54,13 @@ def print_summary(s: dict[str, Any]) -> None:
         tail = " (still active at the end)" if ep["active_at_end"] else ""
         print(f"  - {ep['start_s']:7.2f} s .. {ep['end_s']:7.2f} s ({ep['frames']} frames), xi {ep['sign']} "
               f"(peak {ep['peak_xi_dn']:+.2f} DN): {ep['cause']}{tail}")
+    check = s.get("truth_check")
+    if check:
+        print(f"  vs simulation truth: {check['detected']} of {len(check['episodes'])} corruption episode(s) "
+              f"detected, {check['false_alarms']} false alarm(s)")
+        for ep in check["episodes"]:
+            delay = f"after {ep['delay_s']:.2f} s" if ep["detected"] else "MISSED"
+            print(f"  - {'; '.join(ep['corrupted'])} (xi {ep['xi_sign']}): {delay}")
     rt = s["realtime_factor"]
     print(f"\n  {s['frames_per_s']} frames/s, {rt}x real time" if rt else f"\n  {s['frames_per_s']} frames/s")
     for kind, path in s.get("outputs", {}).items():
@@ -64,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
     summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights, device=args.device,
                      config=args.params, camera_name=args.camera_name, image_topic=args.image_topic,
-                     metadata_topic=args.metadata_topic, camera_info_topic=args.camera_info_topic, temperature_topic=args.temperature_topic,
+                     metadata_topic=args.metadata_topic, camera_info_topic=args.camera_info_topic,
+                     temperature_topic=args.temperature_topic,
                      bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot)
     print_summary(summary)
     if args.json:

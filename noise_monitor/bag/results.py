@@ -99,3 +99,25 @@ def source_summaries(rows: list[FrameRow]) -> dict[str, dict[str, float | int | 
 def skip_reasons(rows: list[FrameRow]) -> dict[str, int]:
     """Count of skipped frames per reason."""
     return dict(Counter(r.skip_reason or "unknown" for r in rows if not r.processed).most_common())
+
+
+def truth_check(alarms: list[dict[str, Any]], truth_episodes: list[dict[str, Any]]) -> dict[str, Any]:
+    """Alarm episodes vs the corruption episodes of a simulated bag's truth sidecar.
+
+    A corruption counts as detected by an alarm of the same xi sign that starts inside it; the delay is
+    alarm start - corruption start. Alarms starting outside every corruption are false alarms.
+    """
+    found = []
+    used: set[int] = set()
+    for ep in truth_episodes:
+        hit = next((i for i, a in enumerate(alarms) if ep["start_ns"] <= a["start_ns"] <= ep["end_ns"]
+                    and a["sign"] == ep["xi_sign"]), None)
+        if hit is not None:
+            used.add(hit)
+        delay = round((alarms[hit]["start_ns"] - ep["start_ns"]) / 1e9, 3) if hit is not None else None
+        found.append({"corrupted": ep["corrupted"], "start_ns": ep["start_ns"], "end_ns": ep["end_ns"],
+                      "xi_sign": ep["xi_sign"], "detected": hit is not None, "delay_s": delay})
+    false = [a for i, a in enumerate(alarms)
+             if i not in used and not any(ep["start_ns"] <= a["start_ns"] <= ep["end_ns"] for ep in truth_episodes)]
+    detected = sum(f["detected"] for f in found)
+    return {"episodes": found, "detected": detected, "missed": len(found) - detected, "false_alarms": len(false)}
