@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from noise_monitor.lab.compare import Comparison, baseline_effects, outlier_expectation, quantized_temporal_variance
+from noise_monitor.lab.compare import Comparison, baseline_effects, outlier_expectation
+from noise_monitor.lab.quantization import quantized_temporal_variance
 from noise_monitor.lab.measure import measure_frames
 from noise_monitor.lab.synthetic import simulate_frames
 from noise_monitor.physics import NoiseModel, load_profile

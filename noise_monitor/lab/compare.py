@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -21,6 +20,7 @@ from ..physics import CameraMetadata, CameraProfile, Effect, EffectError, NoiseM
 from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
 from ..physics.sensor import Conditions
+from .quantization import quantized_temporal_variance
 from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMeasurement
 
 MEASURED = ("temporal", "fixed", "column", "row", "outlier")
@@ -28,6 +28,8 @@ MEASURED = ("temporal", "fixed", "column", "row", "outlier")
 STEP_SYSTEMATIC_DN = 0.05
 #: outlier pixels a segment needs before their mean amplitude is compared with the model
 MIN_OUTLIERS_FOR_AMPLITUDE = 5
+#: blocks per cell at which the model is evaluated (evenly spread over the cell's intensities)
+MAX_MODEL_BLOCKS = 16
 
 
 def component_of(effect: Effect) -> str | None:
@@ -69,11 +71,12 @@ def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarra
 
 
 def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray,
-                         sigma: np.ndarray) -> dict[str, np.ndarray]:
+                         sigma: np.ndarray, span: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Unclipped variance (DN^2) per measured component at block intensities ``v``.
 
     A fixed mixture (hot pixels) goes to "outlier" where its offset stands out of the block's noise
     ``sigma`` (robust, DN) and to the white fixed-pattern core elsewhere; its offsets are clipped.
+    Quantization acts on the temporal noise at each block's level ``v`` over its level ``span`` (DN).
     """
     cond = _conditions(effects, meta)
     out = {c: np.zeros(v.shape) for c in MEASURED}
@@ -88,7 +91,8 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
             out[comp] = out[comp] + var * (1.0 - p)
         else:
             out[comp] = out[comp] + np.asarray(e.variance_dn2(v, cond), dtype=float)
-    added, spread = quantization_variance(effects, cond, out["temporal"])
+    levels = None if span is None else span + 2.0 * np.sqrt(np.maximum(out["fixed"], 0.0))
+    added, spread = quantization_variance(effects, cond, out["temporal"], v if span is not None else None, levels)
     out["temporal"] = out["temporal"] + added
     out[QUANT_SPREAD] = spread
     return out
@@ -98,55 +102,28 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
 QUANT_SPREAD = "quantization_spread"
 
 
-def quantization_variance(effects: Sequence[Effect], cond: Conditions,
-                          temporal_var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(added temporal variance, its spread over the quantization phase) in DN^2 for the coarsest
-    quantization step acting on temporal noise of variance ``temporal_var``."""
+def quantization_variance(effects: Sequence[Effect], cond: Conditions, temporal_var: np.ndarray,
+                          level_dn: np.ndarray | None = None,
+                          span_dn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(added temporal variance, the model's spread of it) in DN^2 of the coarsest quantization step
+    acting on temporal noise of variance ``temporal_var`` (see :mod:`.quantization`)."""
     lsb = max((e.lsb_dn(cond) for e in effects if e.distribution == "quantization"), default=0.0)
     if lsb <= 0.0:
         return np.zeros_like(temporal_var), np.zeros_like(temporal_var)
-    return quantized_temporal_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb)
-
-
-@lru_cache(maxsize=1)
-def _quantization_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Added temporal variance / LSB^2 of Q(u + n), n ~ N(0, r^2 LSB^2): mean and std over the phase u."""
-    ratios = np.geomspace(1e-3, 8.0, 160)
-    phases = (np.arange(64) + 0.5) / 64.0
-    mean_added = np.empty(ratios.size)
-    spread = np.empty(ratios.size)
-    for i, r in enumerate(ratios):
-        k = np.arange(-int(np.ceil(8 * r)) - 2, int(np.ceil(8 * r)) + 3, dtype=float)[:, None]
-        p = ndtr((k + 0.5 - phases) / r) - ndtr((k - 0.5 - phases) / r)
-        m = np.sum(k * p, axis=0)
-        var = np.sum(k * k * p, axis=0) - m**2
-        mean_added[i] = var.mean() - r * r
-        spread[i] = var.std()
-    return ratios, mean_added, spread
-
-
-def quantized_temporal_variance(sigma_dn: np.ndarray, lsb_dn: float) -> tuple[np.ndarray, np.ndarray]:
-    """(temporal variance a quantizer of step ``lsb_dn`` adds to Gaussian noise ``sigma_dn``, its std
-    over the quantization phase), DN^2. Phase-averaged: LSB^2/12 when the noise dithers the quantizer;
-    noise far below the step is mostly erased (the output varies only where the level sits on a decision
-    threshold); a flat region has one phase, hence the spread. The phase-dependent bias is a fixed offset per flat region (not modelled)."""
-    ratios, added, spread = _quantization_table()
-    r = np.asarray(sigma_dn, dtype=float) / lsb_dn
-    big = r >= ratios[-1]
-    return (lsb_dn**2 * np.where(big, 1.0 / 12.0, np.interp(r, ratios, added)),
-            lsb_dn**2 * np.where(big, 0.0, np.interp(r, ratios, spread)))
+    return quantized_temporal_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb, level_dn, span_dn)
 
 
 def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray,
-                        pixels_per_block: int) -> tuple[float, float]:
-    """(expected outlier pixels, their mean |offset| in DN) from the fixed mixtures."""
+                        pixels: float | np.ndarray) -> tuple[float, float]:
+    """(expected outlier pixels, their mean |offset| in DN) from the fixed mixtures; ``pixels``: pixels
+    each block stands for."""
     cond = _conditions(effects, meta)
     count = weighted = 0.0
     for e in effects:
         if e.distribution == "mixture" and not e.temporal:
             frac, off, p = _detection(e, cond, v, sigma)
-            count += float(np.sum(frac * p)) * pixels_per_block
-            weighted += float(np.sum(frac * p * np.abs(off))) * pixels_per_block
+            count += float(np.sum(frac * p * pixels))
+            weighted += float(np.sum(frac * p * np.abs(off) * pixels))
     return count, (weighted / count if count > 0 else 0.0)
 
 
@@ -172,26 +149,38 @@ def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) 
     return np.sqrt(np.maximum(np.asarray(pred["total"]) ** 2 + quant, 0.0))
 
 
-@dataclass
 class _SegmentBase:
-    seg: SegmentMeasurement
-    cells: list[Cell]
-    clip_aware: dict[str, np.ndarray]  # component -> per-block variance (DN^2)
-    unclipped: dict[str, np.ndarray]
+    """A segment's cells and the representative blocks the model is evaluated at: up to
+    ``MAX_MODEL_BLOCKS`` per cell, evenly spread over the cell's block intensities (weights: blocks
+    represented)."""
 
-    def __post_init__(self) -> None:
-        self.average = np.zeros((len(self.cells), self.seg.intensity_dn.size))
-        for i, c in enumerate(self.cells):
-            self.average[i, c.block_index] = 1.0 / c.block_index.size
+    def __init__(self, seg: SegmentMeasurement, cells: list[Cell]) -> None:
+        self.seg, self.cells = seg, cells
+        picks, weights = [], []
+        self.average = np.zeros((len(cells), sum(min(c.block_index.size, MAX_MODEL_BLOCKS) for c in cells)))
+        start = 0
+        for i, c in enumerate(cells):
+            idx = c.block_index[np.argsort(seg.intensity_dn[c.block_index], kind="stable")]
+            pick = idx[np.unique(np.rint(np.linspace(0, idx.size - 1, min(idx.size, MAX_MODEL_BLOCKS))).astype(int))]
+            picks.append(pick)
+            weights.append(np.full(pick.size, idx.size / pick.size))
+            self.average[i, start:start + pick.size] = 1.0 / pick.size
+            start += pick.size
+        self.average = self.average[:, :start]
+        rep = np.concatenate(picks)
+        self.weights = np.concatenate(weights)
+        self.v, self.sigma, self.span = seg.intensity_dn[rep], seg.robust_sigma_dn[rep], seg.span_dn[rep]
+        self.clip_aware: dict[str, np.ndarray] = {}
+        self.unclipped: dict[str, np.ndarray] = {}
         # per-cell observables; line offsets are pooled per segment (one observable each); the sparse
         # outlier energy is fitted through the outlier count and amplitude instead
-        self.observed = tuple(k for k in self.cells[0].values if k not in POOLED)
-        self.values = np.array([[c.values[k] for k in self.observed] for c in self.cells])
-        self.errors = np.maximum(np.array([[c.errors[k] for k in self.observed] for c in self.cells]), 1e-9)
-        self.pooled = tuple(k for k in self.cells[0].values if k in POOLED and k != "outlier")
-        self.pooled_values = np.array([self.cells[0].values[k] for k in self.pooled])
-        self.pooled_errors = np.maximum(np.array([self.cells[0].errors[k] for k in self.pooled]), 1e-9)
-        self.pixels_per_block = self.seg.pixels_checked // max(1, self.seg.intensity_dn.size)
+        self.observed = tuple(k for k in cells[0].values if k not in POOLED)
+        self.values = np.array([[c.values[k] for k in self.observed] for c in cells])
+        self.errors = np.maximum(np.array([[c.errors[k] for k in self.observed] for c in cells]), 1e-9)
+        self.pooled = tuple(k for k in cells[0].values if k in POOLED and k != "outlier")
+        self.pooled_values = np.array([cells[0].values[k] for k in self.pooled])
+        self.pooled_errors = np.maximum(np.array([cells[0].errors[k] for k in self.pooled]), 1e-9)
+        self.pixels_per_block = seg.pixels_checked // max(1, seg.intensity_dn.size)
 
     def total_errors(self, comps: dict[str, np.ndarray]) -> np.ndarray:
         """Measurement errors with the model's quantization-phase spread added to temporal observables."""
@@ -201,18 +190,22 @@ class _SegmentBase:
 
     def model_cells(self, comps: dict[str, np.ndarray]) -> np.ndarray:
         """Model variance per cell (rows) and per-cell observed component (columns)."""
-        return np.stack([_cell_values(self.average, comps, k) for k in self.observed], axis=1)
+        return np.stack([_cell_values(self, comps, k) for k in self.observed], axis=1)
 
     def model_pooled(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        return np.array([float(np.mean(comps[k])) for k in self.pooled])
+        return np.array([_pooled(comps[k], self.weights) for k in self.pooled])
 
 
-def _cell_values(average: np.ndarray, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+def _pooled(x: np.ndarray, weights: np.ndarray) -> float:
+    return float(np.sum(x * weights) / np.sum(weights))
+
+
+def _cell_values(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
     if comp == "single":
-        return average @ (comps["temporal"] + comps["fixed"])
+        return sb.average @ (comps["temporal"] + comps["fixed"])
     if comp in POOLED:
-        return np.full(average.shape[0], float(np.mean(comps[comp])))
-    return average @ comps[comp]
+        return np.full(sb.average.shape[0], _pooled(comps[comp], sb.weights))
+    return sb.average @ comps[comp]
 
 
 class Comparison:
@@ -237,17 +230,19 @@ class Comparison:
         for seg in meas.segments:
             if seg.index not in by_seg:
                 continue
-            v = seg.intensity_dn
-            pred = clip_model.predict(v, seg.meta)
-            comps = unclipped_components([e for e in rest if e.distribution != "quantization"], seg.meta, v,
-                                         seg.robust_sigma_dn)
+            sb = _SegmentBase(seg, by_seg[seg.index])
+            pred = clip_model.predict(sb.v, seg.meta)
+            comps = unclipped_components([e for e in rest if e.distribution != "quantization"], seg.meta, sb.v,
+                                         sb.sigma)
             for e in analytic:
                 comps[component_of(e)] = comps[component_of(e)] + np.asarray(pred[e.name], dtype=float) ** 2
+            levels = sb.span + 2.0 * np.sqrt(np.maximum(comps["fixed"], 0.0))
             added, comps[QUANT_SPREAD] = quantization_variance(self.effects, clip_model.conditions(seg.meta),
-                                                               comps["temporal"])
+                                                               comps["temporal"], sb.v, levels)
             comps["temporal"] = comps["temporal"] + added
-            self.segments.append(_SegmentBase(seg, by_seg[seg.index], comps,
-                                              unclipped_components(self.effects, seg.meta, v, seg.robust_sigma_dn)))
+            sb.clip_aware = comps
+            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span)
+            self.segments.append(sb)
             if progress is not None:
                 progress.update(1)
 
@@ -267,7 +262,7 @@ class Comparison:
         names = ", ".join(e.name for e in extra)
         for sb in self.segments:
             try:
-                new = unclipped_components(effects, sb.seg.meta, sb.seg.intensity_dn, sb.seg.robust_sigma_dn)
+                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span)
             except EffectError:
                 raise
             except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
@@ -291,8 +286,7 @@ class Comparison:
             res.extend(np.sqrt(2.0 * np.log(err / sb.errors)).ravel())
             res.extend((sb.pooled_values - sb.model_pooled(comps)) / sb.pooled_errors)
             seg = sb.seg
-            count, amp = outlier_expectation(effects, seg.meta, seg.intensity_dn, seg.robust_sigma_dn,
-                                             sb.pixels_per_block)
+            count, amp = outlier_expectation(effects, seg.meta, sb.v, sb.sigma, sb.pixels_per_block * sb.weights)
             res.append((seg.outlier_pixels - count) / math.sqrt(max(count, seg.outlier_pixels, 1.0)))
             if seg.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE and count >= 1.0:
                 err = math.hypot(seg.outlier_amplitude_err_dn, 0.05 * seg.outlier_amplitude_dn)
@@ -314,7 +308,7 @@ class Comparison:
         t0 = self.meas.segments[0].stamp_ns
         for sb, comps in pairs:
             seg = sb.seg
-            table = {c: _cell_values(sb.average, comps, c) for c in MEASURED + ("single",)}
+            table = {c: _cell_values(sb, comps, c) for c in MEASURED + ("single",)}
             for i, cell in enumerate(sb.cells):
                 model = {c: float(a[i]) for c, a in table.items()}
                 meas_total = sum(cell.values.values())

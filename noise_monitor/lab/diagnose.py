@@ -87,18 +87,19 @@ class EffectSpec:
 
 
 def _scan_values(p: Param) -> np.ndarray:
-    """Coarse scan of a parameter: its default plus log-spaced magnitudes, about 2 per decade (both
-    signs if allowed)."""
+    """Coarse scan of a parameter: its default plus log-spaced magnitudes, SCAN_PER_DECADE per decade
+    (both signs if allowed)."""
+    per_decade = SCAN_PER_DECADE
     lo, hi = p.bounds
     if lo < 0.0 < hi:
         top = max(hi, -lo)
         mags = np.geomspace(top * 1e-3, top, 7)
         pts = np.concatenate([[0.0, p.default], mags, -mags])
     elif lo > 0.0:
-        pts = np.concatenate([[p.default], np.geomspace(lo, hi, SCAN_PER_DECADE * _decades(lo, hi) + 1)])
+        pts = np.concatenate([[p.default], np.geomspace(lo, hi, per_decade * _decades(lo, hi) + 1)])
     else:
         bottom = max(hi * 1e-9, 1e-12)
-        pts = np.concatenate([[p.default, lo], np.geomspace(bottom, hi, SCAN_PER_DECADE * _decades(bottom, hi) + 1)])
+        pts = np.concatenate([[p.default, lo], np.geomspace(bottom, hi, per_decade * _decades(bottom, hi) + 1)])
     return np.unique(np.clip(pts, lo, hi))
 
 
@@ -118,9 +119,20 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
             p = pmap[name]
             (grid if p.integer and p.bounds[1] - p.bounds[0] < MAX_GRID else cont).append((i, p))
 
+    # wide positive ranges (e.g. 0..1e7) are fitted in log10 (a floor of 1e-9 x the upper bound stands for 0)
+    logs = np.array([p.bounds[0] >= 0.0 and p.bounds[1] > 1e3 * max(p.bounds[0], 1e-9 * p.bounds[1])
+                     for _, p in cont], dtype=bool)
+    floors = np.array([max(p.bounds[0], 1e-9 * p.bounds[1]) for _, p in cont])
+
+    def to_internal(x: np.ndarray) -> np.ndarray:
+        return np.where(logs, np.log10(np.maximum(x, floors)), x)
+
+    def to_external(u: np.ndarray) -> np.ndarray:
+        return np.where(logs, 10.0 ** np.where(logs, u, 0.0), u)
+
     def build(xc: np.ndarray, xg: tuple[float, ...]) -> list[Effect]:
         vals = [dict(s.fixed) for s in specs]
-        for (i, p), x in zip(cont, xc):
+        for (i, p), x in zip(cont, to_external(np.asarray(xc, dtype=float))):
             vals[i][p.name] = float(np.clip(x, *p.bounds))
         for (i, p), x in zip(grid, xg):
             vals[i][p.name] = x
@@ -145,13 +157,13 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
             if best is None or chi2 < best[0]:
                 best = (chi2, np.zeros(0), xg, None)
             continue
-        lo = np.array([p.bounds[0] for _, p in cont])
-        hi = np.array([p.bounds[1] for _, p in cont])
-        scan = [np.asarray(x) for x in itertools.product(*[_scan_values(p) for _, p in cont])]
+        lo = to_internal(np.array([p.bounds[0] for _, p in cont]))
+        hi = to_internal(np.array([p.bounds[1] for _, p in cont]))
+        scan = [to_internal(np.asarray(x)) for x in itertools.product(*[_scan_values(p) for _, p in cont])]
         chi = [float(np.sum(resid(x, xg) ** 2)) for x in scan]
         for j in np.argsort(chi)[:N_STARTS]:
-            x0 = scan[j]
-            scale = np.maximum(np.abs(x0), 1e-3 * (hi - lo))
+            x0 = np.clip(scan[j], lo, hi)
+            scale = np.where(logs, 0.3, np.maximum(np.abs(x0), 1e-3 * (hi - lo)))
             sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=scale, args=(xg,), max_nfev=200)
             chi2 = float(sol.fun @ sol.fun)
             if best is None or chi2 < best[0]:
@@ -162,8 +174,10 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
     if cont and jac is not None:
         dof = max(n_obs - len(cont) - len(grid), 1)
         cov = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2 / dof)
+        ext = to_external(xc)
         for k, (i, p) in enumerate(cont):
-            errs[i][p.name] = float(math.sqrt(max(cov[k, k], 0.0)))
+            sd = math.sqrt(max(cov[k, k], 0.0))
+            errs[i][p.name] = float(sd * ext[k] * math.log(10.0) if logs[k] else sd)
     for i, p in grid:
         errs[i][p.name] = None
     return FitResult(

@@ -79,6 +79,7 @@ class SegmentMeasurement:
     region: np.ndarray  # (B,) region index 0..8 (3 x 3 grid, row-major)
     values: dict[str, np.ndarray]  # component -> (B,) variance DN^2 per block
     robust_sigma_dn: np.ndarray  # (B,) robust sigma of the mean residual (outlier threshold basis)
+    span_dn: np.ndarray  # (B,) range of the fitted plane over the block (DN)
     outlier_pixels: int
     outlier_amplitude_dn: float  # mean |residual| of the outlier pixels
     outlier_amplitude_err_dn: float
@@ -140,11 +141,12 @@ class Measurements:
 
 
 # --- block algebra -----------------------------------------------------------------------------
-def _projection(b: int) -> np.ndarray:
-    """Residual projector of a least-squares plane fit on a b x b block (pixels row-major)."""
+def _plane_fit(b: int) -> tuple[np.ndarray, np.ndarray]:
+    """(residual projector, slope extractor (b*b, 2)) of a least-squares plane fit on a b x b block."""
     y, x = np.mgrid[0:b, 0:b]
     design = np.stack([np.ones(b * b), x.ravel() - x.mean(), y.ravel() - y.mean()], axis=1)
-    return np.eye(b * b) - design @ np.linalg.pinv(design)
+    pinv = np.linalg.pinv(design)
+    return np.eye(b * b) - design @ pinv, pinv[1:].T
 
 
 def _blocks(img: np.ndarray, b: int) -> np.ndarray:
@@ -224,11 +226,13 @@ def _bin_outliers(values: np.ndarray, bins: np.ndarray, keep: np.ndarray, factor
 class _SegmentAccumulator:
     """Running sums over the frames of one segment."""
 
-    def __init__(self, index: int, meta: CameraMetadata, stamp_ns: int, b: int, proj: np.ndarray) -> None:
-        self.index, self.meta, self.stamp_ns, self.b, self.proj = index, meta, stamp_ns, b, proj
+    def __init__(self, index: int, meta: CameraMetadata, stamp_ns: int, b: int,
+                 plane: tuple[np.ndarray, np.ndarray]) -> None:
+        self.index, self.meta, self.stamp_ns, self.b = index, meta, stamp_ns, b
+        self.proj, self.slopes = plane
         self.frames: list[int] = []
         self.metas: list[CameraMetadata] = []
-        self.s1 = self.s2 = self.mean = None
+        self.s1 = self.s2 = self.mean = self.slope = None
 
     def add(self, frame_index: int, blocks: np.ndarray, meta: CameraMetadata) -> None:
         r = blocks @ self.proj
@@ -236,6 +240,8 @@ class _SegmentAccumulator:
             self.s1 = np.zeros_like(r)
             self.s2 = np.zeros(r.shape[0])
             self.mean = np.zeros(r.shape[0])
+            self.slope = np.zeros((r.shape[0], 2))
+        self.slope += blocks @ self.slopes
         self.s1 += r
         self.s2 += np.sum(r * r, axis=1)
         self.mean += blocks.mean(axis=1)
@@ -299,6 +305,7 @@ class _SegmentAccumulator:
             region=region[keep],
             values={c: a[keep] for c, a in values.items()},
             robust_sigma_dn=robust[keep],
+            span_dn=(b - 1) * np.abs(self.slope[keep] / k).sum(axis=1),
             outlier_pixels=int(amp.size),
             outlier_amplitude_dn=float(amp.mean()) if amp.size else 0.0,
             outlier_amplitude_err_dn=float(amp.std() / math.sqrt(amp.size)) if amp.size > 1 else 0.0,
@@ -394,7 +401,7 @@ def measure_frames(
     """
     if block < 4:
         raise ValueError(f"block size must be >= 4 pixels, got {block}")
-    proj = _projection(block)
+    plane = _plane_fit(block)
     segments: list[SegmentMeasurement] = []
     skipped: dict[str, int] = {}
     acc: _SegmentAccumulator | None = None
@@ -429,7 +436,7 @@ def measure_frames(
         if acc is None or len(acc.frames) >= tolerance.max_frames or not tolerance.same(acc.metas[0], meta):
             if acc is not None:
                 segments.append(acc.finish(grid))
-            acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, proj)
+            acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, plane)
         acc.add(i, _blocks(img, block), meta)
     if acc is not None:
         segments.append(acc.finish(grid))
