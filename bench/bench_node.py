@@ -19,6 +19,7 @@ import json
 import multiprocessing as mp
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -116,10 +117,38 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=15.0, help="duration of the 30 Hz phase")
     ap.add_argument("--rate", type=float, default=30.0, help="publisher rate of phase 2 (Hz)")
     ap.add_argument("--weights", help="estimator checkpoint to benchmark instead of the bundled full_meta")
-    ap.add_argument("--shm-segment-mb", type=int, default=0,
-                    help="use a Fast DDS shared-memory transport with segments of this size (0 = Fast DDS default)")
+    ap.add_argument("--shm-segment-mb", type=int, default=None,
+                    help="Fast DDS shared-memory segment size (0 = Fast DDS default); default: run both 0 and 16")
     ap.add_argument("--json", help="write the figures to this JSON file")
     args = ap.parse_args()
+    if args.shm_segment_mb is None:
+        compare_transports(args)
+        return
+    run_once(args)
+
+
+def compare_transports(args: argparse.Namespace) -> None:
+    """Run the benchmark once with Fast DDS defaults and once with 16 MiB shared-memory segments."""
+    import subprocess
+    import sys
+    import tempfile
+
+    both = {}
+    for mb in (0, 16):
+        with tempfile.NamedTemporaryFile(suffix=".json") as out:
+            cmd = [sys.executable, __file__, "--frames", str(args.frames), "--seconds", str(args.seconds),
+                   "--rate", str(args.rate), "--shm-segment-mb", str(mb), "--json", out.name]
+            if args.weights:
+                cmd += ["--weights", args.weights]
+            print(f"--- transport: {'Fast DDS default' if mb == 0 else f'shared memory, {mb} MiB segments'}", flush=True)
+            subprocess.run(cmd, check=True)
+            both["fastdds_default" if mb == 0 else f"shm_{mb}mb"] = json.loads(Path(out.name).read_text())
+    if args.json:
+        Path(args.json).write_text(json.dumps(both, indent=2))
+
+
+def run_once(args: argparse.Namespace) -> None:
+    """One benchmark run (lockstep + live phase) with the transport chosen by args.shm_segment_mb."""
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if args.shm_segment_mb:
