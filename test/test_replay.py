@@ -71,6 +71,16 @@ def test_unexpected_noise_episode_is_one_alarm_with_negative_xi(replayed, noisy_
     assert 0 <= check["episodes"][0]["delay_s"] <= (truth["end_ns"] - truth["start_ns"]) / 1e9
 
 
+def test_doubled_thermal_noise_metadata_is_a_positive_xi_alarm(tmp_path, estimator):
+    bag = simulate_bag(tmp_path / "w2.mcap", "ev76c661", "double_thermal_noise", frames=20,
+                       width=3 * estimator.patch_size, height=2 * estimator.patch_size, seed=6, hold_s=0)
+    s = replay(bag, "ev76c661", None, estimator=estimator, config=CONFIG, progress=False)
+    assert [a["sign"] for a in s["alarms"]] == ["+"]
+    assert "model predicts more noise" in s["alarms"][0]["cause"]
+    assert s["truth_check"]["detected"] == 1 and s["truth_check"]["false_alarms"] == 0
+    assert "outputs" not in s  # no out_dir: nothing written
+
+
 def test_truth_check_counts_misses_wrong_signs_and_false_alarms():
     s = 1_000_000_000
     truth = [{"start_ns": 10 * s, "end_ns": 20 * s, "corrupted": ["a"], "xi_sign": "-"},

@@ -13,7 +13,7 @@ from typing import Callable
 #: Campaign-time window of the unexpected-noise episodes.
 EPISODE = (0.4, 0.7)
 #: Default operating point (true metadata) outside sweeps.
-BASE = {"gain_db": 6.0, "exposure_time_s": 0.02, "sensor_temperature_c": 35.0}
+BASE = {"gain_db": 12.0, "exposure_time_s": 0.02, "sensor_temperature_c": 35.0}
 
 
 @dataclass(frozen=True)
