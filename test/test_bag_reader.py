@@ -181,6 +181,13 @@ def test_unusable_bags_raise_bag_error(tmp_path, sim_bag):
         w.write("/camera/camera_info", camera_info_msg(8, 8, 1), 1)
     with pytest.raises(BagError, match="no image topic"):
         open_bag(info_only)
+    compressed = tmp_path / "compressed.mcap"
+    t = typestore().types
+    with BagWriter(compressed) as w:
+        w.write("/camera/image_raw/compressed", t["sensor_msgs/msg/CompressedImage"](
+            header=header(1), format="jpeg", data=np.zeros(4, np.uint8)), 1)
+    with pytest.raises(BagError, match="CompressedImage is not supported: lossy compression"):
+        open_bag(compressed)
     no_msgs = tmp_path / "no_msgs"
     shutil.copytree(simulate_bag(tmp_path / "src", "icx285", "static", frames=1, width=16, height=16), no_msgs)
     (no_msgs / "src.mcap").write_bytes(b"")

@@ -144,7 +144,11 @@ class BagReader:
             raise BagError(f"several {role} topics in bag {self.path}: {', '.join(candidates)}; "
                            f"choose one with --{role.replace('_', '-')}-topic")
         if not candidates and required:
-            raise BagError(f"no {role} topic ({IMAGE_TYPE}) in bag {self.path}; topics: {self._listing()}")
+            hint = ""
+            if any(m == "sensor_msgs/msg/CompressedImage" for m in self.topics.values()):
+                hint = (" (sensor_msgs/CompressedImage is not supported: lossy compression changes the noise "
+                        "being measured; record the raw image topic)")
+            raise BagError(f"no {role} topic ({IMAGE_TYPE}) in bag {self.path}{hint}; topics: {self._listing()}")
         return candidates[0] if candidates else None
 
     def _listing(self) -> str:
