@@ -41,64 +41,83 @@ class PatchSelection:
         return f"{', '.join(parts) or 'none'} of {self.candidates} candidate patches rejected"
 
 
-def _grid(length: int, size: int, stride: int) -> np.ndarray:
-    n = (length - size) // stride + 1
-    offset = ((length - size) - (n - 1) * stride) // 2
-    return offset + stride * np.arange(n)
+@dataclass(frozen=True)
+class _Layout:
+    """Candidate grid: corners at (y0 + i*stride, x0 + j*stride); a patch spans ``cells`` x ``cells`` cells."""
+
+    y0: int
+    x0: int
+    stride: int
+    ny: int
+    nx: int
+
+    @property
+    def cells(self) -> int:
+        return 0 if not self.stride else self.size // self.stride
+
+    size: int = 0
+
+    def corners(self) -> list[tuple[int, int]]:
+        return [(self.y0 + i * self.stride, self.x0 + j * self.stride) for i in range(self.ny) for j in range(self.nx)]
+
+
+def _layout(height: int, width: int, size: int, k: int) -> _Layout:
+    """A centred grid of non-overlapping patches, half-overlapping (even sizes) when that gives fewer than k."""
+    if height < size or width < size:
+        return _Layout(0, 0, 0, 0, 0, size)
+    stride = size
+    if ((height - size) // size + 1) * ((width - size) // size + 1) < k and size % 2 == 0:
+        stride = size // 2
+    ny, nx = (height - size) // stride + 1, (width - size) // stride + 1
+    y0 = ((height - size) - (ny - 1) * stride) // 2
+    x0 = ((width - size) - (nx - 1) * stride) // 2
+    return _Layout(y0, x0, stride, ny, nx, size)
 
 
 def candidate_corners(height: int, width: int, size: int, k: int) -> list[tuple[int, int]]:
-    """A centred grid of non-overlapping patch positions (half-overlapping when that gives fewer than k)."""
-    if height < size or width < size:
-        return []
-    stride = size
-    if ((height - size) // size + 1) * ((width - size) // size + 1) < k:
-        stride = max(size // 2, 1)
-    return [(int(y), int(x)) for y in _grid(height, size, stride) for x in _grid(width, size, stride)]
+    """Top-left corners of the candidate patches (see :func:`_layout`)."""
+    return _layout(height, width, size, k).corners()
 
 
-class _BoxSums:
-    """Per-candidate sums of pixel statistics via integral images (O(image) for all candidates)."""
-
-    def __init__(self, image: np.ndarray, size: int) -> None:
-        self.size = size
-        img = np.ascontiguousarray(image, dtype=np.float32)
-        self.value = cv2.integral(img, sdepth=cv2.CV_64F)
-        self.low = cv2.integral((img <= _LOW).astype(np.uint8))
-        self.high = cv2.integral((img >= _HIGH).astype(np.uint8))
-        self.eq_x = cv2.integral((img[:, 1:] == img[:, :-1]).astype(np.uint8))
-        self.eq_y = cv2.integral((img[1:] == img[:-1]).astype(np.uint8))
-        # texture: gradients of the 4x area-downsampled image (noise averages out, structure stays)
-        h4, w4 = img.shape[0] // 4, img.shape[1] // 4
-        small = cv2.resize(img[: 4 * h4, : 4 * w4], (w4, h4), interpolation=cv2.INTER_AREA)
-        grad = np.zeros_like(small)
-        grad[:, 1:] += np.abs(np.diff(small, axis=1))
-        grad[1:] += np.abs(np.diff(small, axis=0))
-        self.grad = cv2.integral(grad, sdepth=cv2.CV_64F)
-
-    @staticmethod
-    def _sum(table: np.ndarray, y: int, x: int, h: int, w: int) -> float:
-        return float(table[y + h, x + w] - table[y, x + w] - table[y + h, x] + table[y, x])
-
-    def stats(self, y: int, x: int) -> tuple[float, float, float, float, float]:
-        """(mean, fraction at 0 DN, fraction at 255 DN, fraction of equal neighbours, texture)."""
-        s = self.size
-        n = float(s * s)
-        equal = (self._sum(self.eq_x, y, x, s, s - 1) + self._sum(self.eq_y, y, x, s - 1, s)) / (2.0 * s * (s - 1))
-        s4 = max(s // 4, 1)
-        texture = self._sum(self.grad, y // 4, x // 4, s4, s4) / (s4 * s4)
-        return (self._sum(self.value, y, x, s, s) / n, self._sum(self.low, y, x, s, s) / n,
-                self._sum(self.high, y, x, s, s) / n, equal, texture)
+def _patch_sums(a: np.ndarray, lay: _Layout, scale: int = 1) -> np.ndarray:
+    """(ny, nx) sums of ``a`` over every candidate patch (integral image; ``a`` downsampled by ``scale``)."""
+    table = cv2.integral(a) if a.dtype == np.uint8 else cv2.integral(a, sdepth=cv2.CV_64F)
+    ys = (lay.y0 + lay.stride * np.arange(lay.ny)) // scale
+    xs = (lay.x0 + lay.stride * np.arange(lay.nx)) // scale
+    y1, x1, d = ys[:, None], xs[None, :], lay.size // scale
+    return (table[y1 + d, x1 + d] - table[y1, x1 + d] - table[y1 + d, x1] + table[y1, x1]).astype(np.float64)
 
 
-def _reject_reason(mean: float, low: float, high: float, equal: float, cfg: MonitorConfig) -> str | None:
-    if mean < cfg.min_patch_mean_dn or low > cfg.max_clipped_fraction:
-        return "black"
-    if mean > cfg.max_patch_mean_dn or high > cfg.max_clipped_fraction:
-        return "saturated"
-    if equal > cfg.max_flat_fraction:
-        return "flat"
-    return None
+def _candidate_stats(image: np.ndarray, lay: _Layout) -> dict[str, np.ndarray]:
+    """Per candidate: mean, fractions at 0 / 255 DN, fraction of equal right/lower neighbours (pairs
+    leaving the patch count at their inner pixel) and texture (mean gradient of the image averaged
+    over f x f blocks, f = 4 when the grid allows: noise averages out, structure stays)."""
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    n = float(lay.size * lay.size)
+    equal = np.zeros(img.shape, dtype=np.uint8)
+    equal[:, :-1] += img[:, 1:] == img[:, :-1]
+    equal[:-1] += img[1:] == img[:-1]
+    f = next(d for d in (4, 2, 1) if lay.stride % d == 0 and lay.y0 % d == 0 and lay.x0 % d == 0)
+    h, w = img.shape[0] // f, img.shape[1] // f
+    small = cv2.resize(img[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
+    grad = np.zeros_like(small)
+    grad[:, :-1] += np.abs(np.diff(small, axis=1))
+    grad[:-1] += np.abs(np.diff(small, axis=0))
+    return {
+        "mean": _patch_sums(img, lay) / n,
+        "low": _patch_sums((img <= _LOW).view(np.uint8), lay) / n,
+        "high": _patch_sums((img >= _HIGH).view(np.uint8), lay) / n,
+        "equal": _patch_sums(equal, lay) / (2.0 * n),
+        "texture": _patch_sums(grad, lay, f) / (n / (f * f)),
+    }
+
+
+def _reject_reasons(st: dict[str, np.ndarray], cfg: MonitorConfig) -> np.ndarray:
+    """Per candidate: index into REJECT_REASONS, or -1 when usable."""
+    black = (st["mean"] < cfg.min_patch_mean_dn) | (st["low"] > cfg.max_clipped_fraction)
+    saturated = (st["mean"] > cfg.max_patch_mean_dn) | (st["high"] > cfg.max_clipped_fraction)
+    flat = st["equal"] > cfg.max_flat_fraction
+    return np.select([black, saturated, flat], [0, 1, 2], default=-1)
 
 
 def _spread(points: np.ndarray, k: int) -> list[int]:
@@ -115,22 +134,18 @@ def _spread(points: np.ndarray, k: int) -> list[int]:
 def select_patches(image: np.ndarray, size: int, cfg: MonitorConfig) -> PatchSelection:
     """Choose up to ``cfg.patches_per_frame`` usable patches of ``size`` pixels from a gray DN image."""
     k = cfg.patches_per_frame
-    corners = candidate_corners(image.shape[0], image.shape[1], size, k)
-    rejected = dict.fromkeys(REJECT_REASONS, 0)
-    usable: list[tuple[int, int]] = []
-    texture: list[float] = []
-    sums = _BoxSums(image, size) if corners else None
-    for y, x in corners:
-        mean, low, high, equal, tex = sums.stats(y, x)
-        reason = _reject_reason(mean, low, high, equal, cfg)
-        if reason:
-            rejected[reason] += 1
-        else:
-            usable.append((y, x))
-            texture.append(tex)
+    lay = _layout(image.shape[0], image.shape[1], size, k)
+    corners = lay.corners()
+    if not corners:
+        return PatchSelection(size=size, corners=[], candidates=0, rejected=dict.fromkeys(REJECT_REASONS, 0))
+    stats = _candidate_stats(image, lay)
+    reasons = _reject_reasons(stats, cfg).ravel()
+    rejected = {r: int(np.count_nonzero(reasons == i)) for i, r in enumerate(REJECT_REASONS)}
+    ok = np.flatnonzero(reasons < 0)
+    usable = [corners[i] for i in ok]
     if len(usable) > k:
-        order = np.argsort(texture, kind="stable")
-        keep = order[: max(k, int(np.ceil(cfg.smooth_fraction * len(usable))))]
+        texture = stats["texture"].ravel()[ok]
+        keep = np.argsort(texture, kind="stable")[: max(k, int(np.ceil(cfg.smooth_fraction * len(usable))))]
         pts = np.array([usable[i] for i in keep], dtype=float)
         usable = sorted(usable[keep[i]] for i in _spread(pts, k))
     return PatchSelection(size=size, corners=usable, candidates=len(corners), rejected=rejected)
