@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import threading
 import time
 from dataclasses import dataclass
@@ -310,6 +311,8 @@ def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = 
     context = rclpy.Context()
     rclpy.init(args=argv, context=context)
     node = None
+    stop = threading.Event()
+    previous = _catch_signals(stop)
     try:
         params = [Parameter(k, value=v) for k, v in overrides.items()]
         node = node_class()(parameter_overrides=params, context=context)
@@ -317,7 +320,7 @@ def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = 
         executor.add_node(node)
         end = None if duration_s is None else time.monotonic() + duration_s
         try:
-            while context.ok() and (end is None or time.monotonic() < end):
+            while context.ok() and not stop.is_set() and (end is None or time.monotonic() < end):
                 executor.spin_once(timeout_sec=0.1)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
@@ -327,10 +330,20 @@ def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = 
             Path(json_path).write_text(json.dumps(summary, indent=2))
         executor.shutdown()
     finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
     return 0
+
+
+def _catch_signals(stop: threading.Event) -> dict:
+    """SIGINT/SIGTERM (Ctrl-C, kill, systemd, docker stop) end the spin loop cleanly: summary written,
+    node destroyed, exit code 0. rclpy installs no handlers for own contexts. Returns the old handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
 
 
 _CLI_OVERRIDES = {
