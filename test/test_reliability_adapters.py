@@ -5,6 +5,10 @@ Messages are real rclpy messages and their rosbags-deserialised twins (what a ba
 """
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
@@ -223,3 +227,48 @@ def test_camera_info_disagreeing_with_the_image_size():
         camera_geometry(CameraInfo(width=640, height=480, roi=RegionOfInterest(x_offset=600, width=100, height=10)))
     with pytest.raises(AdapterError, match="not a CameraInfo message"):
         camera_geometry(diagnostics({}))
+
+
+# --- huge images ---------------------------------------------------------------------------------
+HUGE = r'''
+import json, re, sys
+from types import SimpleNamespace
+import numpy as np, torch
+torch.set_num_threads(1)
+from msg_adapters import image_to_gray_dn
+from noise_monitor.estimator import load
+from noise_monitor.monitor import Frame, Monitor, MonitorConfig
+from noise_monitor.physics import NoiseModel, load_profile
+
+def mem_mb(key):
+    return int(re.search(rf"{key}:\s+(\d+) kB", open("/proc/self/status").read()).group(1)) / 1024
+
+def image(h, w, rng):
+    data = np.empty((h, w), np.uint8)
+    ramp = (60 + 120 * np.arange(w) / w).astype(np.uint8)
+    for r in range(0, h, 256):
+        data[r:r + 256] = ramp + rng.integers(0, 3, size=(min(256, h - r), w), dtype=np.uint8)
+    return SimpleNamespace(height=h, width=w, step=w, encoding="mono8", is_bigendian=0, data=data.reshape(-1))
+
+meta = load_profile("icx285").metadata(gain_db=18.0, exposure_time_s=0.01, sensor_temperature_c=40.0)
+monitor = Monitor(MonitorConfig(), load("full_meta", device="cpu"), NoiseModel(), "cam", "hw")
+rng = np.random.default_rng(0)
+monitor.process(Frame(0, image_to_gray_dn(image(256, 256, rng)), meta))  # warm-up: tables, network
+msg = image(int(sys.argv[1]), int(sys.argv[1]), rng)
+before = mem_mb("VmRSS")
+res = monitor.process(Frame(1, image_to_gray_dn(msg), meta))
+print(json.dumps({"extra_mb": mem_mb("VmHWM") - before, "processed": res.processed, "level": res.level,
+                  "numbers": res.numeric()}))
+'''
+
+
+def test_huge_8k_image_is_evaluated_within_bounded_memory():
+    """An 8192 x 8192 mono8 frame (64 MB) through conversion and the monitor pipeline, in a fresh process:
+    evaluated with finite numbers; peak memory beyond the input stays below 24 bytes per pixel."""
+    size = 8192
+    run = subprocess.run([sys.executable, "-c", HUGE, str(size)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["processed"] and out["numbers"]["patches"] == 8.0
+    assert all(np.isfinite(v) for v in out["numbers"].values())
+    assert out["extra_mb"] < 24 * size * size / 2**20, out["extra_mb"]
