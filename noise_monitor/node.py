@@ -265,6 +265,11 @@ def _make_node_class():
                 self._last_publish_ns = now_ns
                 self.published += 1
 
+        @property
+        def temperature_c(self) -> float | None:
+            """The latest sensor temperature from the Temperature topic (None before the first)."""
+            return self._temperature_c
+
         def summary(self) -> dict[str, Any]:
             """Counters, alarm episodes and the last status (for --json)."""
             last = self.monitor.last_result

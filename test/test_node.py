@@ -283,3 +283,18 @@ def test_unusable_image_is_a_warning_with_the_reason(rig_factory):
     rig.pub_img.publish(image)
     report = rig.status_for(5 * 10**9)
     assert report.level == WARN and "image unusable: unsupported image encoding 'yuv422'" in report.message
+
+
+def test_temperature_topic_completes_the_metadata(rig_factory):
+    from sensor_msgs.msg import Temperature
+
+    rig = rig_factory("thermo", temperature_topic="/thermo/temperature")
+    pub = rig.cam.create_publisher(Temperature, "/thermo/temperature", 10)
+    assert rig.spin_until(lambda: pub.get_subscription_count() > 0, TIMEOUT_S)
+    no_temp = {k: v for k, v in DYNAMIC.items() if k != "sensor_temperature_c"}
+    report, _ = rig.step(0, metadata=no_temp)
+    assert report.level == WARN and "sensor_temperature_c" in report.message
+    pub.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))
+    assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
+    report, _ = rig.step(1, metadata=no_temp)
+    assert report.level == OK, report.message
