@@ -15,7 +15,8 @@ from .results import FrameRow  # noqa: E402
 
 SERIES = (("sigma_pn", "PN (photon shot)", "tab:blue"), ("sigma_dcsn", "DCSN (dark current shot)", "tab:orange"),
           ("sigma_rn", "RN (readout)", "tab:green"), ("sigma_total", "total (estimated)", "black"),
-          ("sigma_model", "model total (stated metadata)", "tab:gray"))
+          ("sigma_model", "model total (stated metadata)", "tab:gray"),
+          ("sigma_image", "noise measured in the image", "tab:purple"))
 
 
 def _series(rows: list[FrameRow], key: str) -> tuple[np.ndarray, np.ndarray]:
@@ -38,7 +39,7 @@ def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path
     for key, label, color in SERIES:
         t, v = _series(rows, key)
         if t.size:
-            style = "--" if key == "sigma_model" else "-"
+            style = {"sigma_model": "--", "sigma_image": ":"}.get(key, "-")
             ax_s.plot(t, v, style, color=color, lw=1.3, label=label, marker="." if t.size < 60 else None)
     t, v = _series(rows, "xi")
     if t.size:

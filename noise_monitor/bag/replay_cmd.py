@@ -46,7 +46,7 @@ def print_summary(s: dict[str, Any]) -> None:
         print(f"  skipped {n:4d} x {reason}")
     print(f"\n  {'source':12s} {'mean':>6s} {'p5':>6s} {'p95':>6s}   [DN]")
     for key, label in (("sigma_pn", "PN"), ("sigma_dcsn", "DCSN"), ("sigma_rn", "RN"), ("sigma_total", "total"),
-                       ("sigma_model", "model"), ("xi", "xi")):
+                       ("sigma_model", "model"), ("sigma_image", "image"), ("xi", "xi")):
         st = s[key]
         print(f"  {label:12s} {_fmt(st['mean'])} {_fmt(st['p5'])} {_fmt(st['p95'])}")
     print(f"\n  alarm episodes: {len(s['alarms'])}")

@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 #: Per-source summaries of the JSON contract (and a few more), from the per-frame numbers.
-SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigma_model", "xi_filtered")
+SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigma_model", "sigma_image",
+                "xi_filtered")
 #: Leading CSV columns; the numeric columns of processed frames follow in a fixed order.
 BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_state", "alarm", "skip_reason")
 #: Stated operating conditions per frame (from the frame's metadata), CSV columns after the base ones.
