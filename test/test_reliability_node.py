@@ -363,3 +363,59 @@ def test_node_process_shuts_down_cleanly_on_signal(tmp_path, sig):
     assert "Traceback" not in err and "Error" not in err, err
     data = json.loads(summary.read_text())
     assert data["frames_received"] == 0 and data["last_level"] is None
+
+
+FAILING_EFFECTS = """
+import numpy as np
+from noise_monitor.physics.effects import Effect
+
+
+class NodeRaises(Effect):
+    name = "node_raises"
+    distribution = "gaussian"
+
+    def sigma_dn(self, signal_dn, cond):
+        raise RuntimeError("lookup table missing")
+
+
+class NodeNan(Effect):
+    name = "node_nan"
+    distribution = "gaussian"
+
+    def sigma_dn(self, signal_dn, cond):
+        return np.full(np.shape(signal_dn), np.nan)
+"""
+
+
+@pytest.mark.parametrize("effect,reason", [
+    ("node_raises", "evaluation failed: effect 'node_raises' failed to evaluate: lookup table missing"),
+    ("node_nan", "evaluation failed: effect(s) node_nan returned a NaN, infinite or negative variance"),
+])
+def test_failing_plugin_effect_in_the_profile_is_a_warning_per_frame(rig_factory, tmp_path, monkeypatch, effect,
+                                                                    reason):
+    from noise_monitor.physics import load_plugin_file
+    from noise_monitor.physics.effects import registry
+
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # forget the plug-ins afterwards
+    (tmp_path / "effects.py").write_text(FAILING_EFFECTS)
+    load_plugin_file(tmp_path / "effects.py")
+    profile = tmp_path / "broken.yaml"
+    profile.write_text(PROFILE.to_yaml().replace("name: ICX285", "name: broken") + f"effects: [{effect}]\n")
+    rig = rig_factory(f"plugin_{effect}", profile=str(profile))
+    for i in range(2):
+        report = rig.status_for(rig.publish(i))
+        assert report.level == WARN and reason in report.message, report.message
+    assert rig.node.monitor.counters["frames_skipped"] == 2
+
+
+def test_profile_naming_an_unknown_effect_stops_the_node_at_start(estimator, tmp_path):
+    profile = tmp_path / "typo.yaml"
+    profile.write_text(PROFILE.to_yaml() + "effects: [prnuu]\n")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(ValueError, match="unknown effect 'prnuu'; known: "):
+            node_class()(node_name="typo", context=context, estimator=estimator,
+                         parameter_overrides=[Parameter("profile", value=str(profile))])
+    finally:
+        context.try_shutdown()
