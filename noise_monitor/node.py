@@ -81,6 +81,21 @@ def _coerce(name: str, value: Any, default: Any) -> Any:
     return value
 
 
+def _check_node_parameters(p: dict[str, Any]) -> None:
+    """Range checks of the node-only parameters (the monitor's are checked by MonitorConfig)."""
+    if p["color"] not in ("luma", "green"):
+        raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
+    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "threads", "bit_depth"):
+        if p[name] < 0:
+            raise ValueError(f"parameter {name} must be >= 0, got {p[name]}")
+    if p["bit_depth"] > 16:
+        raise ValueError(f"parameter bit_depth must be in 0..16, got {p['bit_depth']}")
+    if p["diagnostics_rate_hz"] <= 0:
+        raise ValueError("parameter diagnostics_rate_hz must be > 0")
+    if not p["image_topic"]:
+        raise ValueError("parameter image_topic must not be empty")
+
+
 def _set_inference_threads(threads: int) -> None:
     """torch intra-op threads: ``threads``, or all cores but one when 0."""
     import os
@@ -115,11 +130,10 @@ def _make_node_class():
                 desc = ParameterDescriptor(description=description, dynamic_typing=True)
                 p[name] = _coerce(name, self.declare_parameter(name, default, desc).value, default)
             self.params = p
+            _check_node_parameters(p)
             config = MonitorConfig.from_mapping({k: p[k] for k in MonitorConfig.field_names()})
             self.profile: CameraProfile | None = load_profile(p["profile"]) if p["profile"] else None
             model = NoiseModel(extra=self.profile.effects if self.profile else None)
-            if p["threads"] < 0:
-                raise ValueError(f"parameter threads must be >= 0, got {p['threads']}")
             _set_inference_threads(p["threads"])
             if estimator is None:
                 from noise_monitor.estimator import load
@@ -129,13 +143,6 @@ def _make_node_class():
             hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
             self.monitor = Monitor(config, estimator, model, p["camera_name"], hardware_id)
             self.bit_depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
-            if p["color"] not in ("luma", "green"):
-                raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
-            for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s"):
-                if p[name] < 0:
-                    raise ValueError(f"parameter {name} must be >= 0, got {p[name]}")
-            if p["diagnostics_rate_hz"] <= 0:
-                raise ValueError("parameter diagnostics_rate_hz must be > 0")
             wait = p["sync_wait_s"] if p["metadata_topic"] else 0.0
             self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
             self.gaps = GapCounter()
