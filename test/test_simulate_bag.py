@@ -95,6 +95,14 @@ def test_same_seed_same_bag(tmp_path):
             assert np.array_equal(fa.image_dn, fb.image_dn)
 
 
+def test_simulate_bag_help_lists_every_scenario(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate-bag", "--help"])
+    assert exc.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert all(name in text for name in SCENARIOS) and "40%-70% of the campaign" in text
+
+
 def test_simulate_bag_command(tmp_path, capsys):
     out = tmp_path / "cmd.mcap"
     summary = tmp_path / "s.json"

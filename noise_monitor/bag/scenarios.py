@@ -46,6 +46,9 @@ class Scenario:
     step: Callable[[float], Step]
 
 
+_SPAN = f"{EPISODE[0]:.0%}-{EPISODE[1]:.0%}"
+
+
 def _in_episode(u: float) -> bool:
     return EPISODE[0] <= u < EPISODE[1]
 
@@ -85,11 +88,11 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
              lambda u: Step(exposure_time_s=_geom(0.001, 0.2, u))),
     Scenario("temperature_ramp", "sensor temperature 10 -> 70 degC",
              lambda u: Step(sensor_temperature_c=_lerp(10.0, 70.0, u))),
-    Scenario("image_noise", f"paper's xi<0 case: +N(0, 5 DN) image noise during u in {EPISODE}",
+    Scenario("image_noise", f"paper's xi<0 case: +N(0, 5 DN) image noise during {_SPAN} of the campaign",
              lambda u: Step(image_noise_dn=5.0 if _in_episode(u) else 0.0)),
-    Scenario("double_thermal_noise", f"paper's xi>0 case: thermal white noise stated x2 during u in {EPISODE}",
+    Scenario("double_thermal_noise", f"paper's xi>0 case: thermal white noise stated x2 during {_SPAN} of the campaign",
              lambda u: Step(stated_factors={"thermal_white_noise_v_per_sqrt_hz": 2.0} if _in_episode(u) else {})),
-    Scenario("double_temperature", f"paper's supplementary case: temperature stated x2 during u in {EPISODE}",
+    Scenario("double_temperature", f"paper's supplementary case: temperature stated x2 during {_SPAN} of the campaign",
              lambda u: Step(stated_factors={"sensor_temperature_c": 2.0} if _in_episode(u) else {})),
     Scenario("lab", "static chart, 16 blocks of constant gain/exposure/temperature", _lab),
     Scenario("field", "dusk drive: gain, exposure and temperature rise, +N(0, 5 DN) image noise episode", _field),

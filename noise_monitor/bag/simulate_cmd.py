@@ -17,17 +17,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", required=True,
                         help="camera profile YAML or bundled name (icx285, ev76c661, generic)")
     parser.add_argument("--scenario", required=True, choices=sorted(SCENARIOS), metavar="NAME",
-                        help="; ".join(f"{k}: {v.description}" for k, v in SCENARIOS.items()))
+                        help="; ".join(f"{k}: {v.description}" for k, v in SCENARIOS.items()).replace("%", "%%"))
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                         help="switch on a registered effect (repeatable): NAME, NAME=VALUE or NAME:param=v,param=v")
     parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE", help="load effects from FILE")
-    parser.add_argument("--frames", type=int, default=60)
-    parser.add_argument("--width", type=int, default=320)
-    parser.add_argument("--height", type=int, default=256)
+    parser.add_argument("--frames", type=int, default=60, help="number of images (default 60)")
+    parser.add_argument("--width", type=int, default=320, help="image width in pixels (default 320)")
+    parser.add_argument("--height", type=int, default=256, help="image height in pixels (default 256)")
     parser.add_argument("--fps", type=float, default=5.0, help="frame rate of the stamps (Hz)")
     parser.add_argument("--hold", type=float, default=1.0, metavar="SECONDS",
                         help="metadata (gain, exposure, temperature) update period; 0 = every frame")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="random seed (scene, noise); same seed, same bag")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     parser.add_argument("--namespace", default="/camera", help="topic namespace (default /camera)")
     parser.add_argument("--json", metavar="PATH", help="write a summary JSON (bag, truth file, episodes)")
