@@ -231,3 +231,28 @@ def test_fast_patch_prediction_equals_model_predict(rng, mode, extra):
     assert set(slow) == set(fast)
     for k in slow:
         np.testing.assert_allclose(fast[k], slow[k], rtol=1e-9, atol=1e-12)
+
+
+def test_estimator_nan_and_failing_model_effect_are_warnings(rng):
+    from noise_monitor.physics import Effect
+
+    class NanEstimator(PhysicsSplitEstimator):
+        def predict(self, patches_dn, metas):
+            out = super().predict(patches_dn, metas)
+            out["rn"] = out["rn"] * np.nan
+            return out
+
+    frame = next(frames(rng, 1))[0]
+    res = Monitor(MonitorConfig(), NanEstimator(), MODEL, "cam", "hw").process(frame)
+    assert res.level == WARN and "returned NaN/inf for rn" in res.message
+
+    class Broken(Effect):
+        name = "broken_for_test"
+        distribution = "gaussian"
+
+        def sigma_dn(self, signal, cond):
+            raise RuntimeError("sensor table missing")
+
+    mon = Monitor(MonitorConfig(), PhysicsSplitEstimator(), NoiseModel(extra=[Broken()]), "cam", "hw")
+    res = mon.process(frame)
+    assert res.level == WARN and "physics model failed" in res.message and "broken_for_test" in res.message

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from msg_adapters.diagnostics import ERROR, OK, STALE, WARN, StatusReport
-from noise_monitor.physics import CameraMetadata, NoiseModel
+from noise_monitor.physics import CameraMetadata, EffectError, NoiseModel
 
 from .alarm import EmaFilter, XiAlarm
 from .config import MonitorConfig
@@ -196,8 +196,14 @@ class Monitor:
         patches = selection.extract(frame.image_dn)
         est = self.estimator.predict(patches, meta)
         per_patch = {k: np.asarray(est[k], dtype=np.float64).reshape(-1) for k in ESTIMATOR_KEYS}
+        bad = [k for k, v in per_patch.items() if not np.all(np.isfinite(v))]
+        if bad:
+            return self._skip(frame, f"estimator {self.estimator.name} returned NaN/inf for {', '.join(bad)}")
         smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in patches])
-        model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
+        try:
+            model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
+        except EffectError as exc:  # e.g. a plug-in effect of the profile failing for this metadata
+            return self._skip(frame, f"physics model failed: {exc}")
         sigma = {k: float(np.median(v)) for k, v in per_patch.items()}
         model = {k: float(np.median(v)) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
