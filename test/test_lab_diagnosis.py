@@ -21,7 +21,7 @@ HIDDEN = {
     "prnu": "prnu=3",
     "dsnu": "dsnu=0.05",
     "column_offsets": "column_offsets=3",
-    "quantization": "quantization=5",
+    "quantization": "quantization=4",
     "hot_pixels": "hot_pixels:fraction=0.02,dark_multiplier=0.3",
     "extra_read_noise": "extra_read_noise=40",
     "dark_current_law": "dark_current_law:scale=3,rate_per_k=0.03",

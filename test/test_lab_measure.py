@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from noise_monitor.lab.compare import Comparison, baseline_effects, outlier_expectation
-from noise_monitor.lab.quantization import quantized_temporal_variance
+from noise_monitor.lab.quantization import quantized_variance
 from noise_monitor.lab.measure import measure_frames
 from noise_monitor.lab.synthetic import simulate_frames
 from noise_monitor.physics import NoiseModel, load_profile
@@ -75,11 +75,15 @@ def test_quantization_step_from_the_histogram() -> None:
     assert meas.quant_step_dn == 4.0  # 255/63 = 4.05 DN on the 8-bit grid: gaps of 4 (and some 5)
 
 
-def test_quantized_temporal_variance_limits() -> None:
-    added, spread = quantized_temporal_variance(np.array([0.01, 5.0]), 1.0)
+def test_quantized_variance_limits() -> None:
+    added, fixed, spread = quantized_variance(np.array([0.01, 5.0]), 1.0)
     assert 0.01**2 + added[0] < 0.1 / 12.0  # noise far below the step is (mostly) erased
     assert spread[0] > added[0]  # ... except where the level sits on a decision threshold
     assert added[1] == pytest.approx(1.0 / 12.0) and spread[1] < 1e-9  # dithered: LSB^2/12
+    assert fixed[0] == pytest.approx(1.0 / 12.0, rel=0.1)  # undithered, phases spread: a fixed bias pattern
+    assert fixed[1] < 1e-6
+    added, fixed, _ = quantized_variance(np.array([0.01]), 1.0, level_dn=np.array([0.2]), span_dn=np.array([0.0]))
+    assert added[0] < 1e-3 and fixed[0] < 1e-3  # one flat region mid-step: nothing varies
 
 
 @dataclass

@@ -20,7 +20,7 @@ from ..physics import CameraMetadata, CameraProfile, Effect, EffectError, NoiseM
 from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
 from ..physics.sensor import Conditions
-from .quantization import quantized_temporal_variance
+from .quantization import quantized_variance
 from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMeasurement
 
 MEASURED = ("temporal", "fixed", "column", "row", "outlier")
@@ -76,7 +76,7 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
 
     A fixed mixture (hot pixels) goes to "outlier" where its offset stands out of the block's noise
     ``sigma`` (robust, DN) and to the white fixed-pattern core elsewhere; its offsets are clipped.
-    Quantization acts on the temporal noise at each block's level ``v`` over its level ``span`` (DN).
+    Quantization acts on the temporal noise at each block's level ``v`` over its range of levels ``span`` (DN).
     """
     cond = _conditions(effects, meta)
     out = {c: np.zeros(v.shape) for c in MEASURED}
@@ -91,9 +91,10 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
             out[comp] = out[comp] + var * (1.0 - p)
         else:
             out[comp] = out[comp] + np.asarray(e.variance_dn2(v, cond), dtype=float)
-    levels = None if span is None else span + 2.0 * np.sqrt(np.maximum(out["fixed"], 0.0))
-    added, spread = quantization_variance(effects, cond, out["temporal"], v if span is not None else None, levels)
+    added, fixed, spread = quantization_variance(effects, cond, out["temporal"], v if span is not None else None,
+                                                 span)
     out["temporal"] = out["temporal"] + added
+    out["fixed"] = out["fixed"] + fixed
     out[QUANT_SPREAD] = spread
     return out
 
@@ -104,13 +105,15 @@ QUANT_SPREAD = "quantization_spread"
 
 def quantization_variance(effects: Sequence[Effect], cond: Conditions, temporal_var: np.ndarray,
                           level_dn: np.ndarray | None = None,
-                          span_dn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(added temporal variance, the model's spread of it) in DN^2 of the coarsest quantization step
-    acting on temporal noise of variance ``temporal_var`` (see :mod:`.quantization`)."""
+                          span_dn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(added temporal variance, added fixed-pattern variance, the model's spread of the temporal part)
+    in DN^2 of the coarsest quantization step acting on temporal noise of variance ``temporal_var``
+    (see :mod:`.quantization`)."""
     lsb = max((e.lsb_dn(cond) for e in effects if e.distribution == "quantization"), default=0.0)
     if lsb <= 0.0:
-        return np.zeros_like(temporal_var), np.zeros_like(temporal_var)
-    return quantized_temporal_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb, level_dn, span_dn)
+        zero = np.zeros_like(temporal_var)
+        return zero, zero, zero
+    return quantized_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb, level_dn, span_dn)
 
 
 def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray,
@@ -145,8 +148,8 @@ def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) 
     clip_model = NoiseModel([e for e in effects if e.distribution != "quantization"])
     pred = clip_model.predict(v, meta)
     temporal = sum(np.asarray(pred[e.name]) ** 2 for e in clip_model.noise_effects if e.temporal)
-    quant, _ = quantization_variance(effects, clip_model.conditions(meta), temporal)
-    return np.sqrt(np.maximum(np.asarray(pred["total"]) ** 2 + quant, 0.0))
+    added, fixed, _ = quantization_variance(effects, clip_model.conditions(meta), temporal)
+    return np.sqrt(np.maximum(np.asarray(pred["total"]) ** 2 + added + fixed, 0.0))
 
 
 class _SegmentBase:
@@ -169,7 +172,12 @@ class _SegmentBase:
         self.average = self.average[:, :start]
         rep = np.concatenate(picks)
         self.weights = np.concatenate(weights)
-        self.v, self.sigma, self.span = seg.intensity_dn[rep], seg.robust_sigma_dn[rep], seg.span_dn[rep]
+        self.v, self.sigma = seg.intensity_dn[rep], seg.robust_sigma_dn[rep]
+        # range of clean levels in a block: its gradient plus the measured spread beyond temporal noise
+        spread = np.zeros(rep.size)
+        if "temporal" in seg.values:
+            spread = np.sqrt(np.maximum(self.sigma**2 - seg.values["temporal"][rep] / seg.n_frames, 0.0))
+        self.span = seg.span_dn[rep] + 2.0 * spread
         self.clip_aware: dict[str, np.ndarray] = {}
         self.unclipped: dict[str, np.ndarray] = {}
         # per-cell observables; line offsets are pooled per segment (one observable each); the sparse
@@ -236,10 +244,10 @@ class Comparison:
                                          sb.sigma)
             for e in analytic:
                 comps[component_of(e)] = comps[component_of(e)] + np.asarray(pred[e.name], dtype=float) ** 2
-            levels = sb.span + 2.0 * np.sqrt(np.maximum(comps["fixed"], 0.0))
-            added, comps[QUANT_SPREAD] = quantization_variance(self.effects, clip_model.conditions(seg.meta),
-                                                               comps["temporal"], sb.v, levels)
+            added, fixed, comps[QUANT_SPREAD] = quantization_variance(
+                self.effects, clip_model.conditions(seg.meta), comps["temporal"], sb.v, sb.span)
             comps["temporal"] = comps["temporal"] + added
+            comps["fixed"] = comps["fixed"] + fixed
             sb.clip_aware = comps
             sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span)
             self.segments.append(sb)

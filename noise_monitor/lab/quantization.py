@@ -21,8 +21,9 @@ _STEP = 1.0 / _PHASES.size
 
 
 @lru_cache(maxsize=1)
-def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per (ratio, phase), LSB units: E[Q]; the added variance Var[Q] - r^2; its cumulative over 3 periods."""
+def _tables() -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Per (ratio, phase), LSB units: E[Q]; the added variance Var[Q] - r^2; and cumulatives over 3
+    periods of that, of the bias b = E[Q] - phase and of b^2."""
     mean = np.empty((_RATIOS.size, _PHASES.size))
     added = np.empty_like(mean)
     for i, r in enumerate(_RATIOS):
@@ -30,16 +31,20 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         p = ndtr((k + 0.5 - _PHASES) / r) - ndtr((k - 0.5 - _PHASES) / r)
         mean[i] = np.sum(k * p, axis=0)
         added[i] = np.sum(k * k * p, axis=0) - mean[i] ** 2 - r * r
-    cum = np.concatenate([np.zeros((_RATIOS.size, 1)), np.cumsum(np.tile(added, 3), axis=1) * _STEP], axis=1)
+    bias = mean - _PHASES
+    cum = {name: np.concatenate([np.zeros((_RATIOS.size, 1)), np.cumsum(np.tile(a, 3), axis=1) * _STEP], axis=1)
+           for name, a in (("added", added), ("bias", bias), ("bias2", bias**2))}
     return mean, added, cum
 
 
-def quantized_temporal_variance(sigma_dn: np.ndarray, lsb_dn: float, level_dn: np.ndarray | None = None,
-                                span_dn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(temporal variance added by the quantizer, the model's spread of it) in DN^2.
+def quantized_variance(sigma_dn: np.ndarray, lsb_dn: float, level_dn: np.ndarray | None = None,
+                       span_dn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(temporal variance added by the quantizer, fixed-pattern variance it adds, the model's spread of
+    the temporal part), all in DN^2.
 
     ``level_dn``: measured mean output of each region (then the region's own phase is used, spread 0);
-    ``span_dn``: range of levels inside each region (gradient, fixed-pattern noise), averaged over.
+    ``span_dn``: range of levels inside each region (gradient, fixed-pattern noise), averaged over; the
+    quantizer's bias E[Q] - level varies over that range and shows as fixed-pattern noise.
     """
     mean, added, cum = _tables()
     r = np.asarray(sigma_dn, dtype=float) / lsb_dn
@@ -48,7 +53,8 @@ def quantized_temporal_variance(sigma_dn: np.ndarray, lsb_dn: float, level_dn: n
     i0 = i1 - 1
     w = np.clip((logr - np.log(_RATIOS[i0])) / (np.log(_RATIOS[i1]) - np.log(_RATIOS[i0])), 0.0, 1.0)
     if level_dn is None:
-        out = (1.0 - w) * added[i0].mean(axis=1) + w * added[i1].mean(axis=1)
+        phase = np.zeros_like(r)
+        half = np.full_like(r, 0.5)
         spread = (1.0 - w) * added[i0].std(axis=1) + w * added[i1].std(axis=1)
     else:
         i = np.where(w < 0.5, i0, i1)
@@ -61,14 +67,18 @@ def quantized_temporal_variance(sigma_dn: np.ndarray, lsb_dn: float, level_dn: n
         m0, m1 = mean[i, j - 1], mean[i, j]
         phase = _PHASES[j - 1] + _STEP * np.clip((t - m0) / np.maximum(m1 - m0, 1e-12), 0.0, 1.0)
         half = np.clip(0.5 * np.asarray(span_dn if span_dn is not None else 0.0) / lsb_dn, 0.5 * _STEP, 0.5)
+        spread = np.zeros_like(r)
 
-        def window(row: np.ndarray) -> np.ndarray:
-            return (_cumulative(cum, row, phase + half) - _cumulative(cum, row, phase - half)) / (2.0 * half)
+    def window(name: str) -> np.ndarray:
+        def one(row: np.ndarray) -> np.ndarray:
+            return (_cumulative(cum[name], row, phase + half) - _cumulative(cum[name], row, phase - half)) / (2 * half)
+        return (1.0 - w) * one(i0) + w * one(i1)
 
-        out = (1.0 - w) * window(i0) + w * window(i1)
-        spread = np.zeros_like(out)
+    temporal = window("added")
+    fixed = np.maximum(window("bias2") - window("bias") ** 2, 0.0)
     dithered = r >= _RATIOS[-1]
-    return lsb_dn**2 * np.where(dithered, 1.0 / 12.0, out), lsb_dn**2 * np.where(dithered, 0.0, spread)
+    return (lsb_dn**2 * np.where(dithered, 1.0 / 12.0, temporal), lsb_dn**2 * np.where(dithered, 0.0, fixed),
+            lsb_dn**2 * np.where(dithered, 0.0, spread))
 
 
 def _cumulative(cum: np.ndarray, i: np.ndarray, phase: np.ndarray) -> np.ndarray:
