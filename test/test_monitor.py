@@ -255,4 +255,4 @@ def test_estimator_nan_and_failing_model_effect_are_warnings(rng):
 
     mon = Monitor(MonitorConfig(), PhysicsSplitEstimator(), NoiseModel(extra=[Broken()]), "cam", "hw")
     res = mon.process(frame)
-    assert res.level == WARN and "physics model failed" in res.message and "broken_for_test" in res.message
+    assert res.level == WARN and "evaluation failed" in res.message and "broken_for_test" in res.message

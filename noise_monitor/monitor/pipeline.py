@@ -203,7 +203,7 @@ class Monitor:
         try:
             model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
         except EffectError as exc:  # e.g. a plug-in effect of the profile failing for this metadata
-            return self._skip(frame, f"physics model failed: {exc}")
+            return self._skip(frame, f"evaluation failed: {exc}")
         sigma = {k: float(np.median(v)) for k, v in per_patch.items()}
         model = {k: float(np.median(v)) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
