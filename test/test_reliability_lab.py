@@ -15,6 +15,7 @@ import pytest
 
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
+from noise_monitor.lab.analyze import analyze
 from noise_monitor.physics import EffectError, NoiseModel, load_plugin_file, load_profile
 from noise_monitor.physics.effects import registry
 
@@ -113,15 +114,19 @@ def test_failing_plugin_effect_in_the_model_is_named(plugins, file, effect):
         model.simulate(np.full((16, 16), 150.0, np.float32), META, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize("file,effect,add", [("raises.py", "rel_raises", False), ("nan.py", "rel_nan", False),
-                                             ("bad_modifier.py", "rel_modifier", True)])
-def test_analyze_with_a_failing_plugin_exits_2_naming_the_effect(capsys, tmp_path, bag, plugins, file, effect, add):
-    extra = ["--add-effect", effect] if add else []
-    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--effect-plugin", plugins[file], *extra,
+def test_analyze_cli_with_a_raising_plugin_exits_2_naming_the_effect(capsys, tmp_path, bag, plugins):
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--effect-plugin", plugins["raises.py"],
                                "--json", tmp_path / "s.json")
-    assert code == 2
-    assert re.search(MESSAGES[effect], one_line(err))
-    assert not (tmp_path / "s.json").exists()  # no partial results with NaN in them
+    assert code == 2 and re.search(MESSAGES["rel_raises"], one_line(err))
+    assert not (tmp_path / "s.json").exists()  # no partial results
+
+
+@pytest.mark.parametrize("file,effect,add", [("nan.py", "rel_nan", False), ("bad_modifier.py", "rel_modifier", True)])
+def test_analyze_with_a_failing_candidate_or_added_effect_names_it(bag, plugins, file, effect, add):
+    """As a diagnosis candidate (NaN would otherwise be listed with a NaN rms error), also with --add-effect
+    (as the CLI runs it: plug-ins are always candidates too)."""
+    with pytest.raises(EffectError, match=MESSAGES[effect]):
+        analyze(bag, "icx285", plugins=[plugins[file]], candidates=[effect], add_effects=[effect] if add else ())
 
 
 @pytest.mark.parametrize("file,match", [
