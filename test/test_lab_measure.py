@@ -82,8 +82,8 @@ def test_quantized_variance_limits() -> None:
     assert added[1] == pytest.approx(1.0 / 12.0) and spread[1] < 1e-9  # dithered: LSB^2/12
     assert fixed[0] == pytest.approx(1.0 / 12.0, rel=0.1)  # undithered, phases spread: a fixed bias pattern
     assert fixed[1] < 1e-6
-    added, fixed, _ = quantized_variance(np.array([0.01]), 1.0, level_dn=np.array([0.2]), span_dn=np.array([0.0]))
-    assert added[0] < 1e-3 and fixed[0] < 1e-3  # one flat region mid-step: nothing varies
+    added, fixed, _ = quantized_variance(np.array([0.01]), 1.0, level_dn=np.array([3.0]), span_dn=np.array([0.0]))
+    assert added[0] < 1e-3 and fixed[0] < 1e-3  # one flat region on an output level: nothing varies
 
 
 @dataclass

@@ -113,7 +113,17 @@ def quantization_variance(effects: Sequence[Effect], cond: Conditions, temporal_
     if lsb <= 0.0:
         zero = np.zeros_like(temporal_var)
         return zero, zero, zero
-    return quantized_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb, level_dn, span_dn)
+    # fits of fixed-pattern candidates leave the temporal noise unchanged: reuse the last results
+    key = (lsb, temporal_var.tobytes(), None if level_dn is None else level_dn.tobytes(),
+           None if span_dn is None else np.asarray(span_dn).tobytes())
+    if key not in _QUANT_CACHE:
+        if len(_QUANT_CACHE) > 1024:
+            _QUANT_CACHE.clear()
+        _QUANT_CACHE[key] = quantized_variance(np.sqrt(np.maximum(temporal_var, 0.0)), lsb, level_dn, span_dn)
+    return _QUANT_CACHE[key]
+
+
+_QUANT_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
 def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray,
