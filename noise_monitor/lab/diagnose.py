@@ -4,7 +4,8 @@ Each candidate's fittable parameters are fitted by bounded least squares on the 
 of all observables (cell variances per component, outlier-pixel counts, quantization step); integer
 parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - k ln N``; explained
 fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
-chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction.
+chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction and
+a minimum relative drop of the rms error (DN).
 """
 from __future__ import annotations
 
@@ -25,6 +26,9 @@ from .compare import Comparison, rms_error
 SIGNIFICANCE_P = 1e-6
 #: ... and the fraction of the chi-square it must explain
 MIN_EXPLAINED_FRACTION = 0.1
+#: ... and the relative drop of rms_error_dn it must bring (statistically significant but tiny
+#: improvements are what residual scene texture leaking into the flat-region statistics produces)
+MIN_RMS_REDUCTION = 0.2
 MAX_GRID = 32
 #: best points of the coarse parameter scan refined by least squares
 N_STARTS = 3
@@ -200,6 +204,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
     """Fit every candidate, rank by BIC gain (best first) and test significance."""
     r0 = comp.residuals()
     chi0 = float(r0 @ r0)
+    rms0 = rms_error(comp.cell_table())
     n = r0.size
     reg = available()
     out = []
@@ -216,6 +221,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
         p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
         explained = drop / chi0 if chi0 > 0 else 0.0
         eff = res.effects[0]
+        rms1 = rms_error(comp.cell_table(extra=[eff]))
         out.append(Candidate(
             effect=name,
             params=res.values[name],
@@ -224,9 +230,10 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             explained_fraction=explained,
             delta_bic=drop - k * math.log(n),
             p_value=p,
-            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION),
+            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION
+                             and rms1 <= (1.0 - MIN_RMS_REDUCTION) * rms0),
             reading=eff.reading(),
-            rms_error_after_dn=rms_error(comp.cell_table(extra=[eff])),
+            rms_error_after_dn=rms1,
             instance=eff,
         ))
         if progress is not None:
