@@ -12,7 +12,7 @@ from tqdm import tqdm
 from ..physics import CameraProfile, Effect, NoiseModel, load_plugin_file, load_profile
 from ..physics.effects import effect_class
 from ..physics.metadata import profile_from_mapping
-from .compare import Comparison, baseline_effects, by_condition, rms_error
+from .compare import Comparison, baseline_effects, by_condition, region_table, rms_error
 from .diagnose import EffectSpec, candidate_names, diagnose, fit
 from .measure import Measurements, SegmentTolerance, measure_frames
 
@@ -85,6 +85,8 @@ def analyze(
     ``rms_error_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly).
     """
     t0 = time.perf_counter()
+    if write_profile and not add_effects:
+        raise ValueError("--write-profile needs at least one --add-effect")
     plugin_names = [n for f in plugins for n in load_plugin_file(f)]
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
     specs = [parse_add_effect(a) for a in add_effects]
@@ -105,7 +107,7 @@ def analyze(
         "model_effects": [e.name for e in base],
         "measurement": meas.summary(),
         "rms_error_dn": rms_error(rows),
-        "by_condition": by_condition(rows),
+        "by_condition": {**by_condition(rows), "region": region_table(comp)},
         "candidates": [c.as_dict() for c in cands],
         "cells": _strip(rows),
     }
@@ -114,7 +116,8 @@ def analyze(
         res = fit(comp, specs)
         after_effects = comp.replaced(res.effects)
         after_model = NoiseModel(after_effects)
-        rows_after = Comparison(meas, after_model).cell_table()
+        comp_after = Comparison(meas, after_model)
+        rows_after = comp_after.cell_table()
         out.update({
             "added_effects": [
                 {"effect": e.name, "params": dict(e.values), "fitted": res.values[e.name],
@@ -123,13 +126,11 @@ def analyze(
             ],
             "rms_error_before_dn": out["rms_error_dn"],
             "rms_error_after_dn": rms_error(rows_after),
-            "by_condition_after": by_condition(rows_after),
+            "by_condition_after": {**by_condition(rows_after), "region": region_table(comp_after)},
             "cells_after": _strip(rows_after),
         })
         if write_profile:
             out["profile_written"] = str(_write_profile(write_profile, prof, res.effects, meas))
-    elif write_profile:
-        raise ValueError("--write-profile needs at least one --add-effect")
     out["analysis_time_s"] = round(time.perf_counter() - t0, 3)
     if report_dir is not None:
         from .report import write_report

@@ -181,6 +181,7 @@ class _SegmentBase:
             start += pick.size
         self.average = self.average[:, :start]
         rep = np.concatenate(picks)
+        self.rep = rep
         self.weights = np.concatenate(weights)
         self.v, self.sigma = seg.intensity_dn[rep], seg.robust_sigma_dn[rep]
         # range of clean levels in a block: its gradient plus the measured spread beyond temporal noise
@@ -351,6 +352,27 @@ class Comparison:
                     "model_var_dn2": {c: model[c] for c in cell.values},
                 })
         return rows
+
+
+def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[str, Any]]:
+    """Which part of the image: measured vs model total sigma per region of a 3 x 3 grid (row-major),
+    from the blocks the model is evaluated at."""
+    meas_var: dict[int, list[float]] = {}
+    model_var: dict[int, list[float]] = {}
+    for sb, comps in comp.predict_with(extra):
+        seg = sb.seg
+        measured = sum(seg.values[c][sb.rep] for c in seg.values)
+        model = sum(comps[c] for c in MEASURED)
+        for region, m, p in zip(seg.region[sb.rep], measured, model):
+            meas_var.setdefault(int(region), []).append(float(m))
+            model_var.setdefault(int(region), []).append(float(p))
+    rows = []
+    for region in sorted(meas_var):
+        ms = math.sqrt(max(float(np.mean(meas_var[region])), 0.0))
+        mm = math.sqrt(max(float(np.mean(model_var[region])), 0.0))
+        rows.append({"region": region, "blocks": len(meas_var[region]), "measured_sigma_dn": ms,
+                     "model_sigma_dn": mm, "mean_residual_dn": ms - mm, "rms_residual_dn": abs(ms - mm)})
+    return rows
 
 
 def rms_error(rows: Iterable[dict[str, Any]]) -> float:

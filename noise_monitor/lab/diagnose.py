@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -60,7 +60,6 @@ class Candidate:
     significant: bool
     reading: str
     rms_error_after_dn: float
-    instance: Effect = field(repr=False, default=None)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -234,7 +233,6 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
                              and rms1 <= (1.0 - MIN_RMS_REDUCTION) * rms0),
             reading=eff.reading(),
             rms_error_after_dn=rms1,
-            instance=eff,
         ))
         if progress is not None:
             progress.update(1)

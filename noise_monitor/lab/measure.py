@@ -30,9 +30,9 @@ from ..physics import CameraMetadata
 BLOCK = 8
 BIN_WIDTH_DN = 16.0
 INTENSITY_RANGE_DN = (8.0, 240.0)
-#: per-pixel variance components: temporal, fixed-pattern white core, column and row offsets, outlier pixels;
-#: "single" (temporal + fixed core) replaces the first two for single-frame segments
-COMPONENTS = ("temporal", "fixed", "column", "row", "outlier", "single")
+# Per-pixel variance components measured per block: temporal, fixed (white fixed-pattern core), column
+# and row (line offsets), outlier (outlier pixels); "single" (temporal + fixed) replaces the first two
+# in single-frame segments.
 #: a block is textured if its residual is correlated along both axes beyond this lag-1 correlation
 TEXTURE_CORRELATION = 0.3
 #: ... or if its robust sigma (temporal spread) exceeds this multiple of its bin's median

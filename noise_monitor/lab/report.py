@@ -24,6 +24,7 @@ CONDITION_LABELS = {
     "exposure_time_s": "exposure time [s]",
     "sensor_temperature_c": "sensor temperature [°C]",
     "time_s": "time since first frame [s]",
+    "region": "image region (3x3 grid, row-major)",
 }
 
 
@@ -74,6 +75,7 @@ def _condition_plot(summary: dict[str, Any]) -> str:
         if after:
             ax.plot(x, [r["model_sigma_dn"] for r in after[key]], "^:", color="tab:green", label="model + added")
         ax.set_xticks(x, [f"{r[key]:.3g}" for r in rows], rotation=45, fontsize=8)
+        ax.set_xlim(-0.5, len(rows) - 0.5)
         ax.set_xlabel(CONDITION_LABELS[key])
         ax.set_ylabel("rms noise sigma [DN]")
         ax.grid(alpha=0.3)
@@ -171,7 +173,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{b64}'>")
     parts.append("<h2>Where the model fails (by condition)</h2>")
     for key, rows in summary["by_condition"].items():
-        cols = [key, "cells", "measured_sigma_dn", "model_sigma_dn", "mean_residual_dn", "rms_residual_dn"]
+        count = "blocks" if rows and "blocks" in rows[0] else "cells"
+        cols = [key, count, "measured_sigma_dn", "model_sigma_dn", "mean_residual_dn", "rms_residual_dn"]
         parts.append(f"<h3>{html.escape(CONDITION_LABELS.get(key, key))}</h3>" + _table(rows, cols))
     parts.append("<h2>Measurement</h2><pre>" + html.escape(json.dumps(summary["measurement"], indent=1)) + "</pre>")
     parts.append("</body></html>")
