@@ -169,7 +169,7 @@ def rig_factory(estimator):
         r.close()
 
 
-def bad_images() -> list[tuple[str, Image, str]]:
+def bad_images(patch_size: int) -> list[tuple[str, Image, str]]:
     good = np.full((SIZE, SIZE), 100, np.uint8).tobytes()
     big16 = np.full((SIZE, SIZE), 1000, ">u2").tobytes()
     return [
@@ -183,7 +183,7 @@ def bad_images() -> list[tuple[str, Image, str]]:
          f"image unusable: step {SIZE} is smaller than width*channels*bytes = {2 * SIZE}"),
         ("0x0", Image(height=0, width=0, encoding="mono8", step=0, data=b""), "image unusable: empty image (0x0)"),
         ("1x1", Image(height=1, width=1, encoding="mono8", step=1, data=b"\x64"),
-         "image 1x1 is smaller than the patch size 64"),
+         f"image 1x1 is smaller than the patch size {patch_size}"),
         ("big-endian beyond 12 bits", Image(height=SIZE, width=SIZE, encoding="mono16", step=2 * SIZE,
                                             is_bigendian=0, data=big16),
          "pixel value 59395 exceeds the 12-bit range"),
@@ -193,11 +193,12 @@ def bad_images() -> list[tuple[str, Image, str]]:
 def test_bad_images_are_warnings_with_the_reason_and_the_node_goes_on(rig_factory):
     rig = rig_factory("badimg", bit_depth=12)
     assert rig.status_for(rig.publish(0)).level == OK
-    for i, (case, img, reason) in enumerate(bad_images(), start=1):
+    cases = bad_images(rig.node.monitor.patch_size)
+    for i, (case, img, reason) in enumerate(cases, start=1):
         report = rig.status_for(rig.publish(i, image=img))
         assert report.level == WARN and reason in report.message, (case, report.message)
         assert "sigma_pn" not in report.values  # no numbers for a frame that was not evaluated
-    n = len(bad_images()) + 1
+    n = len(cases) + 1
     big_endian = np.full((SIZE, SIZE), 0, ">u2")
     big_endian[:] = (rig.frame().astype(np.uint16) * 16)  # 12-bit data in big-endian words
     ok = Image(height=SIZE, width=SIZE, encoding="mono16", step=2 * SIZE, is_bigendian=1, data=big_endian.tobytes())
