@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.lab.analyze import analyze
 from noise_monitor.physics import EffectError, NoiseModel, load_plugin_file, load_profile
@@ -160,3 +162,14 @@ def test_analyze_on_unusable_bags(capsys, tmp_path, bag):
     truncated.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
     code, _, err = run_analyze(capsys, truncated, "--profile", "icx285")
     assert code == 2 and "cut.mcap" in one_line(err)
+
+
+def test_analyze_on_a_bag_without_measurable_regions(capsys, tmp_path):
+    bag = tmp_path / "saturated.mcap"
+    with BagWriter(bag) as w:
+        for i in range(3):
+            stamp = 10**18 + i * 10**8
+            w.write("/camera/metadata", metadata_msg(META, stamp, "t"), stamp)
+            w.write("/camera/image_raw", image_msg(np.full((64, 64), 255, np.uint8), stamp), stamp)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285")
+    assert code == 2 and "no flat, unclipped image regions to measure noise in" in one_line(err)
