@@ -28,7 +28,7 @@ from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
 from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC
-from noise_monitor.physics import CameraProfile, EffectError, load_plugin_file, load_profile
+from noise_monitor.physics import CameraProfile, load_plugin_file, load_profile
 from noise_monitor.physics.effects import registry
 
 torch.set_num_threads(1)
@@ -389,15 +389,34 @@ def plugin(tmp_path, monkeypatch) -> Path:
     return path
 
 
-@pytest.mark.parametrize("effect,match", [
-    ("reliability_raises", "effect 'reliability_raises' failed to evaluate: sensor model not calibrated"),
-    ("reliability_nan", "reliability_nan.* returned a NaN, infinite or negative variance"),
+@pytest.mark.parametrize("effect,reason", [
+    ("reliability_raises", "evaluation failed: effect 'reliability_raises' failed to evaluate: sensor model not "
+                           "calibrated"),
+    ("reliability_nan", "evaluation failed: effect(s) reliability_nan returned a NaN, infinite or negative variance"),
 ])
-def test_replay_with_a_failing_plugin_effect_stops_with_the_effect_named(tmp_path, src, estimator, plugin, effect,
-                                                                        match):
+def test_replay_with_a_failing_plugin_effect_skips_every_frame_naming_it(tmp_path, estimator, plugin, effect,
+                                                                        reason):
+    """As the node does: each frame is a WARN with the reason; the replay completes with its outputs."""
     bag = simulate_bag(tmp_path / "p.mcap", "icx285", "static", frames=2, width=estimator.patch_size,
                        height=estimator.patch_size, hold_s=0.0)
     profile = CameraProfile("ICX285+broken", dict(PROFILE.values), {effect: {}})
-    with pytest.raises(EffectError, match=match):
-        replay(bag, profile, tmp_path / "o", estimator=estimator, config=CONFIG, progress=False, plot=False)
-    assert not (tmp_path / "o" / "replay.mcap").exists()
+    s = replay(bag, profile, tmp_path / "o", estimator=estimator, config=CONFIG, progress=False, plot=False)
+    assert s["frames_total"] == 2 and s["frames_processed"] == 0 and s["skip_reasons"] == {reason: 2}
+    assert s["levels"]["WARN"] == 2 and (tmp_path / "o" / "replay.mcap").is_file()
+
+
+@pytest.mark.parametrize("value,reason", [(255, "saturated"), (0, "black")])
+def test_bag_of_only_unusable_frames_gives_reasons_and_no_numbers(tmp_path, estimator, value, reason):
+    size = estimator.patch_size
+    bag = tmp_path / "flat.mcap"
+    with BagWriter(bag) as w:
+        for i in range(4):
+            stamp = T0 + i * PERIOD
+            w.write("/camera/metadata", metadata_msg(META, stamp, "t"), stamp)
+            w.write("/camera/image_raw", image_msg(np.full((2 * size, 2 * size), value, np.uint8), stamp), stamp)
+    s = replay(bag, PROFILE, tmp_path / "o", estimator=estimator, config=CONFIG, progress=False, plot=False)
+    assert (s["frames_total"], s["frames_processed"], s["levels"]["WARN"]) == (4, 0, 4)
+    (text, n), = s["skip_reasons"].items()
+    assert n == 4 and text.startswith("0 usable patches (need 1): ") and f"{reason} of" in text
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi"):
+        assert s[key] == {"mean": None, "p5": None, "p95": None, "n": 0}  # no numbers rather than NaN
