@@ -101,3 +101,36 @@ def test_broken_plugins_give_clear_errors(tmp_path: Path) -> None:
     (tmp_path / "syntax.py").write_text("def broken(:\n")
     with pytest.raises(EffectError, match="failed to import"):
         load_plugin_file(tmp_path / "syntax.py")
+
+
+def test_broken_modifier_and_quantization_plugins_are_named(tmp_path: Path) -> None:
+    bad = tmp_path / "bad_modifiers.py"
+    bad.write_text(textwrap.dedent('''
+        from noise_monitor.physics.effects import Effect
+
+        class BadModifier(Effect):
+            name = "bad_modifier"
+            distribution = "modifier"
+            def modify(self, cond):
+                return {}["gain"]
+
+        class NegativeGain(Effect):
+            name = "negative_gain"
+            distribution = "modifier"
+            def modify(self, cond):
+                return cond.replace(gain=-1.0)
+
+        class BadStep(Effect):
+            name = "bad_step"
+            distribution = "quantization"
+            def lsb_dn(self, cond):
+                return float("nan")
+    '''))
+    load_plugin_file(bad)
+    meta = load_profile("generic").metadata(gain_db=0.0, exposure_time_s=0.01, sensor_temperature_c=20.0)
+    with pytest.raises(EffectError, match="'bad_modifier' failed to modify: 'gain'"):
+        NoiseModel(extra=["bad_modifier"]).predict(100.0, meta)
+    with pytest.raises(EffectError, match="'negative_gain' produced impossible conditions"):
+        NoiseModel(extra=["negative_gain"]).simulate(np.zeros((8, 8)), meta, np.random.default_rng(0))
+    with pytest.raises(EffectError, match="'bad_step' returned an invalid quantization step"):
+        NoiseModel(extra=["bad_step"]).predict(100.0, meta)

@@ -106,12 +106,26 @@ def noise_moments(
     return (r1, r2, p_in) if rounding else (q1, q2, p_in)
 
 
+#: Where the Gaussian part of the noise is wider than this many steps, the rounding error is uniform
+#: and independent of the signal to ~exp(-2 pi^2 0.7^2) = 6e-5 (Sheppard's correction is exact enough)...
+SHEPPARD_MIN_SIGMA_LSB = 0.7
+#: ... except next to the clipped ends, where the last half step always rounds towards the end level:
+#: there the rounding is computed exactly unless the noise is wider than this many steps.
+EDGE_EXACT_MAX_SIGMA_LSB = 3.0
+
+
 def quantized_noise_moments(x, e1, e2, p_in, mu, s, w, lsb, hi):
-    """(E[n], E[n^2], E[r], E[r^2]) after rounding; Sheppard's correction where the noise is wide."""
-    if float(np.min(s)) > 2.0 * lsb or float(np.max(np.sqrt(np.maximum(e2 - e1**2, 0.0)))) > 8.0 * lsb:
-        r2 = lsb**2 / 12.0 * p_in  # error ~exp(-2 pi^2 s^2 / lsb^2): negligible
-        return e1, e2 + r2, np.zeros_like(x), r2
-    return _quantized_moments(x, mu, s, w, lsb, hi)
+    """(E[n], E[n^2], E[r], E[r^2]) after rounding: exact where the Gaussian part is narrow, Sheppard elsewhere."""
+    r2 = lsb**2 / 12.0 * p_in  # clipped outputs sit on the end levels: no rounding error there
+    out = [e1.copy(), e2 + r2, np.zeros_like(x), r2.copy()]
+    sd = np.sqrt(np.maximum(e2 - e1**2, 0.0))
+    near_end = (np.minimum(x, hi - x) < 6.0 * sd + lsb) & (s < EDGE_EXACT_MAX_SIGMA_LSB * lsb)
+    narrow = (s < SHEPPARD_MIN_SIGMA_LSB * lsb) | near_end
+    if narrow.any():
+        exact = _quantized_moments(x[narrow], mu[..., narrow], s[narrow], w[..., narrow], lsb, hi)
+        for arr, val in zip(out, exact):
+            arr[narrow] = val
+    return tuple(out)
 
 
 def _quantized_moments(x, mu, s, w, lsb, hi, chunk: int = 64):

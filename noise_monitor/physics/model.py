@@ -64,8 +64,22 @@ class NoiseModel:
         cond = Conditions.from_meta(meta)
         for e in self.effects:
             if e.distribution == "modifier":
-                cond = e.modify(cond)
+                cond = _guarded(e, "modify", e.modify, cond)
+                if not isinstance(cond, Conditions):
+                    raise EffectError(f"effect {e.name!r}: modify() must return Conditions, got {type(cond).__name__}")
+                values = (cond.gain, cond.exposure_time_s, cond.temperature_k, cond.dark_scale, cond.dark_rate_per_k)
+                if not all(np.isfinite(v) for v in values) or cond.gain <= 0 or cond.exposure_time_s < 0 \
+                        or cond.temperature_k <= 0 or cond.dark_scale < 0:
+                    raise EffectError(f"effect {e.name!r} produced impossible conditions: gain {cond.gain:g}, "
+                                      f"exposure {cond.exposure_time_s:g} s, temperature {cond.temperature_k:g} K")
         return cond
+
+    def lsb(self, effect: Effect, cond: Conditions) -> float:
+        """Quantization step of a quantization effect, checked."""
+        lsb = _guarded(effect, "evaluate", effect.lsb_dn, cond)
+        if not (np.isfinite(lsb) and 0.0 < lsb <= DN_MAX):
+            raise EffectError(f"effect {effect.name!r} returned an invalid quantization step {lsb!r} DN")
+        return float(lsb)
 
     # --- analytic ----------------------------------------------------------------------------
     def tables(self, meta: CameraMetadata, mode: str = "joint") -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -87,25 +101,21 @@ class NoiseModel:
         s2 = np.zeros_like(x)
         mixes = []
         for e in effects:
-            try:
-                if e.distribution == "poisson":
-                    lam = lam + np.broadcast_to(np.asarray(e.electrons(x, cond), dtype=float), x.shape)
-                elif e.distribution == "gaussian":
-                    s2 = s2 + np.broadcast_to(np.asarray(e.sigma_dn(x, cond), dtype=float) ** 2, x.shape)
-                elif e.distribution == "mixture":
-                    frac, off = e.mixture(x, cond)
-                    mixes.append((float(frac), np.broadcast_to(np.asarray(off, dtype=float), x.shape)))
-            except EffectError:
-                raise
-            except Exception as exc:
-                raise EffectError(f"effect {e.name!r} failed to evaluate: {exc}") from exc
+            if e.distribution == "poisson":
+                lam = lam + np.broadcast_to(np.asarray(_guarded(e, "evaluate", e.electrons, x, cond), dtype=float), x.shape)
+            elif e.distribution == "gaussian":
+                sig = np.asarray(_guarded(e, "evaluate", e.sigma_dn, x, cond), dtype=float)
+                s2 = s2 + np.broadcast_to(sig**2, x.shape)
+            elif e.distribution == "mixture":
+                frac, off = _guarded(e, "evaluate", e.mixture, x, cond)
+                mixes.append((float(frac), np.broadcast_to(np.asarray(off, dtype=float), x.shape)))
         return lam, s2, mixes
 
     def _moments(self, effects: list[Effect], x: np.ndarray, cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
         """E[n|x], E[n^2|x] of the effects applied together in one pass (clipped, then quantized)."""
         lam, s2, mixes = self._components(effects, x, cond)
         _check_finite(effects, lam, s2, mixes)
-        lsbs = [e.lsb_dn(cond) for e in effects if e.distribution == "quantization"]
+        lsbs = [self.lsb(e, cond) for e in effects if e.distribution == "quantization"]
         if lsbs and len(lsbs) == len(effects):
             # rounding of the previous output alone (sequential protocol): each node of the carried
             # distribution stands for its bin of the grid step, i.e. a spread of step/sqrt(12) DN
@@ -119,7 +129,7 @@ class NoiseModel:
         """Joint mode: moments of the rounding error of the one-pass noisy output (as ``simulate``)."""
         others = [o for o in self.noise_effects if o.distribution != "quantization"]
         lam, s2, mixes = self._components(others, x, cond)
-        r1, r2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=e.lsb_dn(cond), rounding=True)
+        r1, r2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=self.lsb(e, cond), rounding=True)
         return r1, r2
 
     def _joint_tables(self, cond: Conditions) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -243,7 +253,7 @@ class NoiseModel:
                 sigmas[e.name] = _std(nxt - noisy)
                 noisy = nxt
         for e in quant:
-            nxt = _quantize(noisy, e.lsb_dn(conds[e.name]))
+            nxt = _quantize(noisy, self.lsb(e, conds[e.name]))
             if per_source:  # the rounding error of the output
                 sigmas[e.name] = _std(nxt - noisy)
             noisy = nxt
@@ -306,16 +316,22 @@ def _quantize(img: np.ndarray, lsb: float) -> np.ndarray:
 
 
 def _checked_sample(e: Effect, signal: np.ndarray, cond: Conditions, rng: np.random.Generator) -> np.ndarray:
-    try:
-        n = e.sample(signal, cond, rng)
-    except Exception as exc:
-        raise EffectError(f"effect {e.name!r} failed to sample: {exc}") from exc
-    n = np.asarray(n, dtype=np.float32)
+    n = np.asarray(_guarded(e, "sample", e.sample, signal, cond, rng), dtype=np.float32)
     if n.shape != signal.shape:
         n = np.broadcast_to(n, signal.shape)
     if not np.all(np.isfinite(n)):
         raise EffectError(f"effect {e.name!r} produced NaN or inf noise")
     return n
+
+
+def _guarded(e: Effect, what: str, fn, *args):
+    """Call an effect's method; any failure becomes an EffectError naming the effect."""
+    try:
+        return fn(*args)
+    except EffectError:
+        raise
+    except Exception as exc:
+        raise EffectError(f"effect {e.name!r} failed to {what}: {exc}") from exc
 
 
 def _check_finite(effects: list[Effect], lam, s2, mixes) -> None:
