@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 import time
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import numpy as np
 import torch
 
 from noise_monitor.estimator import load
-from noise_monitor.estimator.inference import NAMES, WEIGHTS_DIR
+from noise_monitor.estimator.inference import NAMES, WEIGHTS_DIR, onnx_session
 from noise_monitor.estimator.networks import PaperConfig, PaperNet
 from noise_monitor.physics import load_profile
 
@@ -42,19 +41,6 @@ def row(name: str, size: int, batch: int, seconds: float) -> dict:
             "ms_per_patch": round(1000.0 * seconds / batch, 3), "patches_per_s": round(batch / seconds, 1)}
 
 
-def onnx_session(net: torch.nn.Module, inputs: tuple[torch.Tensor, ...], threads: int):
-    import onnxruntime as ort
-
-    path = Path(tempfile.mkdtemp()) / "net.onnx"
-    names = [f"in{i}" for i in range(len(inputs))]
-    torch.onnx.export(net, inputs, path, input_names=names, output_names=["out"],
-                      dynamic_axes={n: {0: "batch"} for n in names + ["out"]}, dynamo=False)
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = threads
-    opts.inter_op_num_threads = 1
-    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"]), names
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=2)
@@ -66,12 +52,14 @@ def main() -> None:
     rng = np.random.default_rng(0)
     rows: list[dict] = []
 
-    fm = load("full_meta", device="cpu")
+    ests = {bk: load("full_meta", device="cpu", backend=bk) for bk in ("onnx", "torch")}
+    fm = ests["torch"]
     size = fm.patch_size
-    fm.predict(np.full((1, size, size), 100.0, np.float32), meta)  # build the metadata's tables once
-    for b in BATCHES:
-        x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
-        rows.append(row("full_meta (end to end, torch)", size, b, timeit(lambda: fm.predict(x, meta), args.reps)))
+    for bk, est in ests.items():
+        est.predict(np.full((1, size, size), 100.0, np.float32), meta)  # build the metadata's tables once
+        for b in BATCHES:
+            x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
+            rows.append(row(f"full_meta (end to end, {bk})", size, b, timeit(lambda: est.predict(x, meta), args.reps)))
 
     # network part only: torch eager vs ONNX Runtime
     from noise_monitor.estimator.features import compact_inputs
@@ -110,7 +98,7 @@ def main() -> None:
     print(f"{'variant':<44} {'patch':>8} {'batch':>5} {'ms/patch':>10} {'patches/s':>10}")
     for r in rows:
         print(f"{r['variant']:<44} {r['patch']:>8} {r['batch']:>5} {r['ms_per_patch']:>10.3f} {r['patches_per_s']:>10.1f}")
-    ours = max(r["patches_per_s"] for r in rows if r["variant"].startswith("full_meta (end"))
+    ours = max(r["patches_per_s"] for r in rows if r["variant"] == "full_meta (end to end, onnx)")
     ref = max(r["patches_per_s"] for r in rows if r["variant"].startswith("paper-size") and r["area_px"] == size * size)
     print(f"speed-up of shipped full_meta over the paper-size network at {size}x{size}: {ours / ref:.0f}x (best batch each)")
     if args.json:

@@ -105,6 +105,16 @@ def test_train_resume_and_load(tmp_path, tiny_data, meta):
     assert np.allclose(out["xi"], out["sigma_model"] - out["sigma_image"])
 
 
+def test_onnx_and_torch_backends_agree(meta):
+    rng = np.random.default_rng(5)
+    x = rng.uniform(30, 200, (3, 48, 48)).astype(np.float32)
+    a = load("full_meta", device="cpu", backend="torch").predict(x, meta)
+    b = load("full_meta", device="cpu", backend="onnx").predict(x, meta)
+    assert all(np.allclose(a[k], b[k], atol=1e-4) for k in a)
+    with pytest.raises(ValueError, match="backend"):
+        load("full_meta", device="cpu", backend="tvm")
+
+
 def test_shipped_full_meta_contract(meta):
     est = load("full_meta")
     assert est.name == "full_meta" and est.patch_size >= 16

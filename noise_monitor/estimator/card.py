@@ -21,7 +21,8 @@ def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Pat
     lines = [f"# Model card: `{name}`", "",
              f"- Network: {type(net).__name__} {json.dumps(ck['config'])}, {count_parameters(net):,} parameters",
              f"- Weights: `{name}.pt` ({(weights_dir / f'{name}.pt').stat().st_size / 1024:.0f} KiB), "
-             f"{ck['step']} steps, {ck['elapsed_s'] / 60:.1f} min training wall time on the shared 2-core CPU"]
+             f"{ck['step'] + ck.get('prior_steps', 0)} steps, {(ck['elapsed_s'] + ck.get('prior_elapsed_s', 0.0)) / 60:.1f} min "
+             "training wall time in total on the shared 2-core CPU" + (" (fine-tuned from an earlier run, see command)" if ck.get("prior_steps") else "")]
     if train:
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "

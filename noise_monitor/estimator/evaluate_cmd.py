@@ -21,6 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="estimators to evaluate (default: every one with weights)")
     p.add_argument("--weights-dir", type=Path, default=WEIGHTS_DIR)
     p.add_argument("--patches", type=int, default=600, help="held-out patches per part")
+    p.add_argument("--patch-size", type=int, default=None,
+                   help="evaluate every variant on patches of this size (default: each variant's training size)")
     p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
@@ -37,15 +39,17 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
     estimators = {n: load(n, args.device, weights=args.weights_dir / f"{n}.pt") for n in names}
-    sizes = {e.patch_size for e in estimators.values()}
-    results: dict = {"patches_per_part": args.patches, "parts": {}, "ms_per_patch": {}}
+    if args.patch_size is not None and args.patch_size < 16:
+        raise ValueError("--patch-size must be >= 16")
+    size_of = {n: args.patch_size or e.patch_size for n, e in estimators.items()}
+    results: dict = {"patches_per_part": args.patches, "patch_size": size_of, "parts": {}, "ms_per_patch": {}}
     prior = PhysicsPrior()
     for part in args.parts:
         results["parts"][part] = {}
-        for size in sorted(sizes):
+        for size in sorted(set(size_of.values())):
             data = heldout(part, args.patches, size, args.cache)
             for name, est in estimators.items():
-                if est.patch_size != size:
+                if size_of[name] != size:
                     continue
                 pred, dt = timed_predict(est, data)
                 results["parts"][part][name] = score(pred, data, part)
@@ -57,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_sweep and "full_meta" in estimators:
         fm = estimators["full_meta"]
         results["sensitivity_full_meta"] = sensitivity_sweep(
-            lambda x, m: fm.predict(x, m)["total"][0], fm.patch_size, model=fm.prior.model)
+            lambda x, m: fm.predict(x, m)["total"][0], size_of["full_meta"], model=fm.prior.model)
     print(_table(results))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -17,7 +17,7 @@ import torch
 from ..physics import CameraMetadata, NoiseModel
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import SIGMA_SCALE
+from .networks import N_SCALARS, SIGMA_SCALE
 from .physics_prior import SOURCES, PhysicsPrior, group_by_meta
 from .train import network_from_checkpoint
 
@@ -76,12 +76,55 @@ class _Base:
         return f"<{type(self).__name__} {self.name} patch {self.patch_size} on {self.device}>"
 
 
-class FullMetaEstimator(_Base):
-    """Physics-anchored sources plus a learned measurement of the image noise (see module docstring)."""
+BACKENDS = ("auto", "torch", "onnx")
 
-    def __init__(self, ckpt: dict, device: torch.device, model: NoiseModel | None = None) -> None:
+
+def onnx_session(net: torch.nn.Module, example: tuple[torch.Tensor, ...], threads: int | None = None):
+    """An ONNX Runtime CPU session of ``net`` (dynamic batch and patch size), exported in memory."""
+    import io
+    import warnings
+
+    import onnxruntime as ort
+
+    names = [f"in{i}" for i in range(len(example))]
+    axes = {n: ({0: "batch", 2: "h", 3: "w"} if t.ndim == 4 else {0: "batch"}) for n, t in zip(names, example)}
+    buf = io.BytesIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # torch's TorchScript exporter deprecation notices
+        torch.onnx.export(net, example, buf, input_names=names, output_names=["out"],
+                          dynamic_axes={**axes, "out": {0: "batch"}}, dynamo=False)
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = threads or torch.get_num_threads()
+    opts.log_severity_level = 3
+    return ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"]), names
+
+
+class FullMetaEstimator(_Base):
+    """Physics-anchored sources plus a learned measurement of the image noise (see module docstring).
+
+    ``backend``: ``torch`` (eager) or ``onnx`` (ONNX Runtime, CPU only); ``auto`` = ONNX Runtime on
+    CPU (measured faster here, bench/bench_estimator.py), torch on CUDA.
+    """
+
+    def __init__(self, ckpt: dict, device: torch.device, model: NoiseModel | None = None, backend: str = "auto") -> None:
         super().__init__(ckpt, device)
         self.prior = PhysicsPrior(model)
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        if backend == "onnx" and device.type != "cpu":
+            raise ValueError("the onnx backend runs on CPU only; use backend='torch' with CUDA")
+        self.backend = "onnx" if backend == "onnx" or (backend == "auto" and device.type == "cpu") else "torch"
+        self._session = None
+        if self.backend == "onnx":
+            p = self.patch_size
+            self._session, self._inputs = onnx_session(self.net, (torch.zeros(2, 2, p, p), torch.zeros(2, N_SCALARS)))
+
+    def _run_net(self, maps: np.ndarray, scalars: np.ndarray) -> np.ndarray:
+        if self._session is not None:
+            return self._session.run(None, {self._inputs[0]: maps, self._inputs[1]: scalars})[0]
+        with torch.inference_mode():
+            r = self.net(torch.from_numpy(maps).to(self.device), torch.from_numpy(scalars).to(self.device))
+        return r.cpu().numpy()
 
     def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | Sequence[CameraMetadata]) -> dict[str, np.ndarray]:
         x = validate_patches(patches_dn)
@@ -93,9 +136,7 @@ class FullMetaEstimator(_Base):
             group_of[idx] = g
         meta_norm = np.stack([m.normalized() for m in groups])[group_of]
         maps, scalars, phys = compact_inputs(x, tables, group_of, meta_norm)
-        with torch.inference_mode():
-            r = self.net(torch.from_numpy(maps).to(self.device), torch.from_numpy(scalars).to(self.device))
-        r = r.clamp(-6.0, 6.0).cpu().numpy().astype(np.float64)
+        r = np.clip(self._run_net(maps, scalars).astype(np.float64), -6.0, 6.0)
         sigma_image = np.maximum(phys["total"], SIGMA_MODEL_FLOOR) * np.exp(r)
         out = {s: phys[s] for s in SOURCES}
         out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
@@ -131,8 +172,12 @@ def weights_path(name: str, weights_dir: Path | None = None) -> Path:
 
 
 def load(name: str = "full_meta", device: str = "auto", weights: str | Path | None = None,
-         model: NoiseModel | None = None) -> FullMetaEstimator | PaperEstimator:
-    """Load a trained estimator (bundled weights, or ``weights`` = a .pt file written by training)."""
+         model: NoiseModel | None = None, backend: str = "auto") -> FullMetaEstimator | PaperEstimator:
+    """Load a trained estimator (bundled weights, or ``weights`` = a .pt file written by training).
+
+    ``model``: the NoiseModel of the physics prior (default: the paper's sources); ``backend``: see
+    :class:`FullMetaEstimator` (paper-family variants always run in torch).
+    """
     dev = resolve_device(device)
     path = Path(weights) if weights is not None else weights_path(name)
     if not path.is_file():
@@ -145,7 +190,7 @@ def load(name: str = "full_meta", device: str = "auto", weights: str | Path | No
         raise ValueError(f"{path} is not an estimator checkpoint")
     try:
         if ckpt["variant"] == "full_meta":
-            return FullMetaEstimator(ckpt, dev, model)
+            return FullMetaEstimator(ckpt, dev, model, backend)
         return PaperEstimator(ckpt, dev)
     except (KeyError, TypeError, RuntimeError) as exc:  # missing entries, wrong layer shapes
         reason = " ".join(str(exc).split())  # torch's multi-line message on one line

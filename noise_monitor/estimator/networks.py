@@ -129,8 +129,8 @@ class CompactConfig:
 
 
 #: Scalar inputs of the compact net: normalised metadata (11), log sigma_model, source fractions (3),
-#: log residual energy ratio.
-N_SCALARS = len(NORMALIZED_ORDER) + 5
+#: log residual energy ratio, log block-energy quantiles (3) (see ``features.compact_inputs``).
+N_SCALARS = len(NORMALIZED_ORDER) + 8
 
 
 class ImageNoiseNet(nn.Module):

@@ -87,8 +87,12 @@ def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) 
 
 
 def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, resume: bool = False,
-          device: str = "auto", threads: int = 2, progress: bool = True) -> Path:
-    """Train a variant; writes ``checkpoint.pt`` every ``checkpoint_every`` steps and ``<variant>.pt``."""
+          device: str = "auto", threads: int = 2, progress: bool = True, init: Path | None = None) -> Path:
+    """Train a variant; writes ``checkpoint.pt`` every ``checkpoint_every`` steps and ``<variant>.pt``.
+
+    ``init``: start from the weights of an earlier ``<variant>.pt`` (fine-tuning; fresh optimiser and
+    schedule, its step count and time are added to this run's).
+    """
     torch.set_num_threads(threads)
     dev = resolve_device(device)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -98,8 +102,16 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     net = build_network(settings.variant, patch_size, settings.width, settings.depth).to(dev)
     opt = torch.optim.Adam(net.parameters(), lr=settings.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=settings.steps, eta_min=settings.lr * 0.05)
-    step, elapsed = 0, 0.0
+    step, elapsed, prior_steps, prior_s = 0, 0.0, 0, 0.0
     rng = np.random.default_rng(settings.seed)
+    if init is not None:
+        if not Path(init).is_file():
+            raise FileNotFoundError(f"--init: {init} not found")
+        ck = torch.load(init, map_location=dev, weights_only=False)
+        if ck.get("variant") != settings.variant or ck["config"] != net.cfg.as_dict():
+            raise ValueError(f"--init: {init} is not a {settings.variant} network of the same configuration")
+        net.load_state_dict(ck["state_dict"])
+        prior_steps, prior_s = ck["step"] + ck.get("prior_steps", 0), ck["elapsed_s"] + ck.get("prior_elapsed_s", 0.0)
     if resume:
         if not ckpt_path.is_file():
             raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
@@ -110,6 +122,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         opt.load_state_dict(ck["optimizer"])
         sched.load_state_dict(ck["scheduler"])
         step, elapsed = ck["step"], ck["elapsed_s"]
+        prior_steps, prior_s = ck.get("prior_steps", 0), ck.get("prior_elapsed_s", 0.0)
         rng.bit_generator.state = ck["rng_state"]
     tensors = tensors_for(settings.variant, data)
     n = len(data["noisy"])
@@ -130,9 +143,10 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         bar.update(1)
         bar.set_postfix(loss=f"{running:.4g}")
         if step % settings.checkpoint_every == 0 or step == settings.steps:
-            torch.save(_checkpoint(net, settings, step, time.time() - t0, opt, sched, rng), ckpt_path)
+            ck = _checkpoint(net, settings, step, time.time() - t0, opt, sched, rng)
+            torch.save({**ck, "prior_steps": prior_steps, "prior_elapsed_s": prior_s}, ckpt_path)
     bar.close()
-    final = _checkpoint(net, settings, step, time.time() - t0)
+    final = {**_checkpoint(net, settings, step, time.time() - t0), "prior_steps": prior_steps, "prior_elapsed_s": prior_s}
     path = out_dir / f"{settings.variant}.pt"
     torch.save(final, path)
     return path

@@ -28,6 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint.pt")
+    p.add_argument("--init", type=Path, default=None, help="start from these weights (<variant>.pt; fine-tuning)")
     p.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda")
     p.add_argument("--json", type=Path, default=None, help="write a JSON summary here")
 
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth)
-    path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads)
+    path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
                "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
