@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 from collections import Counter
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,9 +19,37 @@ BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_stat
 CONDITION_KEYS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
 
 
-@dataclass
+class CompactNumbers(Mapping):
+    """A read-only name -> float mapping stored as float32 values with a shared key tuple.
+
+    A replay keeps one per frame: ~25 numbers cost ~130 bytes instead of ~2 KB as a dict, so a
+    20,000-frame replay stays within a few MB.
+    """
+
+    __slots__ = ("_keys", "_values")
+    _interned: dict[tuple[str, ...], tuple[str, ...]] = {}
+
+    def __init__(self, values: Mapping[str, float]) -> None:
+        keys = tuple(values)
+        self._keys = self._interned.setdefault(keys, keys)
+        self._values = np.fromiter(values.values(), dtype=np.float32, count=len(keys))
+
+    def __getitem__(self, key: str) -> float:
+        try:
+            return float(self._values[self._keys.index(key)])
+        except ValueError:
+            raise KeyError(key) from None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._keys)
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+
+@dataclass(slots=True)
 class FrameRow:
-    """What the replay keeps of one frame."""
+    """What the replay keeps of one frame (compact: numbers as float32)."""
 
     index: int
     stamp_ns: int
@@ -31,8 +60,12 @@ class FrameRow:
     alarm_active: bool
     cause: str | None
     skip_reason: str | None
-    numbers: dict[str, float] = field(default_factory=dict)
-    conditions: dict[str, float] = field(default_factory=dict)
+    numbers: Mapping[str, float] = field(default_factory=dict)
+    conditions: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.numbers = CompactNumbers(self.numbers)
+        self.conditions = CompactNumbers(self.conditions)
 
     def csv_row(self) -> dict[str, Any]:
         return {"index": self.index, "stamp_ns": self.stamp_ns, "time_s": f"{self.time_s:.6f}",
