@@ -138,7 +138,7 @@ def _make_node_class():
             if estimator is None:
                 from noise_monitor.estimator import load
 
-                estimator = load(p["model"], device=p["device"], weights=p["weights"] or None)
+                estimator = load(p["model"], device=p["device"], weights=p["weights"] or None, model=model)
             profile_name = self.profile.name if self.profile else "unknown"
             hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
             self.monitor = Monitor(config, estimator, model, p["camera_name"], hardware_id)
@@ -174,7 +174,7 @@ def _make_node_class():
             self._worker.start()
             self.get_logger().info(
                 f"monitoring {p['image_topic']} with {estimator.name} (patch {self.monitor.patch_size}, "
-                f"K={config.patches_per_frame}); outputs /diagnostics and {ns}/<sigma_*|xi*>"
+                f"K={config.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics and {ns}/<sigma_*|xi*>"
             )
 
         # --- inputs (executor thread) --------------------------------------------------------

@@ -256,3 +256,16 @@ def test_estimator_nan_and_failing_model_effect_are_warnings(rng):
     mon = Monitor(MonitorConfig(), PhysicsSplitEstimator(), NoiseModel(extra=[Broken()]), "cam", "hw")
     res = mon.process(frame)
     assert res.level == WARN and "evaluation failed" in res.message and "broken_for_test" in res.message
+
+
+def test_auto_xi_source_uses_the_model_when_the_profile_adds_effects(rng):
+    prnu = NoiseModel(extra={"prnu": {"sigma_pct": 3.0}})
+    assert make_monitor().xi_source == "estimator"
+    for src, expected in (("auto", "model"), ("estimator", "estimator")):
+        mon = Monitor(MonitorConfig(xi_source=src), PhysicsSplitEstimator(), prnu, "cam", "hw")
+        assert mon.xi_source == expected
+    mon = Monitor(MonitorConfig(), PhysicsSplitEstimator(), prnu, "cam", "hw")
+    for i in range(15):  # a camera with the PRNU its profile declares: no alarm
+        noisy, _ = prnu.simulate(scene(), META, rng)
+        res = mon.process(Frame(i, mono8(noisy), META))
+    assert res.level == OK and abs(res.xi_filtered) < 0.5 and res.model["prnu"] > 2.0

@@ -9,7 +9,7 @@ from typing import Any, Mapping
 
 import yaml
 
-XI_SOURCES = ("estimator", "model")
+XI_SOURCES = ("auto", "estimator", "model")
 MODEL_MODES = ("joint", "sequential")
 ALARM_LEVELS = ("WARN", "ERROR")
 
@@ -23,7 +23,8 @@ DESCRIPTIONS: dict[str, str] = {
     "max_flat_fraction": "max fraction of equal neighbour pixels in a usable patch (flat-clipped plateaus)",
     "smooth_fraction": "when there are more usable patches than needed, keep this least-textured fraction",
     "model_mode": "physics model mode for the predicted sigma: joint (physical camera) or sequential (paper)",
-    "xi_source": "xi driving the alarm: estimator (its xi output) or model (this analytic model - the estimated image noise)",
+    "xi_source": "xi driving the alarm: estimator (its xi output), model (this analytic model incl. the profile's "
+                 "effects - the estimated image noise) or auto (model when the profile adds effects, else estimator)",
     "xi_threshold_dn": "alarm when |filtered xi| exceeds this (DN)",
     "xi_hysteresis_dn": "alarm clears only below threshold - hysteresis (DN)",
     "alarm_min_frames": "consecutive processed frames beyond the threshold before the alarm rises",
@@ -48,7 +49,7 @@ class MonitorConfig:
     max_flat_fraction: float = 0.9
     smooth_fraction: float = 0.5
     model_mode: str = "joint"
-    xi_source: str = "estimator"
+    xi_source: str = "auto"
     xi_threshold_dn: float = 1.0
     xi_hysteresis_dn: float = 0.3
     alarm_min_frames: int = 5

@@ -64,7 +64,7 @@ class FrameResult:
     skip_reason: str | None = None
     sigma: dict[str, float] = field(default_factory=dict)  # estimator medians (DN): pn dcsn rn total xi image
     model: dict[str, float] = field(default_factory=dict)  # model medians (DN) per effect and total
-    xi: float | None = None  # this frame's xi (per config.xi_source)
+    xi: float | None = None  # this frame's xi (per Monitor.xi_source)
     xi_filtered: float | None = None
     xi_model: float | None = None  # analytic sigma_model (this model, these patches) - estimated image noise
     filtered: dict[str, float] = field(default_factory=dict)
@@ -114,6 +114,9 @@ class Monitor:
         self.name = f"noise_monitor: {camera_name}"
         self.hardware_id = hardware_id
         self.patch_size = config.patch_size or int(estimator.patch_size)
+        # the estimator's xi knows the paper's sources only: with more effects in the model, compare to the model
+        extra_effects = set(model.names) - set(SOURCES)
+        self.xi_source = config.xi_source if config.xi_source != "auto" else ("model" if extra_effects else "estimator")
         self.filter = EmaFilter(config.filter_alpha)
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames)
@@ -210,7 +213,7 @@ class Monitor:
         image_pp = np.asarray(est.get("sigma_image", est["total"]), dtype=np.float64).reshape(-1)
         sigma["image"] = float(np.median(image_pp))
         xi_model = float(np.median(model_pp["total"] - image_pp))
-        xi = sigma["xi"] if cfg.xi_source == "estimator" else xi_model
+        xi = sigma["xi"] if self.xi_source == "estimator" else xi_model
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")
         state = self.alarm.update(xi_f)
