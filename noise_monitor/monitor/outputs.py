@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from msg_adapters.diagnostics import StatusReport, to_rclpy, to_rosbags
+from msg_adapters.diagnostics import StatusReport, jazzy_typestore, to_rclpy, to_rosbags
 
 from .pipeline import FrameResult
 
@@ -56,9 +56,7 @@ def rclpy_messages(result: FrameResult | StatusReport, stamp_ns: int | None = No
 def rosbags_messages(result: FrameResult | StatusReport, stamp_ns: int | None = None,
                      namespace: str = DEFAULT_NAMESPACE, typestore: Any = None) -> dict[str, Any]:
     """{topic: rosbags message} with the same topics and values as :func:`rclpy_messages`."""
-    from rosbags.typesys import Stores, get_typestore
-
-    ts = typestore or get_typestore(Stores.ROS2_JAZZY)
+    ts = typestore or jazzy_typestore()
     report, stamp, numbers = _parts(result, stamp_ns, namespace)
     number = ts.types[NUMBER_TYPE]
     out: dict[str, Any] = {DIAGNOSTICS_TOPIC: to_rosbags([report], stamp, ts)}
