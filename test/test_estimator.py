@@ -193,3 +193,23 @@ def test_train_cli_end_to_end(tmp_path):
                    "--json", str(tmp_path / "s.json")])
     summary = json.loads((tmp_path / "s.json").read_text())
     assert rc == 0 and (tmp_path / "drne.pt").is_file() and summary["patches"] == 8
+
+
+def test_clean_level_is_identity_mid_range(meta):
+    from noise_monitor.estimator.physics_prior import clean_level
+
+    m1 = PhysicsPrior().tables(meta)[0]
+    v = np.array([60.0, 100.25, 180.5])
+    assert np.allclose(clean_level(v, m1), v, atol=0.05)
+    assert clean_level(np.array([0.0]), m1)[0] <= 0.0 + 1e-9
+
+
+def test_score_alarm_rates():
+    from noise_monitor.estimator.evaluate import score, stats
+
+    assert stats(np.array([1.0, 3.0]), np.array([0.0, 0.0])) == {"bias": 2.0, "std": 1.0, "rms": pytest.approx(5**0.5, abs=1e-4)}
+    data = {"truth_xi": np.array([0.0, 0.0, 3.0, -3.0, 0.5])}
+    a = score({"xi": np.array([0.2, 1.5, 0.0, 0.0, 0.0])}, data, "a")
+    assert a["false_alarm_rate"] == pytest.approx(0.2)
+    b = score({"xi": np.array([0.0, 0.0, 2.5, 1.5, 0.0])}, data, "b")
+    assert b["hit_rate"] == pytest.approx(0.5) and b["n_hit_candidates"] == 2  # wrong sign is no hit

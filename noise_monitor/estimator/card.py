@@ -28,7 +28,8 @@ def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Pat
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
                   f"(scikit-image bundled photos + dead leaves, sequential simulator, xi scheme; data seed "
                   f"{train.get('data_seed', '?')})" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
-                                                       " (pre-generated dataset file; 16k patches take ~18 min on the shared CPU)"),
+                                                       " (pre-generated dataset file, 16k patches took ~18 min on the shared CPU; the same command "
+                                                       "without --data regenerates it identically from the data seed)"),
                   f"- Training settings: {json.dumps(train['settings'])}"]
     lines += ["", f"## Held-out benchmark (`{command}`)", "",
               f"{results['patches_per_part']} patches per part, matplotlib sample photos + unseen dead leaves, unseen seeds. "

@@ -66,11 +66,15 @@ def clean_level(smooth: np.ndarray, m1: np.ndarray) -> np.ndarray:
 
     Clipping at 0 and 255 biases the noisy mean by E[n | v] (the sum of the sources' tabulated means),
     so a smoothed flat patch at 0 DN reads a few DN; inverting v -> v + sum E[n | v] removes that bias
-    (elsewhere E[n | v] is ~0 and the map is unchanged).
+    (elsewhere E[n | v] is ~0 and the map is unchanged). The inverse is tabulated on the intensity grid
+    and read with linear interpolation (no per-pixel search).
     """
     grid = np.arange(m1.shape[-1]) * TABLE_STEP_DN
-    expected = np.maximum.accumulate(grid + m1.sum(axis=0))
-    return np.interp(np.clip(smooth, 0.0, 255.0).astype(np.float64), expected, grid)
+    inverse = np.interp(grid, np.maximum.accumulate(grid + m1.sum(axis=0)), grid)
+    pos = np.clip(smooth, 0.0, 255.0).astype(np.float64) / TABLE_STEP_DN
+    i0 = np.minimum(pos.astype(np.int64), len(grid) - 2)
+    frac = pos - i0
+    return inverse[i0] * (1.0 - frac) + inverse[i0 + 1] * frac
 
 
 def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
