@@ -14,7 +14,7 @@ ROWS = ("pn", "dcsn", "rn", "sigma_image", "xi")
 
 def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Path:
     """Write ``<name>.md`` next to ``<name>.pt`` (training facts from ``<name>.train.json`` if present)."""
-    ck = torch.load(weights_dir / f"{name}.pt", map_location="cpu", weights_only=False)
+    ck = torch.load(weights_dir / f"{name}.pt", map_location="cpu", weights_only=True)
     train_json = weights_dir / f"{name}.train.json"
     train = json.loads(train_json.read_text()) if train_json.is_file() else {}
     net = network_from_checkpoint(ck)

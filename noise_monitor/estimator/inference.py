@@ -183,7 +183,7 @@ def load(name: str = "full_meta", device: str = "auto", weights: str | Path | No
     if not path.is_file():
         raise FileNotFoundError(f"weights file {path} not found")
     try:
-        ckpt = torch.load(path, map_location=dev, weights_only=False)
+        ckpt = torch.load(path, map_location=dev, weights_only=True)
     except Exception as exc:  # truncated, empty or not a torch file: unpickling errors of every kind
         raise ValueError(f"weights file {path} is not a readable checkpoint ({type(exc).__name__}: {exc})") from None
     if not isinstance(ckpt, dict) or ckpt.get("variant") not in NAMES:

@@ -107,7 +107,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     if init is not None:
         if not Path(init).is_file():
             raise FileNotFoundError(f"--init: {init} not found")
-        ck = torch.load(init, map_location=dev, weights_only=False)
+        ck = torch.load(init, map_location=dev, weights_only=True)
         if ck.get("variant") != settings.variant or ck["config"] != net.cfg.as_dict():
             raise ValueError(f"--init: {init} is not a {settings.variant} network of the same configuration")
         net.load_state_dict(ck["state_dict"])
@@ -115,7 +115,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     if resume:
         if not ckpt_path.is_file():
             raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
-        ck = torch.load(ckpt_path, map_location=dev, weights_only=False)
+        ck = torch.load(ckpt_path, map_location=dev, weights_only=True)
         if ck["variant"] != settings.variant:
             raise ValueError(f"--resume: checkpoint is for variant {ck['variant']!r}, not {settings.variant!r}")
         net.load_state_dict(ck["state_dict"])
