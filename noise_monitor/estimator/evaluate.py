@@ -16,6 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..physics import CameraMetadata, NoiseModel
+from ..physics.sensitivity import SWEEP_INTENSITIES, SWEEPS, reference_metadata
 from .data import PARTS, generate, load, metas_of, save
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
@@ -87,30 +88,6 @@ def timed_predict(estimator, data: dict[str, np.ndarray], batch: int = 64) -> tu
 
 
 # --- the paper's metadata sensitivity sweep ------------------------------------------------------
-#: Sampled values of the appendix table (gain as factor 1..16, pixel size in um, white noise in 1e-8).
-SWEEP_FIELDS: dict[str, np.ndarray] = {
-    "gain_db": 20.0 * np.log10(np.linspace(1.0, 16.0, 10)),
-    "exposure_time_s": np.linspace(0.001, 0.2, 10),
-    "sensor_temperature_c": np.linspace(0.0, 80.0, 10),
-    "dark_signal_fom_na_cm2": np.linspace(0.0, 1.0, 10),
-    "full_well_e": np.linspace(2_000.0, 100_000.0, 10),
-    "pixel_clock_hz": np.linspace(8e6, 150e6, 10),
-    "sense_node_gain_v_per_e": np.linspace(1e-6, 5e-6, 10),
-    "sense_node_reset_factor": np.linspace(0.0, 1.0, 10),
-    "pixel_size_m": np.linspace(0.9e-6, 10e-6, 10),
-    "thermal_white_noise_v_per_sqrt_hz": np.linspace(1e-9, 60e-9, 10),
-}
-SWEEP_INTENSITIES = np.linspace(0.0, 255.0, 10).round()
-
-
-def sweep_reference_meta() -> CameraMetadata:
-    """All variable metadata at their maximum, CMOS (the paper's setting)."""
-    return CameraMetadata(gain_db=20.0 * np.log10(16.0), exposure_time_s=0.2, sensor_temperature_c=80.0,
-                          full_well_e=100_000.0, pixel_size_m=10e-6, dark_signal_fom_na_cm2=1.0,
-                          pixel_clock_hz=150e6, sense_node_gain_v_per_e=5e-6, sense_node_reset_factor=1.0,
-                          thermal_white_noise_v_per_sqrt_hz=60e-9, sensor_type="cmos")
-
-
 def sensitivity_sweep(predict_total: Callable[[np.ndarray, CameraMetadata], float], patch_size: int,
                       seed: int = 2024, model: NoiseModel | None = None) -> dict:
     """Estimator total vs the noise model on flat patches (128 DN unless the intensity is swept).
@@ -121,10 +98,10 @@ def sensitivity_sweep(predict_total: Callable[[np.ndarray, CameraMetadata], floa
     """
     model = model or NoiseModel()
     rng = np.random.default_rng(seed)
-    base = sweep_reference_meta()
+    base = reference_metadata()
     rows: dict[str, dict] = {}
     cells = [("mean_intensity_dn", v, base) for v in SWEEP_INTENSITIES]
-    for field, values in SWEEP_FIELDS.items():
+    for field, values in SWEEPS.items():
         ref = base.replace(sensor_type="ccd") if field == "thermal_white_noise_v_per_sqrt_hz" else base
         cells += [(field, v, ref.replace(**{field: float(v)})) for v in values]
     for field, value, meta in tqdm(cells, desc="sensitivity", leave=False):
