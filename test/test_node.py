@@ -172,17 +172,21 @@ def test_clean_frames_stay_ok_and_sources_match_truth(rig_factory):
 
 def test_extra_image_noise_raises_alarm_with_cause(rig_factory):
     rig = rig_factory("noisy")
+    pn_clean = []
     for i in range(10):
         report, _ = rig.step(i)
         assert report.level == OK, report.message
-    pn_clean = float(report.values["sigma_pn"])
+        pn_clean.append(float(report.values["sigma_pn"]))
+    pn_noisy = []
     for n in range(1, 21):
         report, _ = rig.step(10 + n, extra_sigma=5.0)
+        pn_noisy.append(float(report.values["sigma_pn"]))
         if report.level == ERROR:
             break
     assert report.level == ERROR and n <= 12, report.message
     assert CAUSE_IMAGE_NOISIER in report.message and float(report.values["xi_filtered"]) < -1.0
-    assert float(report.values["sigma_pn"]) == pytest.approx(pn_clean, rel=0.1)  # sources stay put
+    # sources stay put (frame to frame they vary with the patches chosen in the moving scene)
+    assert np.mean(pn_noisy) == pytest.approx(np.mean(pn_clean), rel=0.1)
 
 
 def test_doubled_thermal_white_noise_metadata_raises_alarm_with_cause(rig_factory):
