@@ -15,3 +15,17 @@ import pytest  # noqa: E402
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def rig_factory(request: pytest.FixtureRequest, estimator):
+    """Make test rigs of the requesting module's ``Rig`` class (node + camera); closes them afterwards."""
+    rigs = []
+
+    def make(topic: str, **params):
+        rigs.append(request.module.Rig(estimator, topic, **params))
+        return rigs[-1]
+
+    yield make
+    for rig in rigs:
+        rig.close()

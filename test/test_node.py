@@ -137,18 +137,6 @@ class Rig:
         self.context.try_shutdown()
 
 
-@pytest.fixture
-def rig_factory(estimator):
-    rigs: list[Rig] = []
-
-    def make(topic: str, **params: Any) -> Rig:
-        rigs.append(Rig(estimator, topic, **params))
-        return rigs[-1]
-
-    yield make
-    for r in rigs:
-        r.close()
-
 
 def test_clean_frames_stay_ok_and_sources_match_truth(rig_factory):
     rig = rig_factory("clean")

@@ -155,18 +155,6 @@ class Rig:
         self.context.try_shutdown()
 
 
-@pytest.fixture
-def rig_factory(estimator):
-    rigs: list[Rig] = []
-
-    def make(topic: str, **params: Any) -> Rig:
-        rigs.append(Rig(estimator, topic, **params))
-        return rigs[-1]
-
-    yield make
-    for r in rigs:
-        r.close()
-
 
 def bad_images(patch_size: int) -> list[tuple[str, Image, str]]:
     good = np.full((SIZE, SIZE), 100, np.uint8).tobytes()
