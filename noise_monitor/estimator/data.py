@@ -10,21 +10,30 @@ so training never needs the noise model again. Per patch:
   - unexpected noise: with probability ``p_unexpected`` an additive N(0, s) (s log-uniform in
     ``unexpected_range``, or ``unexpected_sigma`` if set), clipped, measured as the std of its increment;
   - sigma_image = sqrt(sum of the image's per-source sigma^2 + unexpected^2), xi = sigma_model - sigma_image.
+
+A camera's own effect set (``effects``, e.g. a profile extended by the lab) is simulated on top of the
+paper's sources and enters sigma_model, sigma_image and the tables (the ``extra`` row); fixed-pattern
+effects get a fresh pattern seed per group so no pattern can be memorised. ``sensor`` (a profile's
+static fields) fixes the sensor while the operating conditions stay random.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 from tqdm import tqdm
 
 from ..physics import CameraMetadata, NoiseModel, factor_to_db, sample_metadata
-from ..physics.metadata import NUMERIC_FIELDS
+from ..physics.effects import effect_class
+from ..physics.metadata import NUMERIC_FIELDS, STATIC_FIELDS
 from .images import sample_clean_patches, source_images
-from .physics_prior import SOURCES, PhysicsPrior
+from .physics_prior import EXTRA, SOURCES, PhysicsPrior
 
-TRUTH_KEYS = ("pn", "dcsn", "rn", "sigma_model", "sigma_image", "xi")
+TRUTH_KEYS = ("pn", "dcsn", "rn", EXTRA, "sigma_model", "sigma_image", "xi")
+EffectSpecs = Mapping[str, Mapping[str, float]]
 
 
 @dataclass(frozen=True)
@@ -62,13 +71,36 @@ def _random_gain_meta(meta: CameraMetadata, rng: np.random.Generator) -> CameraM
     return meta.replace(gain_db=float(factor_to_db(rng.uniform(1.0, 16.0))))
 
 
+def camera_model(effects: EffectSpecs | None, rng: np.random.Generator | None = None) -> NoiseModel:
+    """The paper's sources plus ``effects``; with ``rng``, fixed patterns get random seeds."""
+    specs = {name: dict(params) for name, params in (effects or {}).items()}
+    if rng is not None:
+        for name, params in specs.items():
+            if any(p.name == "seed" for p in effect_class(name).params):
+                params["seed"] = int(rng.integers(0, 2**31 - 1))
+    return NoiseModel(extra=specs)
+
+
+def _metadata(rng: np.random.Generator, sensor: Mapping[str, Any] | None) -> CameraMetadata:
+    meta = sample_metadata(rng)
+    if not sensor:
+        return meta
+    fixed = {k: v for k, v in sensor.items() if k in STATIC_FIELDS}
+    return CameraMetadata.from_mapping({**meta.as_dict(), **fixed})
+
+
 def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: Scheme = Scheme(),
-             group: int = 8, progress: bool = True, model: NoiseModel | None = None) -> dict[str, np.ndarray]:
-    """A seeded dataset of ``n`` noisy patches with truths, metadata and the analytic tables per group."""
+             group: int = 8, progress: bool = True, effects: EffectSpecs | None = None,
+             sensor: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
+    """A seeded dataset of ``n`` noisy patches with truths, metadata and the analytic tables per group.
+
+    ``effects``: effect specs beyond the paper's sources (name -> parameters); ``sensor``: static
+    metadata fields that replace the random sensor (operating conditions stay random).
+    """
     if n < 1 or patch_size < 8:
         raise ValueError("need n >= 1 patches of at least 8x8 px")
     rng = np.random.default_rng(seed)
-    prior = PhysicsPrior(model)
+    prior = PhysicsPrior(camera_model(effects))  # validates the specs before any work
     images = source_images(split, rng)
     n_groups = -(-n // group)
     clean = sample_clean_patches(images, rng, n, patch_size)
@@ -79,20 +111,23 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
     group_of = np.repeat(np.arange(n_groups), group)[:n]
     metas, tables = [], []
     for g in tqdm(range(n_groups), desc=f"data {split} seed {seed}", disable=not progress, unit="group"):
-        meta = sample_metadata(rng)
+        meta = _metadata(rng, sensor) if sensor else sample_metadata(rng)
+        if effects:
+            prior = PhysicsPrior(camera_model(effects, rng))
         metas.append(meta_to_row(meta))
         tables.append(prior.tables(meta))
         for i in np.flatnonzero(group_of == g):
             img, sig = prior.model.simulate(clean[i], meta, rng, mode="sequential")
             for s in SOURCES:
                 truth[s][i] = sig[s]
-            truth["sigma_model"][i] = np.sqrt(sum(sig[s] ** 2 for s in SOURCES))
+            truth[EXTRA][i] = np.sqrt(sum(sig[e] ** 2 for e in prior.extra_effects))
+            truth["sigma_model"][i] = sig["total"]
             if rng.random() < scheme.p_scheme:
                 over = {s: _random_gain_meta(meta, rng) for s in SOURCES if rng.random() < scheme.p_source}
                 if over:
                     overridden[i] = [s in over for s in SOURCES]
                     img, sig = prior.model.simulate(clean[i], meta, rng, mode="sequential", overrides=over)
-            var_image = sum(sig[s] ** 2 for s in SOURCES)
+            var_image = sig["total"] ** 2
             if rng.random() < scheme.p_unexpected:
                 s_u = scheme.unexpected_sigma or float(np.exp(rng.uniform(*np.log(scheme.unexpected_range))))
                 nxt = np.clip(img + rng.normal(0.0, s_u, img.shape).astype(np.float32), 0.0, 255.0)
@@ -105,8 +140,19 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
     return {
         "noisy": noisy, "clean": clean, "group_of": group_of, "meta_rows": np.stack(metas),
         "tables": np.stack(tables), "overridden": overridden, "unexpected": unexpected,
+        "effects_json": np.array(json.dumps(_plain(effects), sort_keys=True)),
+        "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)),
         **{f"truth_{k}": v for k, v in truth.items()},
     }
+
+
+def _plain(specs: Mapping | None) -> dict:
+    return {k: (_plain(v) if isinstance(v, Mapping) else v) for k, v in (specs or {}).items()}
+
+
+def camera_of(data: dict[str, np.ndarray]) -> tuple[dict, dict]:
+    """(effect specs, fixed sensor fields) a dataset was generated with (empty for the paper's camera)."""
+    return tuple(json.loads(str(data[k])) if k in data else {} for k in ("effects_json", "sensor_json"))
 
 
 def save(data: dict[str, np.ndarray], path: Path) -> None:

@@ -3,8 +3,9 @@
 ``full_meta`` (shipped): per-source sigma = the analytic model (sequential protocol) on each patch's
 5x5-smoothed intensity map with the stated metadata; sigma_model = sqrt(PN^2 + DCSN^2 + RN^2);
 sigma_image = the compact network's measurement of the noise actually in the patch; xi = sigma_model -
-sigma_image; total = sigma_model (the paper's total without xi). The paper-family variants return their
-branch outputs (``drne``: total only).
+sigma_image; total = sigma_model (the paper's total without xi). With a camera model of more effects
+(``model``, or the effects a network was fine-tuned with), ``extra`` is their joint sigma and sigma_model
+includes it. The paper-family variants return their branch outputs (``drne``: total only).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from ..physics import CameraMetadata, NoiseModel
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
 from .networks import N_SCALARS, SIGMA_SCALE
-from .physics_prior import SOURCES, PhysicsPrior, group_by_meta
+from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 from .train import network_from_checkpoint
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -108,7 +109,9 @@ class FullMetaEstimator(_Base):
 
     def __init__(self, ckpt: dict, device: torch.device, model: NoiseModel | None = None, backend: str = "auto") -> None:
         super().__init__(ckpt, device)
-        self.prior = PhysicsPrior(model)
+        #: the camera effects the network was trained with (empty: the paper's sources only)
+        self.trained_effects: dict = dict(ckpt.get("effects") or {})
+        self.prior = PhysicsPrior(model if model is not None else NoiseModel(extra=self.trained_effects))
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if backend == "onnx" and device.type != "cpu":
@@ -138,7 +141,7 @@ class FullMetaEstimator(_Base):
         maps, scalars, phys = compact_inputs(x, tables, group_of, meta_norm)
         r = np.clip(self._run_net(maps, scalars).astype(np.float64), -6.0, 6.0)
         sigma_image = np.maximum(phys["total"], SIGMA_MODEL_FLOOR) * np.exp(r)
-        out = {s: phys[s] for s in SOURCES}
+        out = {s: phys[s] for s in SOURCES + ((EXTRA,) if EXTRA in phys else ())}
         out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
                    total=phys["total"].copy())
         return out
@@ -175,7 +178,8 @@ def load(name: str = "full_meta", device: str = "auto", weights: str | Path | No
          model: NoiseModel | None = None, backend: str = "auto") -> FullMetaEstimator | PaperEstimator:
     """Load a trained estimator (bundled weights, or ``weights`` = a .pt file written by training).
 
-    ``model``: the NoiseModel of the physics prior (default: the paper's sources); ``backend``: see
+    ``model``: the NoiseModel of the physics prior (default: the paper's sources plus the effects the
+    weights were trained with, see ``noise-monitor train --profile``); ``backend``: see
     :class:`FullMetaEstimator` (paper-family variants always run in torch).
     """
     dev = resolve_device(device)

@@ -17,6 +17,8 @@ from ..physics import CameraMetadata, NoiseModel
 from ..physics.model import TABLE_STEP_DN
 
 SOURCES = ("pn", "dcsn", "rn")
+#: Name of the optional 4th table row: every noise effect of the model beyond the paper's sources.
+EXTRA = "extra"
 SMOOTH_KERNEL = 5
 #: Floor of the per-pixel sigma map used to normalise residuals (DN).
 SIGMA_MAP_FLOOR = 0.25
@@ -45,10 +47,26 @@ class PhysicsPrior:
         self.model = model or NoiseModel()
         self.mode = mode
 
+    @property
+    def extra_effects(self) -> list[str]:
+        """Noise effects of the model beyond the paper's sources (summed into the ``extra`` row)."""
+        return [n for n in (e.name for e in self.model.noise_effects) if n not in SOURCES]
+
     def tables(self, meta: CameraMetadata) -> np.ndarray:
-        """float64 (2, S, G): E[n|v] and E[n^2|v] of the paper's sources on the model's intensity grid."""
+        """float64 (2, S, G): E[n|v] and E[n^2|v] of the paper's sources on the model's intensity grid.
+
+        With effects beyond the paper's sources, a 4th row (S = 4) holds their sum as independent
+        noises: means add, variances add.
+        """
         t = self.model.tables(meta, self.mode)
-        return np.stack([np.stack([t[s][k] for s in SOURCES]) for k in (0, 1)])
+        m1 = [t[s][0] for s in SOURCES]
+        m2 = [t[s][1] for s in SOURCES]
+        extra = self.extra_effects
+        if extra:
+            mean = sum(t[n][0] for n in extra)
+            m1.append(mean)
+            m2.append(sum(t[n][1] - t[n][0] ** 2 for n in extra) + mean**2)
+        return np.stack([np.stack(m1), np.stack(m2)])
 
     def predict(self, smooth: np.ndarray, metas: Sequence[CameraMetadata], with_map: bool = False,
                 debias: bool = True) -> dict[str, np.ndarray]:
@@ -81,13 +99,16 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
                         with_map: bool = False, debias: bool = True) -> dict[str, np.ndarray]:
     """Per-source sigma and ``total`` (sqrt of the sum of squares) from tables (K, 2, S, G).
 
+    S = 3 (the paper's sources) or 4 (plus ``extra``, see :meth:`PhysicsPrior.tables`).
+
     Patch i uses ``tables[group_of[i]]``. The smoothed map is first mapped to clean levels
     (:func:`clean_level`, unless ``debias`` is False); integrating the tables over the resulting
     intensity histogram (linear weights) equals ``NoiseModel.predict`` on that map. With ``with_map`` also
     ``sigma_map`` (N, H, W): the model's total sigma at each pixel's level.
     """
     n, h, w = smooth.shape
-    sig = np.empty((n, len(SOURCES)))
+    names = (SOURCES + (EXTRA,))[: tables.shape[2]]
+    sig = np.empty((n, len(names)))
     sigma_map = np.empty(smooth.shape, dtype=np.float32) if with_map else None
     g = tables.shape[-1]
     for k in np.unique(group_of):
@@ -105,7 +126,7 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
         if sigma_map is not None:
             level = np.sqrt(np.maximum(m2 - m1**2, 0.0).sum(axis=0))
             sigma_map[idx] = (level[i0] * (1.0 - frac) + level[i0 + 1] * frac).astype(np.float32)
-    out = {s: sig[:, j] for j, s in enumerate(SOURCES)}
+    out = {s: sig[:, j] for j, s in enumerate(names)}
     out["total"] = np.sqrt((sig**2).sum(axis=1))
     if sigma_map is not None:
         out["sigma_map"] = sigma_map

@@ -91,7 +91,9 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     """Train a variant; writes ``checkpoint.pt`` every ``checkpoint_every`` steps and ``<variant>.pt``.
 
     ``init``: start from the weights of an earlier ``<variant>.pt`` (fine-tuning; fresh optimiser and
-    schedule, its step count and time are added to this run's).
+    schedule, its step count and time are added to this run's). The checkpoints record the camera
+    effects and sensor fields the data was generated with (``effects``, ``sensor``), so ``load`` builds
+    the matching physics prior.
     """
     torch.set_num_threads(threads)
     dev = resolve_device(device)
@@ -124,6 +126,9 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         step, elapsed = ck["step"], ck["elapsed_s"]
         prior_steps, prior_s = ck.get("prior_steps", 0), ck.get("prior_elapsed_s", 0.0)
         rng.bit_generator.state = ck["rng_state"]
+    from .data import camera_of
+
+    effects, sensor = camera_of(data)
     tensors = tensors_for(settings.variant, data)
     n = len(data["noisy"])
     net.train()
@@ -144,9 +149,11 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         bar.set_postfix(loss=f"{running:.4g}")
         if step % settings.checkpoint_every == 0 or step == settings.steps:
             ck = _checkpoint(net, settings, step, time.time() - t0, opt, sched, rng)
-            torch.save({**ck, "prior_steps": prior_steps, "prior_elapsed_s": prior_s}, ckpt_path)
+            torch.save({**ck, "prior_steps": prior_steps, "prior_elapsed_s": prior_s, "effects": effects,
+                        "sensor": sensor}, ckpt_path)
     bar.close()
-    final = {**_checkpoint(net, settings, step, time.time() - t0), "prior_steps": prior_steps, "prior_elapsed_s": prior_s}
+    final = {**_checkpoint(net, settings, step, time.time() - t0), "prior_steps": prior_steps, "prior_elapsed_s": prior_s,
+             "effects": effects, "sensor": sensor}
     path = out_dir / f"{settings.variant}.pt"
     torch.save(final, path)
     return path

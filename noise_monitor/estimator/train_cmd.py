@@ -6,7 +6,10 @@ import json
 import time
 from pathlib import Path
 
-from .data import Scheme, generate, load, save
+from ..physics import load_profile
+from ..physics.effects import load_plugin_file
+from ..physics.metadata import STATIC_FIELDS
+from .data import Scheme, camera_of, generate, load, save
 from .train import VARIANTS, TrainSettings, train
 
 HELP = "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"
@@ -29,6 +32,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint.pt")
     p.add_argument("--init", type=Path, default=None, help="start from these weights (<variant>.pt; fine-tuning)")
+    p.add_argument("--profile", default=None,
+                   help="camera profile (YAML or bundled name): its effects are simulated and enter the physics "
+                        "prior, and its sensor fields replace the random sensor (e.g. a profile written by "
+                        "`noise-monitor analyze --write-profile`, to fine-tune with --init)")
+    p.add_argument("--effect-plugin", action="append", default=[], metavar="FILE",
+                   help="load effects from FILE (for a profile that uses plug-in effects; repeatable)")
     p.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda")
     p.add_argument("--json", type=Path, default=None, help="write a JSON summary here")
 
@@ -50,24 +59,41 @@ def _command(args: argparse.Namespace) -> str:
         if key.startswith("_") or key in ("command", "json") or value is None or value is False:
             continue
         flag = "--" + key.replace("_", "-")
-        parts.append(flag if value is True else f"{flag} {value}")
+        for v in value if isinstance(value, list) else [value]:
+            parts.append(flag if v is True else f"{flag} {v}")
     return " ".join(parts)
+
+
+def camera(profile: str | None) -> tuple[dict, dict]:
+    """(effect specs, static sensor fields) of a profile; empty for the paper's random cameras."""
+    if profile is None:
+        return {}, {}
+    prof = load_profile(profile)
+    sensor = {k: v for k, v in prof.values.items() if k in STATIC_FIELDS}
+    return {k: dict(v) for k, v in prof.effects.items()}, sensor
 
 
 def run(args: argparse.Namespace) -> int:
     _check(args)
+    for plugin in args.effect_plugin:
+        load_plugin_file(plugin)
+    effects, sensor = camera(args.profile)
     data_path = args.data or args.out / "train_data.npz"
     t0 = time.time()
     if data_path.is_file():
         data = load(data_path)
+        if camera_of(data) != (effects, sensor):
+            raise ValueError(f"dataset {data_path} was generated for another camera (effects, sensor) than "
+                             f"{args.profile or 'the paper random cameras'}: {camera_of(data)}; give a new --data path")
     else:
-        data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme())
+        data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme(), effects=effects, sensor=sensor)
         save(data, data_path)
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
+               "effects": effects, "sensor": sensor,
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
                "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
                "settings": vars(settings)}
