@@ -171,3 +171,34 @@ def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):
     broken.write_bytes(noisy_bag.read_bytes()[:5000])
     assert main(["replay", str(broken), "--profile", "ev76c661", "--out", str(tmp_path / "b")]) == 2
     assert "cannot read bag" in capsys.readouterr().err
+
+
+def test_frame_table_columns_episodes_and_csv(tmp_path):
+    """Columns across a storage-block boundary, late keys, skipped frames, an episode at the end."""
+    from noise_monitor.bag.results import BLOCK_ROWS, FrameTable, alarm_episodes, skip_reasons, source_summaries, write_csv
+
+    table, n = FrameTable(), BLOCK_ROWS + 10
+    for i in range(n):
+        skipped = i % 1000 == 3
+        alarm = i >= n - 7
+        numbers = {} if skipped else {"xi": -2.0 if alarm else 0.01 * (i % 7), "xi_filtered": -1.5 if alarm else 0.0,
+                                      **({"sigma_model_prnu": 0.5} if i > 2000 else {})}
+        table.append(index=i, stamp_ns=10**9 + i * 10**8, processed=not skipped, level=2 if alarm else 0,
+                     alarm_active=alarm, alarm_state="active" if alarm else "ok", cause="xi < 0" if alarm else None,
+                     skip_reason="metadata missing" if skipped else None, numbers=numbers,
+                     conditions={"gain_db": 6.0, "exposure_time_s": 0.01, "sensor_temperature_c": 30.0})
+    assert len(table) == n and table.column("time_s")[-1] == pytest.approx((n - 1) * 0.1)
+    assert skip_reasons(table) == {"metadata missing": 5}
+    prnu = table.numbers("sigma_model_prnu")
+    assert np.isnan(prnu[:2001]).all() and np.all(prnu[2001:][table.column("processed")[2001:]] == 0.5)
+    (ep,) = alarm_episodes(table)
+    assert (ep["start_index"], ep["end_index"], ep["frames"], ep["sign"], ep["cause"], ep["active_at_end"]) == \
+        (n - 7, n - 1, 7, "-", "xi < 0", True)
+    xi = source_summaries(table)["xi"]
+    assert xi["n"] == n - 5
+    write_csv(table, tmp_path / "t.csv")
+    with open(tmp_path / "t.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["index"]) for r in rows] == list(range(n))
+    assert rows[3]["skip_reason"] == "metadata missing" and rows[3]["xi"] == "" and rows[3]["gain_db"] == "6"
+    assert rows[-1]["alarm"] == "1" and float(rows[-1]["xi"]) == -2.0 and rows[4100]["sigma_model_prnu"] == "0.5"

@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .results import FrameRow  # noqa: E402
+from .results import FrameTable  # noqa: E402
 
 SERIES = (("sigma_pn", "PN (photon shot)", "tab:blue"), ("sigma_dcsn", "DCSN (dark current shot)", "tab:orange"),
           ("sigma_rn", "RN (readout)", "tab:green"), ("sigma_total", "total (estimated)", "black"),
@@ -19,15 +19,7 @@ SERIES = (("sigma_pn", "PN (photon shot)", "tab:blue"), ("sigma_dcsn", "DCSN (da
           ("sigma_image", "noise measured in the image", "tab:purple"))
 
 
-def _series(rows: list[FrameRow], key: str) -> tuple[np.ndarray, np.ndarray]:
-    pts = [(r.time_s, r.numbers[key]) for r in rows if r.processed and key in r.numbers]
-    if not pts:
-        return np.empty(0), np.empty(0)
-    t, v = zip(*pts)
-    return np.asarray(t), np.asarray(v)
-
-
-def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path, title: str,
+def plot_replay(table: FrameTable, episodes: list[dict[str, Any]], path: Path, title: str,
                 threshold_dn: float, frame_period_s: float = 0.0,
                 truth_spans: list[tuple[float, float, str]] = ()) -> Path:
     """Two stacked panels sharing the time axis (seconds since the first frame).
@@ -37,14 +29,14 @@ def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path
     fig, (ax_s, ax_x, ax_c) = plt.subplots(3, 1, figsize=(13, 8.5), sharex=True,
                                            gridspec_kw={"height_ratios": [3, 2, 1.4]}, constrained_layout=True)
     for key, label, color in SERIES:
-        t, v = _series(rows, key)
+        t, v = table.series(key)
         if t.size:
             style = {"sigma_model": "--", "sigma_image": ":"}.get(key, "-")
             ax_s.plot(t, v, style, color=color, lw=1.3, label=label, marker="." if t.size < 60 else None)
-    t, v = _series(rows, "xi")
+    t, v = table.series("xi")
     if t.size:
         ax_x.plot(t, v, ".", color="tab:purple", ms=4, alpha=0.6, label="xi per frame")
-    t, v = _series(rows, "xi_filtered")
+    t, v = table.series("xi_filtered")
     if t.size:
         ax_x.plot(t, v, "-", color="tab:purple", lw=1.6, label="xi filtered")
     ax_x.axhline(0.0, color="black", lw=0.6)
@@ -59,10 +51,10 @@ def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path
     for i, (a, b, label) in enumerate(truth_spans):
         ax_x.axvspan(a - frame_period_s / 2, b + frame_period_s / 2, fill=False, hatch="//", ec="tab:gray", lw=0,
                      label=f"simulated: {label}" if i == 0 else None)
-    skipped = [r.time_s for r in rows if not r.processed]
-    if skipped:
+    skipped = table.column("time_s")[~table.column("processed")]
+    if skipped.size:
         ax_x.plot(skipped, np.zeros(len(skipped)), "x", color="tab:gray", ms=5, label="skipped frame")
-    _plot_conditions(ax_c, rows)
+    _plot_conditions(ax_c, table)
     ax_s.set_ylabel("noise sigma [DN]")
     ax_s.set_ylim(bottom=0)
     ax_x.set_ylabel("xi = sigma_model - sigma_image [DN]")
@@ -77,19 +69,18 @@ def plot_replay(rows: list[FrameRow], episodes: list[dict[str, Any]], path: Path
     return path
 
 
-def _plot_conditions(ax: plt.Axes, rows: list[FrameRow]) -> None:
+def _plot_conditions(ax: plt.Axes, table: FrameTable) -> None:
     """Stated gain and temperature (left axis) and exposure (right axis, log) per frame."""
-    pts = [(r.time_s, r.conditions) for r in rows if r.conditions]
-    if not pts:
+    t, gain = table.series("gain_db")
+    if not t.size:
         ax.text(0.5, 0.5, "no usable metadata", transform=ax.transAxes, ha="center", va="center")
         return
-    t = np.array([p[0] for p in pts])
-    ax.step(t, [p[1]["gain_db"] for p in pts], where="post", color="tab:brown", label="gain [dB]")
-    ax.step(t, [p[1]["sensor_temperature_c"] for p in pts], where="post", color="tab:red", label="temperature [degC]")
+    ax.step(t, gain, where="post", color="tab:brown", label="gain [dB]")
+    ax.step(*table.series("sensor_temperature_c"), where="post", color="tab:red", label="temperature [degC]")
     ax.set_ylabel("gain [dB]\ntemperature [degC]")
     ax_e = ax.twinx()
-    ax_e.step(t, [1e3 * p[1]["exposure_time_s"] for p in pts], where="post", color="tab:cyan", ls="--",
-              label="exposure [ms]")
+    t, exposure = table.series("exposure_time_s")
+    ax_e.step(t, 1e3 * exposure, where="post", color="tab:cyan", ls="--", label="exposure [ms]")
     ax_e.set_yscale("log")
     ax_e.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
     ax_e.yaxis.set_major_formatter(FormatStrFormatter("%g"))

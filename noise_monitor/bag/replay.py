@@ -17,6 +17,7 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 from msg_adapters.diagnostics import LEVEL_NAMES
@@ -28,8 +29,8 @@ from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
 from .errors import BagError
 from .plot import plot_replay
 from .reader import BagFrame, open_bag
-from .results import (CONDITION_KEYS, FrameRow, alarm_episodes, skip_reasons, source_summaries, truth_check,
-                      write_csv)
+from .results import (CONDITION_KEYS, FrameTable, alarm_episodes, skip_reasons, skipped_frames, source_summaries,
+                      truth_check, write_csv)
 from .simulate import truth_path
 from .writer import BagWriter, typestore
 
@@ -46,12 +47,12 @@ def _settings(config: MonitorConfig | str | Path | None) -> tuple[MonitorConfig,
     return MonitorConfig.from_mapping(params, ignore_unknown=True), params
 
 
-def _row(bf: BagFrame, t0: int, res: FrameResult) -> FrameRow:
+def _record(table: FrameTable, bf: BagFrame, res: FrameResult) -> None:
     meta = bf.metadata
-    return FrameRow(index=bf.index, stamp_ns=res.stamp_ns, time_s=(res.stamp_ns - t0) / 1e9,
-                    processed=res.processed, level=res.level, alarm_state=res.alarm_state,
-                    alarm_active=res.alarm_active, cause=res.cause, skip_reason=res.skip_reason,
-                    numbers=res.numeric(), conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {})
+    table.append(index=bf.index, stamp_ns=res.stamp_ns, processed=res.processed, level=res.level,
+                 alarm_active=res.alarm_active, alarm_state=res.alarm_state, cause=res.cause,
+                 skip_reason=res.skip_reason, numbers=res.numeric(),
+                 conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {})
 
 
 def evaluate(monitor: Monitor, bf: BagFrame) -> FrameResult:
@@ -118,22 +119,23 @@ def replay(
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
     out = Path(out_dir) if out_dir is not None else None
     mcap_path = out / OUTPUT_FILES["mcap"] if out is not None else None
-    rows: list[FrameRow] = []
+    table = FrameTable()
     with ExitStack() as stack:
         # the bag first: an unusable bag is reported before the estimator is loaded
         reader = stack.enter_context(open_bag(bag, image_topic=image_topic, metadata_topic=metadata_topic,
                                               camera_info_topic=camera_info_topic,
                                               temperature_topic=temperature_topic))
-        if estimator is None:
+        model = NoiseModel(extra=prof.effects if prof else None)
+        if estimator is None:  # the estimator's physics prior is the profile's model, as in the node
             from noise_monitor.estimator import load
 
             estimator = load(model_name or params.get("model", "full_meta"),
                              device=device or params.get("device", "cpu"),
-                             weights=weights or params.get("weights") or None)
+                             weights=weights or params.get("weights") or None, model=model)
         set_inference_threads(int(params.get("threads", 0)) if threads is None else threads)
         camera = camera_name or params.get("camera_name") or "camera"
         hw = hardware_id or params.get("hardware_id") or f"{prof.name if prof else 'unknown'}/{camera}"
-        monitor = Monitor(cfg, estimator, NoiseModel(extra=prof.effects if prof else None), camera, hw)
+        monitor = Monitor(cfg, estimator, model, camera, hw)
         depth = bit_depth or int(params.get("bit_depth", 0)) or None
         diag_period_ns = int(1e9 / float(params.get("diagnostics_rate_hz", 1.0)))
         if mcap_path is not None:
@@ -160,16 +162,17 @@ def replay(
                         writer.write(topic, msg, t)
                     t += diag_period_ns
             res = evaluate(monitor, bf)
-            rows.append(_row(bf, rows[0].stamp_ns if rows else bf.stamp_ns, res))
+            _record(table, bf, res)
             if writer is not None:
                 for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
                     writer.write(topic, msg, res.stamp_ns)
             last_pub, last_log = res.stamp_ns, bf.log_time_ns
     wall = time.perf_counter() - t_wall
-    if len(rows) != n_images:
-        raise BagError(f"bag {bag}: read {len(rows)} images but its index lists {n_images}")
-    episodes = alarm_episodes(rows)
-    processed = sum(r.processed for r in rows)
+    if len(table) != n_images:
+        raise BagError(f"bag {bag}: read {len(table)} images but its index lists {n_images}")
+    episodes = alarm_episodes(table)
+    processed = int(table.column("processed").sum())
+    levels = table.column("level")
     summary: dict[str, Any] = {
         "bag": str(bag),
         "profile": prof.name if prof else None,
@@ -177,18 +180,17 @@ def replay(
         "hardware_id": hw,
         "topics_in": topics,
         "topics_out": output_topics(namespace),
-        "frames_total": len(rows),
+        "frames_total": len(table),
         "frames_processed": processed,
-        "frames_skipped": len(rows) - processed,
-        "skip_reasons": skip_reasons(rows),
-        "skipped": [{"index": r.index, "stamp_ns": r.stamp_ns, "reason": r.skip_reason}
-                    for r in rows if not r.processed][:MAX_LISTED_SKIPS],  # all of them are in the CSV
+        "frames_skipped": len(table) - processed,
+        "skip_reasons": skip_reasons(table),
+        "skipped": skipped_frames(table)[:MAX_LISTED_SKIPS],  # all of them are in the CSV
         "alarms": episodes,
-        **source_summaries(rows),
-        "levels": {name: sum(r.level == lvl for r in rows) for lvl, name in LEVEL_NAMES.items()},
+        **source_summaries(table),
+        "levels": {name: int(np.sum(levels == lvl)) for lvl, name in LEVEL_NAMES.items()},
         "bag_duration_s": round(bag_duration, 6),
         "wall_time_s": round(wall, 3),
-        "frames_per_s": round(len(rows) / wall, 3) if wall > 0 else None,
+        "frames_per_s": round(len(table) / wall, 3) if wall > 0 else None,
         "realtime_factor": round(bag_duration / wall, 3) if wall > 0 and bag_duration > 0 else None,
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
     }
@@ -196,15 +198,15 @@ def replay(
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)
     if out is not None:
-        write_csv(rows, out / OUTPUT_FILES["csv"])
+        write_csv(table, out / OUTPUT_FILES["csv"])
         files = {"mcap": str(mcap_path), "csv": str(out / OUTPUT_FILES["csv"])}
-        if plot and rows:
-            period = bag_duration / (len(rows) - 1) if len(rows) > 1 else 0.0
+        if plot and table:
+            period = bag_duration / (len(table) - 1) if len(table) > 1 else 0.0
             title = f"{Path(bag).name}: {summary['estimator']} on {prof.name if prof else 'bag metadata'}"
-            t0 = rows[0].stamp_ns
+            t0 = int(table.column("stamp_ns")[0])
             spans = [((e["start_ns"] - t0) / 1e9, (e["end_ns"] - t0) / 1e9, "; ".join(e["corrupted"]))
                      for e in truth or []]
-            plot_replay(rows, episodes, out / OUTPUT_FILES["png"], title, cfg.xi_threshold_dn, period, spans)
+            plot_replay(table, episodes, out / OUTPUT_FILES["png"], title, cfg.xi_threshold_dn, period, spans)
             files["png"] = str(out / OUTPUT_FILES["png"])
         files["json"] = str(out / OUTPUT_FILES["json"])
         summary["outputs"] = files

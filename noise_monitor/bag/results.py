@@ -1,10 +1,9 @@
-"""Replay results: per-frame rows, alarm episodes, per-source summaries and the CSV file."""
+"""Replay results: the per-frame table, alarm episodes, per-source summaries and the CSV file."""
 from __future__ import annotations
 
 import csv
 from collections import Counter
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,109 +18,154 @@ BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_stat
 CONDITION_KEYS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
 
 
-class CompactNumbers(Mapping):
-    """A read-only name -> float mapping stored as float32 values with a shared key tuple.
+#: Rows per storage block of a :class:`FrameTable` column (blocks are never copied when the table grows).
+BLOCK_ROWS = 4096
 
-    A replay keeps one per frame: ~25 numbers cost ~130 bytes instead of ~2 KB as a dict, so a
-    20,000-frame replay stays within a few MB.
+
+class _Column:
+    """One column in fixed-size numpy blocks; rows never written hold ``fill``."""
+
+    __slots__ = ("dtype", "fill", "blocks")
+
+    def __init__(self, dtype: type, fill: Any) -> None:
+        self.dtype, self.fill, self.blocks = dtype, fill, []
+
+    def set(self, row: int, value: Any) -> None:
+        b, i = divmod(row, BLOCK_ROWS)
+        while len(self.blocks) <= b:
+            self.blocks.append(np.full(BLOCK_ROWS, self.fill, dtype=self.dtype))
+        self.blocks[b][i] = value
+
+    def values(self, n: int) -> np.ndarray:
+        out = np.concatenate(self.blocks) if self.blocks else np.empty(0, dtype=self.dtype)
+        if out.size < n:
+            out = np.concatenate([out, np.full(n - out.size, self.fill, dtype=self.dtype)])
+        return out[:n]
+
+
+class FrameTable:
+    """What a replay keeps of every frame, as columns: ~150 bytes per frame, whatever the length.
+
+    Numbers (estimator, model, conditions) are float32 columns, NaN where a frame has none (skipped
+    frames); texts (alarm state, cause, skip reason) are codes into a shared vocabulary.
     """
 
-    __slots__ = ("_keys", "_values")
-    _interned: dict[tuple[str, ...], tuple[str, ...]] = {}
+    _FIXED = (("index", np.int64, -1), ("stamp_ns", np.int64, 0), ("processed", np.bool_, False),
+              ("level", np.int8, 0), ("alarm", np.bool_, False))
+    _TEXTS = ("alarm_state", "cause", "skip_reason")
 
-    def __init__(self, values: Mapping[str, float]) -> None:
-        keys = tuple(values)
-        self._keys = self._interned.setdefault(keys, keys)
-        self._values = np.fromiter(values.values(), dtype=np.float32, count=len(keys))
-
-    def __getitem__(self, key: str) -> float:
-        try:
-            return float(self._values[self._keys.index(key)])
-        except ValueError:
-            raise KeyError(key) from None
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._keys)
+    def __init__(self) -> None:
+        self._n = 0
+        self._fixed = {name: _Column(dtype, fill) for name, dtype, fill in self._FIXED}
+        self._texts = {name: _Column(np.int32, -1) for name in self._TEXTS}
+        self._vocab: list[str] = []
+        self._codes: dict[str, int] = {}
+        self._numbers: dict[str, _Column] = {}
+        self._conditions: list[str] = []
 
     def __len__(self) -> int:
-        return len(self._keys)
+        return self._n
+
+    def append(self, index: int, stamp_ns: int, processed: bool, level: int, alarm_active: bool, alarm_state: str,
+               cause: str | None, skip_reason: str | None, numbers: Mapping[str, float],
+               conditions: Mapping[str, float]) -> None:
+        i = self._n
+        for name, value in (("index", index), ("stamp_ns", stamp_ns), ("processed", processed), ("level", level),
+                            ("alarm", alarm_active)):
+            self._fixed[name].set(i, value)
+        for name, text in (("alarm_state", alarm_state), ("cause", cause), ("skip_reason", skip_reason)):
+            if text is not None:
+                self._texts[name].set(i, self._codes.setdefault(text, len(self._codes)))
+                if len(self._vocab) < len(self._codes):
+                    self._vocab.append(text)
+        for key, value in conditions.items():
+            if key not in self._conditions:
+                self._conditions.append(key)
+        for key, value in (*conditions.items(), *numbers.items()):
+            col = self._numbers.get(key)
+            if col is None:
+                col = self._numbers[key] = _Column(np.float32, np.nan)
+            col.set(i, value)
+        self._n += 1
+
+    def column(self, name: str) -> np.ndarray:
+        """index, stamp_ns, processed, level, alarm, or time_s (seconds since the first frame)."""
+        if name == "time_s":
+            stamps = self._fixed["stamp_ns"].values(self._n)
+            return (stamps - stamps[0]) / 1e9 if self._n else np.empty(0)
+        return self._fixed[name].values(self._n)
+
+    def texts(self, name: str) -> list[str | None]:
+        """alarm_state, cause or skip_reason of every frame (None where absent)."""
+        return [self._vocab[c] if c >= 0 else None for c in self._texts[name].values(self._n)]
+
+    def numbers(self, key: str) -> np.ndarray:
+        """A number per frame (float64, NaN where the frame has none)."""
+        col = self._numbers.get(key)
+        return col.values(self._n).astype(np.float64) if col else np.full(self._n, np.nan)
+
+    @property
+    def number_keys(self) -> list[str]:
+        """Numeric keys other than the conditions, in first-seen order."""
+        return [k for k in self._numbers if k not in self._conditions]
+
+    def series(self, key: str) -> tuple[np.ndarray, np.ndarray]:
+        """(time_s, value) of the frames that have ``key``."""
+        v = self.numbers(key)
+        ok = ~np.isnan(v)
+        return self.column("time_s")[ok], v[ok]
 
 
-@dataclass(slots=True)
-class FrameRow:
-    """What the replay keeps of one frame (compact: numbers as float32)."""
-
-    index: int
-    stamp_ns: int
-    time_s: float
-    processed: bool
-    level: int
-    alarm_state: str
-    alarm_active: bool
-    cause: str | None
-    skip_reason: str | None
-    numbers: Mapping[str, float] = field(default_factory=dict)
-    conditions: Mapping[str, float] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        self.numbers = CompactNumbers(self.numbers)
-        self.conditions = CompactNumbers(self.conditions)
-
-    def csv_row(self) -> dict[str, Any]:
-        return {"index": self.index, "stamp_ns": self.stamp_ns, "time_s": f"{self.time_s:.6f}",
-                "processed": int(self.processed), "level": self.level, "alarm_state": self.alarm_state,
-                "alarm": int(self.alarm_active), "skip_reason": self.skip_reason or "",
-                **{k: f"{v:.6g}" for k, v in self.conditions.items()},
-                **{k: f"{v:.6g}" for k, v in self.numbers.items()}}
-
-
-def write_csv(rows: list[FrameRow], path: Path) -> None:
+def write_csv(table: FrameTable, path: Path) -> None:
     """One line per frame (skipped frames too, with their reason and empty numbers)."""
-    numeric: list[str] = []
-    for r in rows:
-        numeric += [k for k in r.numbers if k not in numeric and k not in BASE_COLUMNS]
+    numeric = [k for k in table.number_keys if k not in BASE_COLUMNS]
+    base = {name: table.column(name) for name in ("index", "stamp_ns", "time_s", "processed", "level", "alarm")}
+    texts = {name: table.texts(name) for name in ("alarm_state", "skip_reason")}
+    values = {k: table.numbers(k) for k in (*CONDITION_KEYS, *numeric)}
     with open(path, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=[*BASE_COLUMNS, *CONDITION_KEYS, *numeric], restval="")
-        writer.writeheader()
-        for r in rows:
-            writer.writerow(r.csv_row())
+        writer = csv.writer(fh)
+        writer.writerow([*BASE_COLUMNS, *CONDITION_KEYS, *numeric])
+        for i in range(len(table)):
+            writer.writerow([int(base["index"][i]), int(base["stamp_ns"][i]), f"{base['time_s'][i]:.6f}",
+                             int(base["processed"][i]), int(base["level"][i]), texts["alarm_state"][i],
+                             int(base["alarm"][i]), texts["skip_reason"][i] or "",
+                             *("" if np.isnan(v[i]) else f"{v[i]:.6g}" for v in values.values())])
 
 
-def alarm_episodes(rows: list[FrameRow]) -> list[dict[str, Any]]:
+def alarm_episodes(table: FrameTable) -> list[dict[str, Any]]:
     """Contiguous runs of frames with an active alarm (processed or not): stamps, sign of xi, cause."""
-    episodes: list[dict[str, Any]] = []
-    current: list[FrameRow] = []
-    for r in [*rows, None]:
-        if r is not None and r.alarm_active:
-            current.append(r)
-            continue
-        if current:
-            episodes.append(_episode(current, still_active=r is None))
-            current = []
+    alarm = table.column("alarm").astype(np.int8)
+    edges = np.diff(np.concatenate([[0], alarm, [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # [start, end)
+    if not starts.size:
+        return []
+    index, stamps, t = table.column("index"), table.column("stamp_ns"), table.column("time_s")
+    xi_f, causes = table.numbers("xi_filtered"), table.texts("cause")
+    episodes = []
+    for a, b in zip(starts, ends):
+        xi = xi_f[a:b][~np.isnan(xi_f[a:b])]
+        peak = float(xi[np.argmax(np.abs(xi))]) if xi.size else 0.0
+        cause = Counter(c for c in causes[a:b] if c)
+        episodes.append({
+            "start_ns": int(stamps[a]), "end_ns": int(stamps[b - 1]),
+            "start_s": round(float(t[a]), 6), "end_s": round(float(t[b - 1]), 6),
+            "duration_s": round(float(t[b - 1] - t[a]), 6),
+            "frames": int(b - a), "start_index": int(index[a]), "end_index": int(index[b - 1]),
+            "sign": "-" if peak < 0 else "+", "peak_xi_dn": round(peak, 4),
+            "mean_xi_dn": round(float(xi.mean()), 4) if xi.size else None,
+            "cause": cause.most_common(1)[0][0] if cause else None,
+            "active_at_end": bool(b == len(table)),
+        })
     return episodes
 
 
-def _episode(run: list[FrameRow], still_active: bool) -> dict[str, Any]:
-    xi = [r.numbers["xi_filtered"] for r in run if "xi_filtered" in r.numbers]
-    peak = max(xi, key=abs) if xi else 0.0
-    causes = Counter(r.cause for r in run if r.cause)
-    return {
-        "start_ns": run[0].stamp_ns, "end_ns": run[-1].stamp_ns,
-        "start_s": round(run[0].time_s, 6), "end_s": round(run[-1].time_s, 6),
-        "duration_s": round(run[-1].time_s - run[0].time_s, 6),
-        "frames": len(run), "start_index": run[0].index, "end_index": run[-1].index,
-        "sign": "-" if peak < 0 else "+", "peak_xi_dn": round(float(peak), 4),
-        "mean_xi_dn": round(float(np.mean(xi)), 4) if xi else None,
-        "cause": causes.most_common(1)[0][0] if causes else None,
-        "active_at_end": still_active,
-    }
-
-
-def source_summaries(rows: list[FrameRow]) -> dict[str, dict[str, float | int | None]]:
+def source_summaries(table: FrameTable) -> dict[str, dict[str, float | int | None]]:
     """mean, p5, p95 (and n) over the processed frames of each summary key, in DN."""
     out: dict[str, dict[str, float | int | None]] = {}
+    processed = table.column("processed")
     for key in SUMMARY_KEYS:
-        v = np.array([r.numbers[key] for r in rows if r.processed and key in r.numbers], dtype=float)
+        v = table.numbers(key)
+        v = v[processed & ~np.isnan(v)]
         if v.size:
             out[key] = {"mean": round(float(v.mean()), 4), "p5": round(float(np.percentile(v, 5)), 4),
                         "p95": round(float(np.percentile(v, 95)), 4), "n": int(v.size)}
@@ -130,9 +174,16 @@ def source_summaries(rows: list[FrameRow]) -> dict[str, dict[str, float | int | 
     return out
 
 
-def skip_reasons(rows: list[FrameRow]) -> dict[str, int]:
+def skipped_frames(table: FrameTable) -> list[dict[str, Any]]:
+    """index, stamp_ns and reason of every skipped frame."""
+    skipped = np.flatnonzero(~table.column("processed"))
+    index, stamps, reasons = table.column("index"), table.column("stamp_ns"), table.texts("skip_reason")
+    return [{"index": int(index[i]), "stamp_ns": int(stamps[i]), "reason": reasons[i] or "unknown"} for i in skipped]
+
+
+def skip_reasons(table: FrameTable) -> dict[str, int]:
     """Count of skipped frames per reason."""
-    return dict(Counter(r.skip_reason or "unknown" for r in rows if not r.processed).most_common())
+    return dict(Counter(s["reason"] for s in skipped_frames(table)).most_common())
 
 
 def truth_check(alarms: list[dict[str, Any]], truth_episodes: list[dict[str, Any]]) -> dict[str, Any]:
