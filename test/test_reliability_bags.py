@@ -183,8 +183,12 @@ def test_truncated_sqlite3_bag_is_a_bag_error(tmp_path, src, fraction):
 
 
 @pytest.mark.parametrize("damage", ["half", "bad length", "random", "trailing junk"])
-@pytest.mark.parametrize("topic", ["/camera/image_raw", "/camera/metadata", "/camera/camera_info"])
-def test_damaged_message_in_sqlite3_bag_is_a_bag_error_naming_it(tmp_path, src, damage, topic):
+@pytest.mark.parametrize("topic, skipped", [("/camera/image_raw", "image unusable: damaged sensor_msgs/msg/Image"),
+                                            ("/camera/metadata", "metadata invalid: /camera/metadata: damaged "),
+                                            ("/camera/camera_info", None)])
+def test_damaged_message_in_sqlite3_bag_skips_only_its_frame_naming_it(tmp_path, src, damage, topic, skipped):
+    """One message that does not decode: the frame it concerns is skipped with the reason, the others are
+    read as before (a damaged CameraInfo is ignored like any unusable one)."""
     bag = shutil.copytree(src["sqlite3"], tmp_path / "damaged")
     con = sqlite3.connect(next(bag.glob("*.db3")))
     mid, blob = con.execute("select m.id, m.data from messages m join topics t on m.topic_id = t.id "
@@ -201,9 +205,17 @@ def test_damaged_message_in_sqlite3_bag_is_a_bag_error_naming_it(tmp_path, src, 
     con.execute("update messages set data = ? where id = ?", (bytes(b), mid))
     con.commit()
     con.close()
-    with pytest.raises(BagError, match="bag .*damaged is damaged: "):
-        with open_bag(bag) as reader:
-            list(reader.frames(PROFILE))
+    with open_bag(src["sqlite3"]) as reader:
+        good = list(reader.frames(PROFILE))
+    with open_bag(bag) as reader:
+        frames = list(reader.frames(PROFILE))
+    assert [f.index for f in frames] == [f.index for f in good] == list(range(SMALL["frames"]))
+    for f, g in zip(frames, good):
+        if skipped is not None and f.index == 2:
+            assert f.image_dn is None or f.metadata is None
+            assert f.skip_reason.startswith(skipped) and "does not decode" in f.skip_reason
+        else:
+            assert f.skip_reason is None and np.array_equal(f.image_dn, g.image_dn) and f.metadata == g.metadata
 
 
 def test_bag_without_image_topic_lists_what_it_has(tmp_path, capsys):

@@ -35,6 +35,13 @@ _READ_ERRORS = (Exception,)
 _METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
 
 
+@dataclass(frozen=True)
+class DamagedMessage:
+    """Stands in for a message whose bytes do not decode (the reason names it)."""
+
+    reason: str
+
+
 @dataclass
 class BagFrame:
     """One image of a bag with its metadata, or the reason it cannot be processed."""
@@ -175,14 +182,18 @@ class BagReader:
         return [c for c in self._reader.connections if c.topic == topic]
 
     def messages(self, topics: list[str]) -> Iterator[tuple[str, int, Any]]:
-        """(topic, log time ns, deserialised message) in log-time order; BagError if data is damaged."""
+        """(topic, log time ns, deserialised message) in log-time order.
+
+        A message whose bytes do not decode is yielded as a :class:`DamagedMessage` (the frames it
+        concerns are skipped with its reason); damaged bag structure (records, chunks, index) that stops
+        reading is a BagError.
+        """
         conns = [c for t in topics for c in self._conns(t)]
         it = self._reader.messages(connections=conns)
         expected, seen = self.count(topics), 0
         while True:
             try:
                 conn, log_time, raw = next(it)
-                msg = self._reader.deserialize(raw, conn.msgtype)
             except StopIteration:
                 if seen < expected:  # damaged records are skipped silently by rosbags
                     raise BagError(f"bag {self.path} is damaged: read {seen} of the {expected} messages its index "
@@ -190,6 +201,11 @@ class BagReader:
                 return
             except _READ_ERRORS as exc:
                 raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
+            try:
+                msg = self._reader.deserialize(raw, conn.msgtype)
+            except _READ_ERRORS as exc:
+                msg = DamagedMessage(f"damaged {conn.msgtype} message ({len(raw)} bytes) on {conn.topic} at log time "
+                                     f"{log_time} ns does not decode: {exc or type(exc).__name__}")
             seen += 1
             yield conn.topic, log_time, msg
 
@@ -225,6 +241,8 @@ class BagReader:
         items = []
         for _, log_time, msg in self.messages([topic]):
             try:
+                if isinstance(msg, DamagedMessage):
+                    raise AdapterError(msg.reason)
                 value: Any = convert(msg)
             except (AdapterError, ValueError) as exc:
                 value = AdapterError(f"{topic}: {exc}")
@@ -259,6 +277,8 @@ class BagReader:
                              metadata_age_s=(stamp - meta_t[mi]) / 1e9 if mi is not None else None,
                              log_time_ns=int(log_time))
             try:
+                if isinstance(msg, DamagedMessage):
+                    raise AdapterError(msg.reason)
                 frame.image_dn = image_to_gray_dn(msg, bit_depth=depth, color=color)
                 if geom is not None:
                     geom.check_image(int(msg.height), int(msg.width))
