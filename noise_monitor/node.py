@@ -50,6 +50,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "max_rate_hz": (0.0, "evaluate at most this many frames per second (others are dropped); 0 = no limit"),
     "sync_tolerance_s": (0.01, "image and metadata header stamps closer than this belong together"),
     "sync_wait_s": (0.1, "an image waits this long for its metadata, then takes the latest older one"),
+    "expected_rate_hz": (0.0, "the camera's frame rate, for an exact frames_lost count; 0 = inferred from stamp gaps"),
     "diagnostics_rate_hz": (1.0, "minimum /diagnostics rate, also without images (STALE)"),
 }
 
@@ -85,7 +86,7 @@ def _check_node_parameters(p: dict[str, Any]) -> None:
     """Range checks of the node-only parameters (the monitor's are checked by MonitorConfig)."""
     if p["color"] not in ("luma", "green"):
         raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
-    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "threads", "bit_depth"):
+    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth"):
         if p[name] < 0:
             raise ValueError(f"parameter {name} must be >= 0, got {p[name]}")
     if p["bit_depth"] > 16:
@@ -145,7 +146,7 @@ def _make_node_class():
             self.bit_depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
             wait = p["sync_wait_s"] if p["metadata_topic"] else 0.0
             self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
-            self.gaps = GapCounter()
+            self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
             self._temperature_c: float | None = None
             self._geometry = None
             self._lock = threading.Condition()

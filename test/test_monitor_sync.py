@@ -1,6 +1,8 @@
 """StampSynchronizer: pairing by header stamp, waiting, sample-and-hold, overflow."""
 from __future__ import annotations
 
+import pytest
+
 from noise_monitor.monitor import StampSynchronizer
 
 MS = 1_000_000
@@ -57,3 +59,19 @@ def test_gap_counter_infers_lost_frames_from_stamp_gaps(rng):
     lost = sum(counter.observe(i * period + int(jitter[i])) for i in arrived)
     assert lost == 200 - len(arrived) - (200 - 1 - arrived[-1])
     assert counter.observe(arrived[-1] * period) == 0  # repeated/old stamps count nothing
+
+
+def test_gap_counter_with_the_expected_rate_counts_regular_losses(rng):
+    from noise_monitor.monitor import GapCounter
+
+    period = 33_333_333
+    arrived = [i for i in range(300) if i % 2 == 0 or i < 10]  # every other frame lost, regularly
+    jitter = rng.integers(-500_000, 500_000, 300)
+    stamps = [i * period + int(jitter[i]) for i in arrived]
+    inferred = GapCounter()
+    assert sum(inferred.observe(t) for t in stamps) < 40  # of 144: once the window is full it looks like 15 Hz
+    exact = GapCounter(expected_rate_hz=30.0)
+    assert sum(exact.observe(t) for t in stamps) == 300 - len(arrived) - 1  # frame 299 is after the last stamp
+    assert exact.observe(stamps[-1] + 10**9 * 5) == 0  # a paused stream is not a loss
+    with pytest.raises(ValueError, match="expected_rate_hz"):
+        GapCounter(expected_rate_hz=-1.0)

@@ -101,12 +101,19 @@ class GapCounter:
     """Counts images that never arrived (lost in transport or by a full subscriber queue), inferred from
     header-stamp gaps: the frame period is the lower quartile of the recent stamp intervals (robust to
     a few bursts), and an interval of about k periods means k - 1 missing frames. Gaps longer than
-    ``pause_s`` are a paused stream, not losses. Undercounts when more than ~3/4 of the frames are lost."""
+    ``pause_s`` are a paused stream, not losses. Inferred, it undercounts regular losses (every other
+    frame lost looks like half the rate); ``expected_rate_hz`` (the camera's configured rate) makes the
+    period known and the count exact."""
 
-    def __init__(self, window: int = 64, pause_s: float = 1.0) -> None:
+    def __init__(self, window: int = 64, pause_s: float = 1.0, expected_rate_hz: float = 0.0) -> None:
+        if expected_rate_hz < 0:
+            raise ValueError(f"expected_rate_hz must be >= 0, got {expected_rate_hz}")
         self.intervals: deque[int] = deque(maxlen=window)
         self.last_ns: int | None = None
         self.pause_ns = int(pause_s * 1e9)
+        self.period_ns = 1e9 / expected_rate_hz if expected_rate_hz > 0 else None
+        if self.period_ns is not None:
+            self.pause_ns = max(self.pause_ns, int(4 * self.period_ns))
 
     def observe(self, stamp_ns: int) -> int:
         """Record an image stamp; returns the number of frames missing just before it."""
@@ -114,6 +121,8 @@ class GapCounter:
         if last is None or stamp_ns <= last or stamp_ns - last > self.pause_ns:
             return 0
         dt = stamp_ns - last
+        if self.period_ns is not None:
+            return max(int(round(dt / self.period_ns)) - 1, 0)
         self.intervals.append(dt)
         if len(self.intervals) < 8:
             return 0
