@@ -10,7 +10,7 @@
 Prints xi (the monitor's, DN) at every stage and the cost (data generation and training time).
 
 Usage: .venv/bin/python bench/finetune_effect.py [--effect column_offsets=2.0] [--patches 4000]
-       [--steps 600] [--threads 1] [--out out/finetune] [--json out/finetune/summary.json]
+       [--steps 600] [--lr 3e-4] [--threads 1] [--out out/finetune] [--json out/finetune/summary.json]
 """
 from __future__ import annotations
 
@@ -43,6 +43,7 @@ def main() -> None:
     ap.add_argument("--profile", default="ev76c661")
     ap.add_argument("--patches", type=int, default=4000, help="fine-tuning patches")
     ap.add_argument("--steps", type=int, default=600)
+    ap.add_argument("--lr", type=float, default=3e-4)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--out", type=Path, default=Path("out/finetune"))
@@ -51,6 +52,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     name = args.effect.split("=")[0].split(":")[0]
 
+    (args.out / "camera.mcap").unlink(missing_ok=True)  # this script's own output of an earlier run
     bag = simulate_bag(args.out / "camera.mcap", args.profile, "gain_sweep", effects=[args.effect],
                        frames=40, width=320, height=256, seed=args.seed)
     extended = args.out / "camera.yaml"
@@ -65,7 +67,7 @@ def main() -> None:
     t0 = time.perf_counter()
     data = generate(args.patches, 64, args.seed, "train", Scheme(), effects=effects, sensor=sensor, progress=False)
     data_s = time.perf_counter() - t0
-    settings = TrainSettings("full_meta", steps=args.steps, batch=32, lr=3e-4, seed=args.seed)
+    settings = TrainSettings("full_meta", steps=args.steps, batch=32, lr=args.lr, seed=args.seed)
     t0 = time.perf_counter()
     tuned = train(settings, data, args.out / "weights", threads=args.threads, progress=False,
                   init=weights_path("full_meta"))

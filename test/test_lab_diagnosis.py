@@ -57,7 +57,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_clean_bag_claims_nothing(bags: Path) -> None:
-    summary = analyze(_bag(bags, "clean", []), PROFILE)
+    summary = analyze(_bag(bags, "clean", []), PROFILE, estimator=None)
     assert summary["candidates"], "every built-in candidate must be fitted"
     assert not [c["effect"] for c in summary["candidates"] if c["significant"]]
     assert summary["rms_error_dn"] < 0.5
@@ -65,7 +65,7 @@ def test_clean_bag_claims_nothing(bags: Path) -> None:
 
 @pytest.mark.parametrize("effect", sorted(HIDDEN))
 def test_hidden_effect_ranks_first_and_adding_it_cuts_the_error(bags: Path, effect: str) -> None:
-    summary = analyze(_bag(bags, effect, [HIDDEN[effect]]), PROFILE, add_effects=[effect])
+    summary = analyze(_bag(bags, effect, [HIDDEN[effect]]), PROFILE, add_effects=[effect], estimator=None)
     best = summary["candidates"][0]
     assert best["effect"] == effect, [(c["effect"], c["delta_bic"]) for c in summary["candidates"][:3]]
     assert best["significant"]
@@ -78,7 +78,7 @@ def test_plugin_effect_is_found(bags: Path, tmp_path: Path) -> None:
     plugin.write_text(PLUGIN)
     load_plugin_file(plugin)  # the simulator needs it registered too
     summary = analyze(_bag(bags, "plugin", ["illumination_flicker=2"]), PROFILE, plugins=[plugin],
-                      add_effects=["illumination_flicker=fit"])
+                      add_effects=["illumination_flicker=fit"], estimator=None)
     best = summary["candidates"][0]
     assert best["effect"] == "illumination_flicker" and best["significant"]
     assert best["params"]["sigma_pct"] == pytest.approx(2.0, rel=0.15)

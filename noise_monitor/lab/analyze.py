@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from tqdm import tqdm
 
@@ -14,6 +14,7 @@ from ..physics.effects import effect_class
 from ..physics.metadata import profile_from_mapping
 from .compare import Comparison, baseline_effects, by_condition, region_table, rms_error
 from .diagnose import EffectSpec, candidate_names, diagnose, fit
+from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
 
 
@@ -56,14 +57,21 @@ def _number(effect: str, param: str, text: str) -> float:
         raise ValueError(f"{effect}.{param}: expected a number or 'fit', got {text!r}") from None
 
 
-def _frames(source: Any, profile: CameraProfile | None) -> tuple[Iterable[Any], int | None, str]:
+def _frames(source: Any, profile: CameraProfile | None) -> tuple[Callable[[], Iterable[Any]], int | None, str]:
+    """(a function giving a fresh pass over the frames, their number, a name for the report)."""
     if isinstance(source, (str, Path)):
         from ..bag.reader import open_bag
 
-        reader = open_bag(source)
-        return reader.frames(profile), len(reader), str(source)
+        with open_bag(source) as reader:  # unusable bags fail here, before any work
+            n = len(reader)
+
+        def passes() -> Iterator[Any]:
+            with open_bag(source) as r:
+                yield from r.frames(profile)
+
+        return passes, n, str(source)
     frames = list(source)
-    return frames, len(frames), "frames"
+    return lambda: frames, len(frames), "frames"
 
 
 def analyze(
@@ -76,13 +84,18 @@ def analyze(
     candidates: Sequence[str] | None = None,
     tolerance: SegmentTolerance = SegmentTolerance(),
     progress: bool = False,
+    estimator: str | None = "full_meta",
+    weights: str | Path | None = None,
+    device: str = "cpu",
 ) -> dict[str, Any]:
     """Measure, compare, diagnose and (with ``add_effects``) refit; returns the JSON summary.
 
     Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma), ``by_condition``,
     ``candidates`` (ranked best first: ``effect``, ``significant``, ``explained_fraction``, ``params``,
     ...), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
-    ``rms_error_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly).
+    ``rms_error_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With
+    ``estimator`` (None: skip), ``estimator``: the monitor's xi and sigma_image per model (``before``,
+    ``after``) on the same frames (:func:`.estimate.estimator_views`; ``weights``: e.g. fine-tuned ones).
     """
     t0 = time.perf_counter()
     if write_profile and not add_effects:
@@ -92,7 +105,7 @@ def analyze(
     specs = [parse_add_effect(a) for a in add_effects]
     frames, n, source = _frames(bag_or_frames, prof)
     with tqdm(total=n, desc="measure", unit="frame", disable=not progress) as bar:
-        meas = measure_frames(frames, tolerance=tolerance, progress=bar)
+        meas = measure_frames(frames(), tolerance=tolerance, progress=bar)
     integer_output = meas.output_step_dn == 1.0
     base = baseline_effects(prof, meas.segments[0].meta, integer_output)
     with tqdm(total=len(meas.segments), desc="model", unit="segment", disable=not progress) as bar:
@@ -131,6 +144,11 @@ def analyze(
         })
         if write_profile:
             out["profile_written"] = str(_write_profile(write_profile, prof, res.effects, meas))
+    if estimator is not None:
+        models = {"before": NoiseModel(base), **({"after": after_model} if after_model is not None else {})}
+        views = estimator_views(tqdm(frames(), total=n, desc="estimator", unit="frame", disable=not progress),
+                                models, estimator, weights, device)
+        out["estimator"] = views
     out["analysis_time_s"] = round(time.perf_counter() - t0, 3)
     if report_dir is not None:
         from .report import write_report

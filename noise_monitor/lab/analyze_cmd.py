@@ -21,6 +21,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="PATH", help="write the JSON summary to PATH")
     parser.add_argument("--write-profile", metavar="OUT.yaml",
                         help="save the profile extended with the added (fitted) effects")
+    parser.add_argument("--no-estimator", action="store_true",
+                        help="skip the estimator's view (the monitor's xi and sigma_image on the same frames)")
+    parser.add_argument("--weights", metavar="PT", help="estimator weights for that view (e.g. fine-tuned with "
+                                                        "`noise-monitor train --profile`); default: bundled")
+    parser.add_argument("--device", default="cpu", help="estimator device: cpu, cuda or auto")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -33,6 +38,9 @@ def run(args: argparse.Namespace) -> int:
         report_dir=args.report,
         write_profile=args.write_profile,
         progress=not args.quiet,
+        estimator=None if args.no_estimator else "full_meta",
+        weights=args.weights,
+        device=args.device,
     )
     print(f"rms error (model vs measured total sigma): {summary['rms_error_dn']:.4f} DN "
           f"over {summary['measurement']['cells']} cells, {summary['measurement']['frames_used']} frames")
@@ -44,6 +52,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"most likely missing effect: {sig[0]['reading']}" if sig else "no candidate effect is significant")
     if "rms_error_after_dn" in summary:
         print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN")
+    for name, view in summary.get("estimator", {}).items():
+        xi = view["xi_dn"]
+        if xi["mean"] is not None:
+            print(f"estimator ({name}): xi mean {xi['mean']:+.3f} DN (p5 {xi['p5']:+.3f}, p95 {xi['p95']:+.3f}), "
+                  f"mean |xi| {view['mean_abs_xi_dn']:.3f} DN over {view['frames']} frames")
     if "profile_written" in summary:
         print(f"extended profile: {summary['profile_written']}")
     if "report" in summary:

@@ -84,6 +84,23 @@ def _condition_plot(summary: dict[str, Any]) -> str:
     return _png(fig)
 
 
+def _xi_plot(views: dict[str, Any]) -> str:
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    colors = {"before": "tab:red", "after": "tab:green"}
+    for name, v in views.items():
+        s = v["series"]
+        label = f"{'model + added' if name == 'after' else 'model'}: mean {v['xi_dn']['mean']:+.3f} DN" \
+            if v["xi_dn"]["mean"] is not None else name
+        ax.plot(s["time_s"], s["xi"], ".-", ms=3, lw=0.8, color=colors.get(name), label=label)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xlabel("time since first frame [s]")
+    ax.set_ylabel("xi = sigma_model - sigma_image [DN]")
+    ax.set_title("Estimator (Full-Meta) xi per frame")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _png(fig)
+
+
 def _residual_plot(summary: dict[str, Any]) -> str:
     fig, ax = plt.subplots(figsize=(7, 3.6))
     cells = summary["cells"]
@@ -144,6 +161,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         "Residuals": _residual_plot(summary),
         "Components": _component_plot(summary),
     }
+    if summary.get("estimator"):
+        images["Estimator: xi per frame"] = _xi_plot(summary["estimator"])
     cand_rows = [{**c.as_dict(), "params": c.params} for c in candidates]
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>noise_monitor analysis</title>",
@@ -176,6 +195,14 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         count = "blocks" if rows and "blocks" in rows[0] else "cells"
         cols = [key, count, "measured_sigma_dn", "model_sigma_dn", "mean_residual_dn", "rms_residual_dn"]
         parts.append(f"<h3>{html.escape(CONDITION_LABELS.get(key, key))}</h3>" + _table(rows, cols))
+    if summary.get("estimator"):
+        rows = [{"model": name, "frames": v["frames"], "xi_mean_dn": v["xi_dn"]["mean"], "xi_p5_dn": v["xi_dn"]["p5"],
+                 "xi_p95_dn": v["xi_dn"]["p95"], "mean_abs_xi_dn": v["mean_abs_xi_dn"],
+                 "sigma_image_dn": v["sigma_image_dn"]["mean"], "sigma_model_dn": v["sigma_model_dn"]["mean"],
+                 "weights": v["weights"]} for name, v in summary["estimator"].items()]
+        parts.append("<h2>Estimator on the same frames</h2><p>The monitor's xi = sigma_model - sigma_image per "
+                     "frame (sigma_image: Full-Meta's measurement of the noise in the image); near 0 when the "
+                     "model is complete.</p>" + _table(rows, list(rows[0])))
     parts.append("<h2>Measurement</h2><pre>" + html.escape(json.dumps(summary["measurement"], indent=1)) + "</pre>")
     parts.append("</body></html>")
     path = out / "report.html"

@@ -1,0 +1,64 @@
+"""The estimator's view of the analysed frames: per frame, the monitor's xi and sigma_image (Full-Meta's
+measurement of the noise in the image) for each camera model, so a user sees xi move towards 0 when the
+missing effect is added (and again after fine-tuning the estimator with ``noise-monitor train --profile``)."""
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from ..monitor import Frame, Monitor, MonitorConfig
+from ..physics import NoiseModel
+
+#: Per-frame numbers kept from the monitor (DN).
+KEYS = ("xi", "sigma_image", "sigma_model")
+
+
+def _stats(v: list[float]) -> dict[str, float | None]:
+    a = np.asarray(v, dtype=float)
+    if not a.size:
+        return {"mean": None, "p5": None, "p95": None}
+    return {"mean": round(float(a.mean()), 4), "p5": round(float(np.percentile(a, 5)), 4),
+            "p95": round(float(np.percentile(a, 95)), 4)}
+
+
+def estimator_views(frames: Iterable[Any], models: Mapping[str, NoiseModel], estimator: str = "full_meta",
+                    weights: str | Path | None = None, device: str = "cpu",
+                    config: MonitorConfig = MonitorConfig()) -> dict[str, dict[str, Any]]:
+    """One pass over ``frames`` (``image_dn``, ``metadata``, ``stamp_ns``) through a monitor per model.
+
+    Returns per model name: frames evaluated / skipped (by reason), xi / sigma_image / sigma_model
+    statistics (mean, p5, p95 in DN), the mean |xi| and the per-frame series (``time_s``, ``xi``).
+    """
+    from ..estimator import load
+
+    monitors = {name: Monitor(config, load(estimator, device=device, weights=weights, model=model), model, "lab", "lab")
+                for name, model in models.items()}
+    series: dict[str, dict[str, list[float]]] = {name: {k: [] for k in ("time_s", *KEYS)} for name in models}
+    skipped: dict[str, Counter] = {name: Counter() for name in models}
+    t0 = None
+    for f in frames:
+        image, meta = getattr(f, "image_dn", None), getattr(f, "metadata", None)
+        t0 = f.stamp_ns if t0 is None else t0
+        for name, monitor in monitors.items():
+            if image is None or meta is None:
+                skipped[name][getattr(f, "skip_reason", None) or "no image or metadata"] += 1
+                continue
+            res = monitor.process(Frame(stamp_ns=f.stamp_ns, image_dn=image, metadata=meta))
+            if not res.processed:
+                skipped[name][res.skip_reason or "not evaluated"] += 1
+                continue
+            nums = res.numeric()
+            series[name]["time_s"].append((f.stamp_ns - t0) / 1e9)
+            for k in KEYS:
+                series[name][k].append(nums[k])
+    out = {}
+    for name, s in series.items():
+        out[name] = {"estimator": estimator, "weights": str(weights) if weights else "bundled",
+                     "frames": len(s["xi"]), "skipped": dict(skipped[name]),
+                     **{f"{k}_dn": _stats(s[k]) for k in KEYS},
+                     "mean_abs_xi_dn": round(float(np.mean(np.abs(s["xi"]))), 4) if s["xi"] else None,
+                     "series": {"time_s": [round(t, 6) for t in s["time_s"]], "xi": [round(x, 5) for x in s["xi"]]}}
+    return out
