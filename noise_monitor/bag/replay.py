@@ -78,8 +78,11 @@ def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:
     p = truth_path(bag)
     if not p.is_file():
         return None
+    def light(d: dict[str, Any]) -> dict[str, Any] | None:  # per-frame records are dropped while parsing
+        return None if "index" in d and "sigma" in d else d
+
     try:
-        eps = json.loads(p.read_text())["episodes"]
+        eps = json.loads(p.read_text(), object_hook=light)["episodes"]
         return [{k: e[k] for k in ("start_ns", "end_ns", "corrupted", "xi_sign")} for e in eps]
     except (ValueError, KeyError, TypeError):
         return None
@@ -120,6 +123,7 @@ def replay(
     out = Path(out_dir) if out_dir is not None else None
     mcap_path = out / OUTPUT_FILES["mcap"] if out is not None else None
     table = FrameTable()
+    truth = _truth_episodes(bag)  # before the loop: a long simulation's sidecar is parsed while memory is fresh
     with ExitStack() as stack:
         # the bag first: an unusable bag is reported before the estimator is loaded
         reader = stack.enter_context(open_bag(bag, image_topic=image_topic, metadata_topic=metadata_topic,
@@ -194,7 +198,6 @@ def replay(
         "realtime_factor": round(bag_duration / wall, 3) if wall > 0 and bag_duration > 0 else None,
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
     }
-    truth = _truth_episodes(bag)
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)
     if out is not None:
