@@ -9,8 +9,8 @@
 
 Prints xi (the monitor's, DN) at every stage and the cost (data generation and training time).
 
-Usage: .venv/bin/python bench/finetune_effect.py [--effect column_offsets=2.0] [--patches 4000]
-       [--steps 600] [--lr 3e-4] [--threads 1] [--out out/finetune] [--json out/finetune/summary.json]
+Usage: .venv/bin/python bench/finetune_effect.py [--effect column_offsets=2.0] [--patches 8000]
+       [--steps 1500] [--lr 1e-3] [--threads 1] [--out out/finetune] [--json out/finetune/summary.json]
 """
 from __future__ import annotations
 
@@ -41,9 +41,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--effect", default="column_offsets=2.0", help="hidden effect spec (simulate-bag --effect)")
     ap.add_argument("--profile", default="ev76c661")
-    ap.add_argument("--patches", type=int, default=4000, help="fine-tuning patches")
-    ap.add_argument("--steps", type=int, default=600)
-    ap.add_argument("--lr", type=float, default=3e-4)
+    ap.add_argument("--patches", type=int, default=8000, help="fine-tuning patches")
+    ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--out", type=Path, default=Path("out/finetune"))
