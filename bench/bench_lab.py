@@ -1,8 +1,8 @@
 """Benchmark of `noise-monitor analyze`: analysis time of a 120-frame 640x512 bag (target <= 60 s).
 
 The bag is simulated first (ICX285 profile, "lab" scenario: 4 gains x 2 exposures x 2 temperatures,
-hidden PRNU 2 %), then analysed with every built-in candidate and once with --add-effect prnu (refit
-and exact re-evaluation). Stages are timed separately.
+hidden PRNU 2 %), then analysed with every built-in candidate (with and without the estimator's view of
+the frames) and once with --add-effect prnu (refit, exact re-evaluation, estimator view for both models).
 
 Usage: .venv/bin/python bench/bench_lab.py [--frames 120] [--width 640] [--height 512] [--json out.json]
 Prints figures; asserts nothing.
@@ -33,9 +33,11 @@ def main() -> None:
                            width=args.width, height=args.height, seed=1)
         results["simulate_s"] = round(time.perf_counter() - t, 2)
         print(f"simulated {args.frames} frames {args.width}x{args.height} in {results['simulate_s']:.1f} s")
-        for label, add in (("diagnose", []), ("diagnose+add_prnu", ["prnu"])):
+        for label, add, view in (("diagnose", [], True), ("diagnose, no estimator view", [], False),
+                                 ("diagnose+add_prnu", ["prnu"], True)):
             t = time.perf_counter()
-            s = analyze(bag, "icx285", add_effects=add, report_dir=Path(tmp) / label)
+            s = analyze(bag, "icx285", add_effects=add, report_dir=Path(tmp) / label.replace(" ", "_"),
+                        estimator="full_meta" if view else None)
             wall = time.perf_counter() - t
             m = s["measurement"]
             best = s["candidates"][0]
