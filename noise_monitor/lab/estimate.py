@@ -17,11 +17,13 @@ KEYS = ("xi", "sigma_image", "sigma_model")
 
 
 def _stats(v: list[float]) -> dict[str, float | None]:
+    """mean with its standard error (``sem``; frames taken as independent), p5 and p95."""
     a = np.asarray(v, dtype=float)
     if not a.size:
-        return {"mean": None, "p5": None, "p95": None}
-    return {"mean": round(float(a.mean()), 4), "p5": round(float(np.percentile(a, 5)), 4),
-            "p95": round(float(np.percentile(a, 95)), 4)}
+        return {"mean": None, "sem": None, "p5": None, "p95": None}
+    sem = float(a.std(ddof=1) / np.sqrt(a.size)) if a.size > 1 else None
+    return {"mean": round(float(a.mean()), 4), "sem": round(sem, 4) if sem is not None else None,
+            "p5": round(float(np.percentile(a, 5)), 4), "p95": round(float(np.percentile(a, 95)), 4)}
 
 
 def estimator_views(frames: Iterable[Any], models: Mapping[str, NoiseModel], estimator: str = "full_meta",
@@ -30,7 +32,8 @@ def estimator_views(frames: Iterable[Any], models: Mapping[str, NoiseModel], est
     """One pass over ``frames`` (``image_dn``, ``metadata``, ``stamp_ns``) through a monitor per model.
 
     Returns per model name: frames evaluated / skipped (by reason), xi / sigma_image / sigma_model
-    statistics (mean, p5, p95 in DN), the mean |xi| and the per-frame series (``time_s``, ``xi``).
+    statistics (mean, its standard error, p5, p95 in DN), the mean |xi| and the per-frame series
+    (``time_s``, ``xi``).
     """
     from ..estimator import load
 

@@ -196,7 +196,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         cols = [key, count, "measured_sigma_dn", "model_sigma_dn", "mean_residual_dn", "rms_residual_dn"]
         parts.append(f"<h3>{html.escape(CONDITION_LABELS.get(key, key))}</h3>" + _table(rows, cols))
     if summary.get("estimator"):
-        rows = [{"model": name, "frames": v["frames"], "xi_mean_dn": v["xi_dn"]["mean"], "xi_p5_dn": v["xi_dn"]["p5"],
+        rows = [{"model": name, "frames": v["frames"], "xi_mean_dn": v["xi_dn"]["mean"],
+                 "xi_mean_err_dn": v["xi_dn"]["sem"], "xi_p5_dn": v["xi_dn"]["p5"],
                  "xi_p95_dn": v["xi_dn"]["p95"], "mean_abs_xi_dn": v["mean_abs_xi_dn"],
                  "sigma_image_dn": v["sigma_image_dn"]["mean"], "sigma_model_dn": v["sigma_model_dn"]["mean"],
                  "weights": v["weights"]} for name, v in summary["estimator"].items()]
