@@ -82,6 +82,8 @@ def test_train_cli_profile_fine_tune(tmp_path, camera_yaml, meta):
     res = est.predict(flat, meta)
     assert res["extra"][0] == pytest.approx(2.0, abs=0.02)
     assert res["sigma_model"][0] == pytest.approx(np.sqrt(res["pn"][0] ** 2 + res["dcsn"][0] ** 2 + res["rn"][0] ** 2 + 4.0), rel=1e-6)
+    with pytest.warns(UserWarning, match="trained for a camera with column_offsets"):
+        load("full_meta", device="cpu", weights=out / "full_meta.pt", backend="torch", model=NoiseModel())
     # the same dataset cannot silently serve another camera
     rc = cli_main(["train", "--variant", "full_meta", "--out", str(out), "--steps", "2", "--patches", "16",
                    "--patch-size", "32", "--threads", "1"])

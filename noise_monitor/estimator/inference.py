@@ -9,6 +9,7 @@ includes it. The paper-family variants return their branch outputs (``drne``: to
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -112,6 +113,11 @@ class FullMetaEstimator(_Base):
         #: the camera effects the network was trained with (empty: the paper's sources only)
         self.trained_effects: dict = dict(ckpt.get("effects") or {})
         self.prior = PhysicsPrior(model if model is not None else NoiseModel(extra=self.trained_effects))
+        lacking = sorted(set(self.trained_effects) - set(self.prior.model.names))
+        if lacking:
+            warnings.warn(f"estimator weights were trained for a camera with {', '.join(lacking)}, which the given "
+                          "noise model lacks: sigma_model and xi will be biased (use the profile the weights were "
+                          "fine-tuned for)", stacklevel=3)
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if backend == "onnx" and device.type != "cpu":
