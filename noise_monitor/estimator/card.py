@@ -27,9 +27,10 @@ def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Pat
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
                   f"(scikit-image bundled photos + dead leaves, sequential simulator, xi scheme; data seed "
-                  f"{train.get('data_seed', '?')})" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
-                                                       " (pre-generated dataset file, 16k patches took ~18 min on the shared CPU; the same command "
-                                                       "without --data regenerates it identically from the data seed)"),
+                  f"{train.get('data_seed', '?')}" + (f", corruption scheme {json.dumps(train['scheme'])}" if "scheme" in train else "")
+                  + ")" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
+                           " (pre-generated dataset file; the same command without --data regenerates it identically "
+                           "from the data seed)"),
                   f"- Training settings: {json.dumps(train['settings'])}"]
     lines += ["", f"## Held-out benchmark (`{command}`)", "",
               f"{results['patches_per_part']} patches per part, matplotlib sample photos + unseen dead leaves, unseen seeds. "

@@ -42,7 +42,7 @@ class Scheme:
 
     p_scheme: float = 0.5
     p_source: float = 0.5
-    p_unexpected: float = 0.35
+    p_unexpected: float = 0.5
     unexpected_range: tuple[float, float] = (0.3, 12.0)
     unexpected_sigma: float | None = None
 

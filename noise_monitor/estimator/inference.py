@@ -19,7 +19,7 @@ import torch
 from ..physics import CameraMetadata, NoiseModel
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import N_SCALARS, SIGMA_SCALE
+from .networks import N_MAPS, N_SCALARS, SIGMA_SCALE
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 from .train import network_from_checkpoint
 
@@ -126,7 +126,7 @@ class FullMetaEstimator(_Base):
         self._session = None
         if self.backend == "onnx":
             p = self.patch_size
-            self._session, self._inputs = onnx_session(self.net, (torch.zeros(2, 2, p, p), torch.zeros(2, N_SCALARS)))
+            self._session, self._inputs = onnx_session(self.net, (torch.zeros(2, N_MAPS, p, p), torch.zeros(2, N_SCALARS)))
 
     def _run_net(self, maps: np.ndarray, scalars: np.ndarray) -> np.ndarray:
         if self._session is not None:

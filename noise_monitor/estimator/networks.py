@@ -117,10 +117,15 @@ class PaperNet(nn.Module):
 
 @dataclass
 class CompactConfig:
-    """The shipped Full-Meta's image-noise network (sigma_image relative to the physics prediction)."""
+    """The shipped Full-Meta's image-noise network (sigma_image relative to the physics prediction).
+
+    ``strides`` has one entry per 3x3 convolution; stride-2 layers widen the receptive field (texture
+    context) at a quarter of the cost of the layers after them.
+    """
 
     width: int = 16
-    depth: int = 3
+    strides: tuple[int, ...] = field(default=(1, 2, 1, 2, 1))
+    heads: int = 4
     hidden: tuple[int, ...] = field(default=(64, 32))
     patch_size: int = 64
 
@@ -128,16 +133,25 @@ class CompactConfig:
         return asdict(self)
 
 
+def default_strides(depth: int) -> tuple[int, ...]:
+    """Stride pattern of a ``depth``-layer compact net: every second layer halves the resolution."""
+    return tuple(2 if i % 2 else 1 for i in range(depth))
+
+
+#: Maps of the compact net: box residual and Laplacian residual (both / model sigma), intensity.
+N_MAPS = 3
 #: Scalar inputs of the compact net: normalised metadata (11), log sigma_model, source fractions (3),
-#: log residual energy ratio, log block-energy quantiles (3) (see ``features.compact_inputs``).
-N_SCALARS = len(NORMALIZED_ORDER) + 8
+#: log residual energy ratios (2), log block-energy quantiles of both residuals (6)
+#: (see ``features.compact_inputs``).
+N_SCALARS = len(NORMALIZED_ORDER) + 12
 
 
 class ImageNoiseNet(nn.Module):
     """Measures the noise actually in a patch as ``log(sigma_image / sigma_model)``.
 
-    Inputs: ``maps`` (N, 2, H, W) = [residual (patch - 5x5 box) / model sigma map, intensity / 255 - 0.5]
-    and ``scalars`` (N, N_SCALARS). Pooled conv features (mean and mean-square) are fused with the
+    Inputs: ``maps`` (N, N_MAPS, H, W) and ``scalars`` (N, N_SCALARS) (``features.compact_inputs``).
+    A strided 3x3 trunk feeds attention pooling (``heads`` softmax-weighted averages over positions:
+    the net learns to read the noise where the patch is flat) and mean / RMS pooling, fused with the
     scalars by an MLP. A zero output means "the image holds exactly the modelled noise".
     """
 
@@ -145,12 +159,13 @@ class ImageNoiseNet(nn.Module):
         super().__init__()
         self.cfg = cfg
         layers: list[nn.Module] = []
-        c_in = 2
-        for _ in range(cfg.depth):
-            layers += [nn.Conv2d(c_in, cfg.width, 3, padding=1), nn.ReLU()]
+        c_in = N_MAPS
+        for stride in cfg.strides:
+            layers += [nn.Conv2d(c_in, cfg.width, 3, stride=stride, padding=1), nn.ReLU()]
             c_in = cfg.width
         self.convs = nn.Sequential(*layers)
-        n_in = 2 * cfg.width + N_SCALARS
+        self.attend = nn.Conv2d(cfg.width, 2 * cfg.heads, 1)
+        n_in = 2 * cfg.width + cfg.heads + N_SCALARS
         mlp: list[nn.Module] = []
         for n in cfg.hidden:
             mlp += [nn.Linear(n_in, n), nn.ReLU()]
@@ -160,7 +175,9 @@ class ImageNoiseNet(nn.Module):
 
     def forward(self, maps: torch.Tensor, scalars: torch.Tensor) -> torch.Tensor:
         f = self.convs(maps)
-        pooled = torch.cat([f.mean(dim=(2, 3)), f.square().mean(dim=(2, 3)).sqrt()], dim=1)
+        value, logit = self.attend(f).flatten(2).chunk(2, dim=1)
+        attended = (torch.softmax(logit, dim=2) * value).sum(dim=2)
+        pooled = torch.cat([f.mean(dim=(2, 3)), f.square().mean(dim=(2, 3)).sqrt(), attended], dim=1)
         return self.mlp(torch.cat([pooled, scalars], dim=1)).squeeze(1)
 
 

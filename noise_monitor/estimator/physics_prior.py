@@ -79,20 +79,46 @@ class PhysicsPrior:
         return predict_from_tables(smooth, tables, group_of, with_map, debias)
 
 
+def _grid_pos(level: np.ndarray, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lower table index and interpolation weight of each level (DN) on a grid of ``g`` points."""
+    pos = level / TABLE_STEP_DN
+    i0 = np.minimum(pos.astype(np.int64), g - 2)
+    return i0, pos - i0
+
+
+def _nearest(table: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """``table`` (on the intensity grid) at the grid point nearest each level (float32 gather)."""
+    return table.astype(np.float32)[(level * np.float32(1.0 / TABLE_STEP_DN) + np.float32(0.5)).astype(np.intp)]
+
+
+def shrink_noise(smooth: np.ndarray, sigma: np.ndarray, k: int = SMOOTH_KERNEL) -> np.ndarray:
+    """Shrink each smoothed patch (N, H, W) towards its mean by the share of its variance that is noise.
+
+    A k x k box filter leaves noise of variance sigma^2 / k^2 in the smoothed map; on a flat patch that
+    spread alone widens the intensity histogram, which biases the prediction where sigma depends
+    strongly on the level (clipping, a small full well). The Wiener factor
+    ``max(0, 1 - mean(sigma^2) / k^2 / var(smooth))`` removes it and leaves textured patches unchanged.
+    """
+    mean = smooth.mean(axis=(1, 2), keepdims=True)
+    var = smooth.var(axis=(1, 2), keepdims=True)
+    noise = (sigma**2).mean(axis=(1, 2), keepdims=True) / k**2
+    factor = np.clip(1.0 - noise / np.maximum(var, 1e-12), 0.0, 1.0)
+    return mean + factor * (smooth - mean)
+
+
 def clean_level(smooth: np.ndarray, m1: np.ndarray) -> np.ndarray:
     """Clean intensity (DN, float64) whose expected noisy value equals the smoothed value.
 
     Clipping at 0 and 255 biases the noisy mean by E[n | v] (the sum of the sources' tabulated means),
     so a smoothed flat patch at 0 DN reads a few DN; inverting v -> v + sum E[n | v] removes that bias
-    (elsewhere E[n | v] is ~0 and the map is unchanged). The inverse is tabulated on the intensity grid
-    and read with linear interpolation (no per-pixel search).
+    (elsewhere E[n | v] is ~0 and the map is unchanged). The inverse's offset from the identity is
+    tabulated on the intensity grid (0.5 DN) and read at the nearest grid point: it varies slowly, so
+    this costs one gather per pixel and no per-pixel search.
     """
     grid = np.arange(m1.shape[-1]) * TABLE_STEP_DN
-    inverse = np.interp(grid, np.maximum.accumulate(grid + m1.sum(axis=0)), grid)
-    pos = np.clip(smooth, 0.0, 255.0).astype(np.float64) / TABLE_STEP_DN
-    i0 = np.minimum(pos.astype(np.int64), len(grid) - 2)
-    frac = pos - i0
-    return inverse[i0] * (1.0 - frac) + inverse[i0 + 1] * frac
+    offset = np.interp(grid, np.maximum.accumulate(grid + m1.sum(axis=0)), grid) - grid
+    level = np.clip(smooth, 0.0, 255.0).astype(np.float32)
+    return np.clip(level + _nearest(offset, level), 0.0, 255.0).astype(np.float64)
 
 
 def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
@@ -101,8 +127,8 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
 
     S = 3 (the paper's sources) or 4 (plus ``extra``, see :meth:`PhysicsPrior.tables`).
 
-    Patch i uses ``tables[group_of[i]]``. The smoothed map is first mapped to clean levels
-    (:func:`clean_level`, unless ``debias`` is False); integrating the tables over the resulting
+    Patch i uses ``tables[group_of[i]]``. Unless ``debias`` is False, the smoothed map is first rid of
+    the noise it still holds (:func:`shrink_noise`) and mapped to clean levels (:func:`clean_level`); integrating the tables over the resulting
     intensity histogram (linear weights) equals ``NoiseModel.predict`` on that map. With ``with_map`` also
     ``sigma_map`` (N, H, W): the model's total sigma at each pixel's level.
     """
@@ -114,18 +140,20 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
     for k in np.unique(group_of):
         idx = np.flatnonzero(group_of == k)
         m1, m2 = tables[k]
-        level = clean_level(smooth[idx], m1) if debias else np.clip(smooth[idx], 0.0, 255.0).astype(np.float64)
-        pos = level / TABLE_STEP_DN
-        i0 = np.minimum(pos.astype(np.int64), g - 2)
-        frac = pos - i0
+        sigma_level = np.sqrt(np.maximum(m2 - m1**2, 0.0).sum(axis=0))
+        if debias:
+            level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float32)
+            level = clean_level(shrink_noise(level, _nearest(sigma_level, level)), m1)
+        else:
+            level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float64)
+        i0, frac = _grid_pos(level, g)
         rows = (np.arange(len(idx)) * g)[:, None, None]
         hist = np.bincount((i0 + rows).ravel(), (1.0 - frac).ravel(), len(idx) * g)
         hist += np.bincount((i0 + 1 + rows).ravel(), frac.ravel(), len(idx) * g)
         hist = hist.reshape(len(idx), g) / (h * w)
         sig[idx] = np.sqrt(np.maximum(hist @ m2.T - (hist @ m1.T) ** 2, 0.0))
         if sigma_map is not None:
-            level = np.sqrt(np.maximum(m2 - m1**2, 0.0).sum(axis=0))
-            sigma_map[idx] = (level[i0] * (1.0 - frac) + level[i0 + 1] * frac).astype(np.float32)
+            sigma_map[idx] = (sigma_level[i0] * (1.0 - frac) + sigma_level[i0 + 1] * frac).astype(np.float32)
     out = {s: sig[:, j] for j, s in enumerate(names)}
     out["total"] = np.sqrt((sig**2).sum(axis=1))
     if sigma_map is not None:

@@ -11,7 +11,8 @@ from tqdm import tqdm
 
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import PAPER_VARIANTS, SIGMA_SCALE, CompactConfig, ImageNoiseNet, PaperConfig, PaperNet
+from .networks import (PAPER_VARIANTS, SIGMA_SCALE, CompactConfig, ImageNoiseNet, PaperConfig, PaperNet,
+                       default_strides)
 
 VARIANTS = ("full_meta",) + PAPER_VARIANTS
 HUBER_DELTA_DN = 1.0
@@ -42,7 +43,7 @@ def build_network(variant: str, patch_size: int, width: int | None = None, depth
     if variant == "full_meta":
         cfg = CompactConfig(patch_size=patch_size)
         cfg.width = width or cfg.width
-        cfg.depth = depth or cfg.depth
+        cfg.strides = default_strides(depth) if depth else cfg.strides
         return ImageNoiseNet(cfg)
     if variant in PAPER_VARIANTS:
         cfg = PaperConfig(variant=variant, patch_size=patch_size, width=width or 16, blocks=depth or 2, convs_per_block=3)
@@ -53,7 +54,7 @@ def build_network(variant: str, patch_size: int, width: int | None = None, depth
 def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
     cfg = dict(ckpt["config"])
     if ckpt["variant"] == "full_meta":
-        cfg["hidden"] = tuple(cfg["hidden"])
+        cfg["hidden"], cfg["strides"] = tuple(cfg["hidden"]), tuple(cfg["strides"])
         net: torch.nn.Module = ImageNoiseNet(CompactConfig(**cfg))
     else:
         cfg["dense"] = tuple(cfg["dense"])

@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
                              width=args.width, depth=args.depth)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
-               "effects": effects, "sensor": sensor,
+               "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
                "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
                "settings": vars(settings)}
