@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from noise_monitor.estimator import load
 from noise_monitor.estimator.data import Scheme, generate, metas_of
 from noise_monitor.estimator.device import resolve_device
 from noise_monitor.estimator.features import compact_inputs
+from noise_monitor.estimator.inference import WEIGHTS_DIR
 from noise_monitor.estimator.networks import (N_MAPS, N_SCALARS, PAPER_VARIANTS, CompactConfig, ImageNoiseNet, PaperConfig,
                                               PaperNet, count_parameters)
 from noise_monitor.estimator.peers import PEERS
@@ -239,6 +241,26 @@ def test_train_cli_end_to_end(tmp_path):
                    "--json", str(tmp_path / "s.json")])
     summary = json.loads((tmp_path / "s.json").read_text())
     assert rc == 0 and (tmp_path / "drne.pt").is_file() and summary["patches"] == 8
+
+
+def test_evaluate_cli_two_patch_sizes_and_cards(tmp_path):
+    """One benchmark per --patch-size (the net is size-agnostic), the JSON keyed by size, one card
+    section per size; the shipped estimator finds the +5 DN noise of part (c) at both sizes."""
+    weights = tmp_path / "w"
+    weights.mkdir()
+    shutil.copy(WEIGHTS_DIR / "full_meta.pt", weights / "full_meta.pt")
+    rc = cli_main(["evaluate", "--weights-dir", str(weights), "--variants", "full_meta", "--patches", "12",
+                   "--parts", "a", "c", "--patch-size", "32", "64", "--no-peers", "--no-sweep",
+                   "--cache", str(tmp_path / "cache"), "--json", str(tmp_path / "e.json"), "--cards", "--device", "cpu"])
+    assert rc == 0
+    runs = json.loads((tmp_path / "e.json").read_text())["by_patch_size"]
+    assert set(runs) == {"32x32", "64x64"}
+    for size, r in runs.items():
+        assert r["patch_size"]["full_meta"] == int(size.split("x")[0])
+        assert r["parts"]["c"]["full_meta"]["hit_rate"] >= 0.75
+        assert r["parts"]["a"]["full_meta"]["xi"]["rms"] < 1.0
+    card = (weights / "full_meta.md").read_text()
+    assert "32x32 patches" in card and "64x64 patches" in card and "--patch-size 32 64" in card
 
 
 def test_clean_level_is_identity_mid_range(meta):

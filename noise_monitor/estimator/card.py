@@ -12,8 +12,9 @@ from .train import network_from_checkpoint
 ROWS = ("pn", "dcsn", "rn", "sigma_image", "xi")
 
 
-def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Path:
-    """Write ``<name>.md`` next to ``<name>.pt`` (training facts from ``<name>.train.json`` if present)."""
+def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str) -> Path:
+    """Write ``<name>.md`` next to ``<name>.pt``: training facts (``<name>.train.json`` if present) and one
+    held-out benchmark table per evaluated patch size (``runs``: label -> results of ``evaluate``)."""
     ck = torch.load(weights_dir / f"{name}.pt", map_location="cpu", weights_only=True)
     train_json = weights_dir / f"{name}.train.json"
     train = json.loads(train_json.read_text()) if train_json.is_file() else {}
@@ -23,6 +24,10 @@ def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Pat
              f"- Weights: `{name}.pt` ({(weights_dir / f'{name}.pt').stat().st_size / 1024:.0f} KiB), "
              f"{ck['step'] + ck.get('prior_steps', 0)} steps, {(ck['elapsed_s'] + ck.get('prior_elapsed_s', 0.0)) / 60:.1f} min "
              "training wall time in total on the shared 2-core CPU" + (" (fine-tuned from an earlier run, see command)" if ck.get("prior_steps") else "")]
+    for stage in _stages(train)[:-1]:
+        lines += [f"- Earlier stage (its weights are this run's `--init`): `{stage.get('command', '?')}` "
+                  f"({stage['patches']} patches, data {stage['data_seconds'] / 60:.1f} min, training "
+                  f"{stage['train_seconds'] / 60:.1f} min)"]
     if train:
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
@@ -32,10 +37,26 @@ def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Pat
                            " (pre-generated dataset file; the same command without --data regenerates it identically "
                            "from the data seed)"),
                   f"- Training settings: {json.dumps(train['settings'])}"]
-    lines += ["", f"## Held-out benchmark (`{command}`)", "",
-              f"{results['patches_per_part']} patches per part, matplotlib sample photos + unseen dead leaves, unseen seeds. "
-              "RMS (Bias / Std) in DN; alarms: false alarms |xi| > 1 DN on (a), hits on (b)/(c) where |xi_true| > 2 DN.", "",
-              "| part | " + " | ".join(ROWS) + " | alarms |", "|---" * (len(ROWS) + 2) + "|"]
+    lines += ["", f"Benchmark command: `{command}`"]
+    for label, results in runs.items():
+        lines += _benchmark(name, label, results)
+    path = weights_dir / f"{name}.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _stages(train: dict) -> list[dict]:
+    """Training summaries from the first stage to the last (``init_from`` chains fine-tuning runs)."""
+    return (_stages(train["init_from"]) if "init_from" in train else []) + ([train] if train else [])
+
+
+def _benchmark(name: str, label: str, results: dict) -> list[str]:
+    size = results["patch_size"].get(name)
+    title = f"{size}x{size} patches" + (" (native)" if label == "native" else "")
+    lines = ["", f"## Held-out benchmark, {title}", "",
+             f"{results['patches_per_part']} patches per part, matplotlib sample photos + unseen dead leaves, unseen seeds. "
+             "RMS (Bias / Std) in DN; alarms: false alarms |xi| > 1 DN on (a), hits on (b)/(c) where |xi_true| > 2 DN.", "",
+             "| part | " + " | ".join(ROWS) + " | alarms |", "|---" * (len(ROWS) + 2) + "|"]
     for part, rows in results["parts"].items():
         r = rows.get(name)
         if r is None:
@@ -50,6 +71,4 @@ def write_card(name: str, weights_dir: Path, results: dict, command: str) -> Pat
                   f"{sens['max_abs_diff_dn']} DN, {sens['flagged_cells']} cells off by > 1 DN."]
     if name in results.get("ms_per_patch", {}):
         lines += ["", f"Evaluation throughput: {results['ms_per_patch'][name]} ms/patch (batch 64, CPU, incl. physics)."]
-    path = weights_dir / f"{name}.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return lines

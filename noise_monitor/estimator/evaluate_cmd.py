@@ -21,8 +21,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="estimators to evaluate (default: every one with weights)")
     p.add_argument("--weights-dir", type=Path, default=WEIGHTS_DIR)
     p.add_argument("--patches", type=int, default=600, help="held-out patches per part")
-    p.add_argument("--patch-size", type=int, default=None,
-                   help="evaluate every variant on patches of this size (default: each variant's training size)")
+    p.add_argument("--patch-size", type=int, nargs="+", default=None,
+                   help="evaluate every variant on patches of this size, one benchmark per size given (default: each "
+                        "variant's training size; the paper's protocol is 128)")
     p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
@@ -35,13 +36,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.patches < 10:
         raise ValueError("--patches must be >= 10")
+    if any(size < 16 for size in args.patch_size or []):
+        raise ValueError("--patch-size must be >= 16")
     names = args.variants or [n for n in NAMES if (args.weights_dir / f"{n}.pt").is_file()]
     if not names:
         raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
     estimators = {n: load(n, args.device, weights=args.weights_dir / f"{n}.pt") for n in names}
-    if args.patch_size is not None and args.patch_size < 16:
-        raise ValueError("--patch-size must be >= 16")
-    size_of = {n: args.patch_size or e.patch_size for n, e in estimators.items()}
+    runs = {("native" if size is None else f"{size}x{size}"): evaluate(estimators, args, size)
+            for size in args.patch_size or [None]}
+    for label, results in runs.items():
+        print(f"== patches {label}\n{_table(results)}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(next(iter(runs.values())) if len(runs) == 1 else {"by_patch_size": runs}, indent=2))
+    if args.cards:
+        sizes = f" --patch-size {' '.join(map(str, args.patch_size))}" if args.patch_size else ""
+        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}{sizes}"
+        for name in names:
+            print(f"model card: {write_card(name, args.weights_dir, runs, command)}")
+    return 0
+
+
+def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None) -> dict:
+    """Scores of every estimator (and the peers) on each part, the throughput and full_meta's sweep."""
+    size_of = {n: patch_size or e.patch_size for n, e in estimators.items()}
     results: dict = {"patches_per_part": args.patches, "patch_size": size_of, "parts": {}, "ms_per_patch": {}}
     prior = PhysicsPrior()
     for part in args.parts:
@@ -62,15 +80,7 @@ def run(args: argparse.Namespace) -> int:
         fm = estimators["full_meta"]
         results["sensitivity_full_meta"] = sensitivity_sweep(
             lambda x, m: fm.predict(x, m)["total"][0], size_of["full_meta"], model=fm.prior.model)
-    print(_table(results))
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2))
-    if args.cards:
-        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}"
-        for name in names:
-            print(f"model card: {write_card(name, args.weights_dir, results, command)}")
-    return 0
+    return results
 
 
 def _table(results: dict) -> str:
