@@ -153,6 +153,18 @@ def test_train_resume_and_load(tmp_path, tiny_data, meta):
     assert np.allclose(out["xi"], out["sigma_model"] - out["sigma_image"])
 
 
+def test_init_on_larger_patches_keeps_operating_size(tmp_path, tiny_data):
+    """Fine-tuning a size-agnostic net on 48 px patches starts from the 32 px weights and keeps the
+    configured operating patch size; a net of other layer shapes is refused."""
+    first = train(TrainSettings("full_meta", steps=1, batch=2), tiny_data, tmp_path / "a", threads=1, progress=False)
+    big = generate(4, 48, seed=6, group=4, progress=False)
+    path = train(TrainSettings("full_meta", steps=1, batch=2), big, tmp_path / "b", threads=1, progress=False, init=first)
+    ck = torch.load(path, weights_only=True)
+    assert ck["config"]["patch_size"] == 32 and ck["prior_steps"] == 1
+    with pytest.raises(ValueError, match="same configuration"):
+        train(TrainSettings("full_meta", steps=1, batch=2, width=4), big, tmp_path / "c", threads=1, progress=False, init=first)
+
+
 def test_onnx_and_torch_backends_agree(meta):
     rng = np.random.default_rng(5)
     x = rng.uniform(30, 200, (3, 48, 48)).astype(np.float32)

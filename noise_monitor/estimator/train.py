@@ -92,7 +92,9 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     """Train a variant; writes ``checkpoint.pt`` every ``checkpoint_every`` steps and ``<variant>.pt``.
 
     ``init``: start from the weights of an earlier ``<variant>.pt`` (fine-tuning; fresh optimiser and
-    schedule, its step count and time are added to this run's). The checkpoints record the camera
+    schedule, its step count and time are added to this run's). The networks are size-agnostic (global
+    pooling), so the data may have another patch size than the ``init`` network; its configured
+    ``patch_size`` (the size the monitor cuts by default) is kept. The checkpoints record the camera
     effects and sensor fields the data was generated with (``effects``, ``sensor``), so ``load`` builds
     the matching physics prior.
     """
@@ -111,9 +113,10 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         if not Path(init).is_file():
             raise FileNotFoundError(f"--init: {init} not found")
         ck = torch.load(init, map_location=dev, weights_only=True)
-        if ck.get("variant") != settings.variant or ck["config"] != net.cfg.as_dict():
+        if ck.get("variant") != settings.variant or _layers(ck["config"]) != _layers(net.cfg.as_dict()):
             raise ValueError(f"--init: {init} is not a {settings.variant} network of the same configuration")
         net.load_state_dict(ck["state_dict"])
+        net.cfg.patch_size = int(ck["config"]["patch_size"])  # the operating size stays; see the docstring
         prior_steps, prior_s = ck["step"] + ck.get("prior_steps", 0), ck["elapsed_s"] + ck.get("prior_elapsed_s", 0.0)
     if resume:
         if not ckpt_path.is_file():
@@ -158,6 +161,11 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     path = out_dir / f"{settings.variant}.pt"
     torch.save(final, path)
     return path
+
+
+def _layers(config: dict) -> dict:
+    """A network configuration without its operating patch size (what the weights' shapes depend on)."""
+    return {k: v for k, v in config.items() if k != "patch_size"}
 
 
 def _checkpoint(net, settings: TrainSettings, step: int, elapsed: float, opt=None, sched=None, rng=None) -> dict:
