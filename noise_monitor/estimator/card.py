@@ -70,5 +70,6 @@ def _benchmark(name: str, label: str, results: dict) -> list[str]:
         lines += ["", f"Metadata sensitivity sweep (paper's protocol, sequential model reference): max |estimator - model| = "
                   f"{sens['max_abs_diff_dn']} DN, {sens['flagged_cells']} cells off by > 1 DN."]
     if name in results.get("ms_per_patch", {}):
-        lines += ["", f"Evaluation throughput: {results['ms_per_patch'][name]} ms/patch (batch 64, CPU, incl. physics)."]
+        lines += ["", f"Evaluation throughput: {results['ms_per_patch'][name]} ms/patch (batch 64, CPU, incl. building the physics "
+                  "tables of a new metadata set every 8 patches; a camera frame shares one set: see bench/bench_estimator.py)."]
     return lines

@@ -16,7 +16,7 @@ ALARM_LEVELS = ("WARN", "ERROR")
 #: One-line description per field (used for the node's declared parameters and --help texts).
 DESCRIPTIONS: dict[str, str] = {
     "patches_per_frame": "patches (K) evaluated per frame, spread over the usable image area",
-    "patch_size": "patch edge in pixels; 0 = the estimator's native patch size",
+    "patch_size": "patch edge in pixels; 0 = the estimator's native patch size (128 = the paper's: steadier xi, ~4x cost)",
     "min_patch_mean_dn": "patches darker than this mean (DN) are skipped (underexposed: unreliable estimates)",
     "max_patch_mean_dn": "patches brighter than this mean (DN) are skipped (overexposed: unreliable estimates)",
     "max_clipped_fraction": "max fraction of pixels at 0 or 255 DN in a usable patch (black / saturated)",
