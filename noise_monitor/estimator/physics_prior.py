@@ -1,10 +1,11 @@
 """The analytic noise model applied to patches: per-source sigma from the 5x5-smoothed intensity map.
 
-A patch's clean intensity is estimated by a 5x5 box filter of the noisy patch (cv2.blur), corrected
-for the clipping bias near 0 and 255; the model's tables E[n|v], E[n^2|v] (one set per metadata,
-cached by the NoiseModel) are then integrated over the patch's intensity histogram with linear
-weights, which equals ``NoiseModel.predict`` on that map but runs one ``bincount`` per metadata group
-instead of per-pixel interpolation.
+A patch's clean intensity is estimated by a 5x5 box filter of the noisy patch (cv2.blur), shrunk
+towards the patch mean by the noise it still holds and corrected for the clipping bias near 0 and 255;
+the model's tables E[n|v], E[n^2|v] (one set per metadata, cached by the NoiseModel) are then
+integrated over the patch's intensity histogram with linear weights, which equals
+``NoiseModel.predict`` on that map but runs one ``bincount`` per metadata group instead of per-pixel
+interpolation.
 """
 from __future__ import annotations
 
@@ -128,9 +129,10 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
     S = 3 (the paper's sources) or 4 (plus ``extra``, see :meth:`PhysicsPrior.tables`).
 
     Patch i uses ``tables[group_of[i]]``. Unless ``debias`` is False, the smoothed map is first rid of
-    the noise it still holds (:func:`shrink_noise`) and mapped to clean levels (:func:`clean_level`); integrating the tables over the resulting
-    intensity histogram (linear weights) equals ``NoiseModel.predict`` on that map. With ``with_map`` also
-    ``sigma_map`` (N, H, W): the model's total sigma at each pixel's level.
+    the noise it still holds (:func:`shrink_noise`) and mapped to clean levels (:func:`clean_level`);
+    integrating the tables over the resulting intensity histogram (linear weights) equals
+    ``NoiseModel.predict`` on that map. With ``with_map`` also ``sigma_map`` (N, H, W): the model's
+    total sigma at each pixel's level.
     """
     n, h, w = smooth.shape
     names = (SOURCES + (EXTRA,))[: tables.shape[2]]
