@@ -4,17 +4,15 @@ from __future__ import annotations
 import json
 import shutil
 
-import cv2
 import numpy as np
 import pytest
 import torch
 
 from noise_monitor.cli import main as cli_main
 from noise_monitor.estimator import load
-from noise_monitor.estimator.data import Scheme, generate, metas_of, relief_of
+from noise_monitor.estimator.data import Scheme, generate, metas_of
 from noise_monitor.estimator.device import resolve_device
 from noise_monitor.estimator.features import compact_inputs
-from noise_monitor.estimator.images import shaded_relief, source_images
 from noise_monitor.estimator.inference import WEIGHTS_DIR
 from noise_monitor.estimator.networks import (N_MAPS, N_SCALARS, PAPER_VARIANTS, CompactConfig, ImageNoiseNet, PaperConfig,
                                               PaperNet, count_parameters)
@@ -136,25 +134,6 @@ def test_data_is_seeded_and_consistent(tiny_data):
     clean = ~d["overridden"].any(axis=1) & (d["unexpected"] == 0)
     assert np.allclose(d["truth_xi"][clean], 0.0)
     assert len(metas_of(d)) == 16 and d["tables"].shape[0] == 2
-
-
-def test_relief_images_extend_training_sources_reproducibly(tmp_path, capsys):
-    """Shaded relief: seeded, 0..255, dense pixel-scale texture; relief=0 keeps older datasets identical;
-    a dataset file cannot silently serve another --relief-images."""
-    a, b = shaded_relief(np.random.default_rng(4)), shaded_relief(np.random.default_rng(4))
-    assert np.array_equal(a, b) and a.min() >= 0.0 and a.max() <= 255.0 and a.shape == (256, 256)
-    rough = [np.std(im - cv2.blur(im, (5, 5))) for im in (shaded_relief(np.random.default_rng(s)) for s in range(6))]
-    assert max(rough) > 15.0 and min(rough) > 1.0  # terrain texture, never flat
-    plain = source_images("train", np.random.default_rng(1))
-    more = source_images("train", np.random.default_rng(1), n_relief=2)
-    assert len(more) == len(plain) + 2 and all(np.array_equal(x, y) for x, y in zip(plain, more))
-    d = generate(8, 32, seed=3, relief=2, progress=False)
-    assert relief_of(d) == 2 and relief_of({}) == 0
-    args = ["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "1", "--batch", "2",
-            "--patches", "8", "--patch-size", "32", "--threads", "1"]
-    assert cli_main(args + ["--relief-images", "1"]) == 0
-    assert json.loads(capsys.readouterr().out)["relief_images"] == 1
-    assert cli_main(args) == 2 and "--relief-images 1" in capsys.readouterr().err
 
 
 def test_unexpected_noise_makes_xi_negative():

@@ -31,7 +31,7 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
     if train:
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
-                  f"(scikit-image bundled photos + dead leaves{_relief(train)}, sequential simulator, xi scheme; data seed "
+                  f"(scikit-image bundled photos + dead leaves, sequential simulator, xi scheme; data seed "
                   f"{train.get('data_seed', '?')}" + (f", corruption scheme {json.dumps(train['scheme'])}" if "scheme" in train else "")
                   + ")" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
                            " (pre-generated dataset file; the same command without --data regenerates it identically "
@@ -43,11 +43,6 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
     path = weights_dir / f"{name}.md"
     path.write_text("\n".join(lines) + "\n")
     return path
-
-
-def _relief(train: dict) -> str:
-    n = train.get("relief_images", 0)
-    return f" + {n} shaded-relief images" if n else ""
 
 
 def _stages(train: dict) -> list[dict]:

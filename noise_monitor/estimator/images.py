@@ -1,5 +1,4 @@
-"""Clean grayscale source images (DN, float32): bundled photographs, procedural dead leaves and
-(optionally, training only) procedural shaded relief.
+"""Clean grayscale source images (DN, float32): bundled photographs and procedural dead leaves.
 
 Training photographs come from scikit-image's bundled samples; held-out photographs from
 matplotlib's bundled sample data (a different package, never used in training). Only images that
@@ -84,36 +83,12 @@ def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) ->
     return cv2.GaussianBlur(img, (0, 0), 0.6)
 
 
-def shaded_relief(rng: np.random.Generator, size: int = 256) -> np.ndarray:
-    """A shaded relief: a random fractal surface (power spectrum ~ f^-beta, beta 3..4.5, relief 5-100 %
-    of the width) lit from a random direction. Dense, sharp pixel-scale texture (rock, terrain, aerial
-    views) that neither dead leaves nor the training photographs contain.
-    """
-    f = np.fft.fftfreq(size)
-    k = np.hypot(*np.meshgrid(f, f, indexing="ij"))
-    k[0, 0] = 1.0
-    spectrum = k ** (-rng.uniform(3.0, 4.5) / 2.0) * np.exp(2j * np.pi * rng.random((size, size)))
-    spectrum[0, 0] = 0.0
-    z = np.real(np.fft.ifft2(spectrum))
-    z = (z - z.min()) / max(float(np.ptp(z)), 1e-12) * size * np.exp(rng.uniform(np.log(0.05), 0.0))
-    from matplotlib.colors import LightSource
-
-    light = LightSource(azdeg=rng.uniform(0.0, 360.0), altdeg=rng.uniform(20.0, 70.0))
-    return to_gray_dn(light.hillshade(z, vert_exag=1.0))
-
-
-def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
-                  n_relief: int = 0) -> list[np.ndarray]:
-    """Clean images of a split: its photographs, ``n_dead_leaves`` dead-leaves and ``n_relief``
-    shaded-relief images from ``rng`` (drawn after the dead leaves, so ``n_relief=0`` reproduces
-    datasets made before the relief images existed)."""
+def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24) -> list[np.ndarray]:
+    """Clean images of a split: its photographs plus ``n_dead_leaves`` dead-leaves images from ``rng``."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    if n_relief < 0:
-        raise ValueError(f"n_relief must be >= 0, got {n_relief}")
     photos = skimage_photos() if split == "train" else matplotlib_photos()
-    leaves = [dead_leaves(rng) for _ in range(n_dead_leaves)]
-    return photos + leaves + [shaded_relief(rng) for _ in range(n_relief)]
+    return photos + [dead_leaves(rng) for _ in range(n_dead_leaves)]
 
 
 def sample_clean_patches(images: list[np.ndarray], rng: np.random.Generator, n: int, size: int,
