@@ -256,23 +256,25 @@ def test_train_cli_end_to_end(tmp_path):
 
 
 def test_evaluate_cli_two_patch_sizes_and_cards(tmp_path):
-    """One benchmark per --patch-size (the net is size-agnostic), the JSON keyed by size, one card
-    section per size; the shipped estimator finds the +5 DN noise of part (c) at both sizes."""
+    """One run per --patch-size (the net is size-agnostic) and held-out set, the JSON keyed by run, one
+    card section per run; the shipped estimator finds the +5 DN noise of part (c) in every run."""
     weights = tmp_path / "w"
     weights.mkdir()
     shutil.copy(WEIGHTS_DIR / "full_meta.pt", weights / "full_meta.pt")
     rc = cli_main(["evaluate", "--weights-dir", str(weights), "--variants", "full_meta", "--patches", "12",
-                   "--parts", "a", "c", "--patch-size", "32", "64", "--no-peers", "--no-sweep",
+                   "--parts", "a", "c", "--patch-size", "32", "64", "--no-peers", "--no-sweep", "--heldout", "benchmark", "photos",
                    "--cache", str(tmp_path / "cache"), "--json", str(tmp_path / "e.json"), "--cards", "--device", "cpu"])
     assert rc == 0
-    runs = json.loads((tmp_path / "e.json").read_text())["by_patch_size"]
-    assert set(runs) == {"32x32", "64x64"}
-    for size, r in runs.items():
-        assert r["patch_size"]["full_meta"] == int(size.split("x")[0])
+    runs = json.loads((tmp_path / "e.json").read_text())["runs"]
+    assert set(runs) == {"32x32", "64x64", "32x32, photos", "64x64, photos"}
+    for label, r in runs.items():
+        assert r["patch_size"]["full_meta"] == int(label.split("x")[0])
+        assert r["heldout"] == ("photos" if "photos" in label else "benchmark")
         assert r["parts"]["c"]["full_meta"]["hit_rate"] >= 0.75
         assert r["parts"]["a"]["full_meta"]["xi"]["rms"] < 1.0
     card = (weights / "full_meta.md").read_text()
-    assert "32x32 patches" in card and "64x64 patches" in card and "--patch-size 32 64" in card
+    assert "32x32 patches" in card and "64x64 patches" in card and "--patch-size 32 64 --heldout benchmark photos" in card
+    assert card.count("## Held-out set `photos`") == 2 and "PyWavelets" in card
 
 
 def test_clean_level_is_identity_mid_range(meta):

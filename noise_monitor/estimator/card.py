@@ -6,6 +6,7 @@ from pathlib import Path
 
 import torch
 
+from .evaluate import HELDOUT_SETS
 from .networks import count_parameters
 from .train import network_from_checkpoint
 
@@ -52,9 +53,11 @@ def _stages(train: dict) -> list[dict]:
 
 def _benchmark(name: str, label: str, results: dict) -> list[str]:
     size = results["patch_size"].get(name)
-    title = f"{size}x{size} patches" + (" (native)" if label == "native" else "")
-    lines = ["", f"## Held-out benchmark, {title}", "",
-             f"{results['patches_per_part']} patches per part, matplotlib sample photos + unseen dead leaves, unseen seeds. "
+    title = f"{size}x{size} patches" + (" (native)" if label.startswith("native") else "")
+    heldout_set = results.get("heldout", "benchmark")
+    heading = "Held-out benchmark" if heldout_set == "benchmark" else f"Held-out set `{heldout_set}`"
+    lines = ["", f"## {heading}, {title}", "",
+             f"{results['patches_per_part']} patches per part, {HELDOUT_SETS[heldout_set][2]}, unseen seeds. "
              "RMS (Bias / Std) in DN; alarms: false alarms |xi| > 1 DN on (a), hits on (b)/(c) where |xi_true| > 2 DN.", "",
              "| part | " + " | ".join(ROWS) + " | alarms |", "|---" * (len(ROWS) + 2) + "|"]
     for part, rows in results["parts"].items():

@@ -1,7 +1,8 @@
 """Held-out benchmark: parts (a) clean metadata, (b) the paper's gain corruption, (c) +N(0, 5 DN).
 
-Held-out images come from another package than training (matplotlib's sample data) plus dead-leaves
-images and noise from seeds never used in training. Metrics are the paper's: Bias = |mean(est - truth)|,
+Held-out images come from other packages than training: the benchmark uses matplotlib's sample
+images plus dead-leaves images (most of its patches), the ``photos`` set matplotlib's and PyWavelets'
+sample images only; noise and crops come from seeds never used in training. Metrics are the paper's: Bias = |mean(est - truth)|,
 Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). Alarms: false alarms = |xi| > 1 DN on (a); hits on
 (b)/(c) = |xi| > 1 DN with the true sign, among patches with |xi_true| > 2 DN. Peers measure sigma_image
 (xi = physics sigma_model - their estimate).
@@ -21,7 +22,12 @@ from .data import PARTS, generate, load, metas_of, save
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
 
-HELDOUT_SEEDS = {"a": 1001, "b": 1002, "c": 1003}
+#: Held-out sets: data split, seeds per part and a description for reports.
+HELDOUT_SETS = {
+    "benchmark": ("heldout", {"a": 1001, "b": 1002, "c": 1003}, "matplotlib sample images + unseen dead leaves"),
+    "photos": ("photos", {"a": 2001, "b": 2002, "c": 2003},
+               "matplotlib + PyWavelets sample images only (no dead leaves)"),
+}
 ALARM_DN = 1.0
 HIT_TRUTH_DN = 2.0
 SENSITIVITY_FLAG_DN = 1.0
@@ -33,14 +39,19 @@ def stats(est: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     return {"bias": round(bias, 4), "std": round(std, 4), "rms": round(float(np.hypot(bias, std)), 4)}
 
 
-def heldout(part: str, n: int, patch_size: int, cache_dir: Path | None = None, progress: bool = True) -> dict[str, np.ndarray]:
-    """The held-out set of a part (cached as ``heldout_<part>_p<size>_n<n>.npz`` in ``cache_dir``)."""
+def heldout(part: str, n: int, patch_size: int, cache_dir: Path | None = None, progress: bool = True,
+            heldout_set: str = "benchmark") -> dict[str, np.ndarray]:
+    """The held-out data of a part of a set (``HELDOUT_SETS``), cached as
+    ``<split>_<part>_p<size>_n<n>.npz`` in ``cache_dir``."""
     if part not in PARTS:
         raise ValueError(f"part must be one of {tuple(PARTS)}, got {part!r}")
-    path = cache_dir / f"heldout_{part}_p{patch_size}_n{n}.npz" if cache_dir else None
+    if heldout_set not in HELDOUT_SETS:
+        raise ValueError(f"held-out set must be one of {tuple(HELDOUT_SETS)}, got {heldout_set!r}")
+    split, seeds, _ = HELDOUT_SETS[heldout_set]
+    path = cache_dir / f"{split}_{part}_p{patch_size}_n{n}.npz" if cache_dir else None
     if path is not None and path.is_file():
         return load(path)
-    data = generate(n, patch_size, HELDOUT_SEEDS[part], "heldout", PARTS[part], progress=progress)
+    data = generate(n, patch_size, seeds[part], split, PARTS[part], progress=progress)
     if path is not None:
         save(data, path)
     return data

@@ -9,7 +9,7 @@ import numpy as np
 
 from .card import write_card
 from .data import PARTS
-from .evaluate import heldout, peer_predictions, score, sensitivity_sweep, timed_predict
+from .evaluate import HELDOUT_SETS, heldout, peer_predictions, score, sensitivity_sweep, timed_predict
 from .inference import NAMES, WEIGHTS_DIR, load
 from .physics_prior import PhysicsPrior
 
@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="evaluate every variant on patches of this size, one benchmark per size given (default: each "
                         "variant's training size; the paper's protocol is 128)")
     p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
+    p.add_argument("--heldout", nargs="+", default=["benchmark"], choices=list(HELDOUT_SETS),
+                   help="held-out sets: benchmark (matplotlib images + dead leaves) and/or photos (matplotlib + "
+                        "PyWavelets images only); one run per set and patch size")
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
     p.add_argument("--cache", type=Path, default=Path("out/estimator_eval"), help="held-out data cache directory")
@@ -42,30 +45,37 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
     estimators = {n: load(n, args.device, weights=args.weights_dir / f"{n}.pt") for n in names}
-    runs = {("native" if size is None else f"{size}x{size}"): evaluate(estimators, args, size)
-            for size in args.patch_size or [None]}
+    runs = {_label(size, hs): evaluate(estimators, args, size, hs)
+            for hs in args.heldout for size in args.patch_size or [None]}
     for label, results in runs.items():
         print(f"== patches {label}\n{_table(results)}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(next(iter(runs.values())) if len(runs) == 1 else {"by_patch_size": runs}, indent=2))
+        args.json.write_text(json.dumps(next(iter(runs.values())) if len(runs) == 1 else {"runs": runs}, indent=2))
     if args.cards:
         sizes = f" --patch-size {' '.join(map(str, args.patch_size))}" if args.patch_size else ""
-        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}{sizes}"
+        sets = f" --heldout {' '.join(args.heldout)}" if args.heldout != ["benchmark"] else ""
+        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}{sizes}{sets}"
         for name in names:
             print(f"model card: {write_card(name, args.weights_dir, runs, command)}")
     return 0
 
 
-def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None) -> dict:
-    """Scores of every estimator (and the peers) on each part, the throughput and full_meta's sweep."""
+def _label(size: int | None, heldout_set: str) -> str:
+    return ("native" if size is None else f"{size}x{size}") + ("" if heldout_set == "benchmark" else f", {heldout_set}")
+
+
+def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None, heldout_set: str = "benchmark") -> dict:
+    """Scores of every estimator (and the peers) on each part of a held-out set, the throughput and (on
+    the benchmark) full_meta's metadata sweep."""
     size_of = {n: patch_size or e.patch_size for n, e in estimators.items()}
-    results: dict = {"patches_per_part": args.patches, "patch_size": size_of, "parts": {}, "ms_per_patch": {}}
+    results: dict = {"heldout": heldout_set, "patches_per_part": args.patches, "patch_size": size_of, "parts": {},
+                     "ms_per_patch": {}}
     prior = PhysicsPrior()
     for part in args.parts:
         results["parts"][part] = {}
         for size in sorted(set(size_of.values())):
-            data = heldout(part, args.patches, size, args.cache)
+            data = heldout(part, args.patches, size, args.cache, heldout_set=heldout_set)
             for name, est in estimators.items():
                 if size_of[name] != size:
                     continue
@@ -76,7 +86,7 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None)
                 for peer, pred in peer_predictions(data, prior).items():
                     results["parts"][part][f"{peer}@{size}"] = score(pred, data, part)
     results["ms_per_patch"] = {k: round(float(np.mean(v)), 3) for k, v in results["ms_per_patch"].items()}
-    if not args.no_sweep and "full_meta" in estimators:
+    if not args.no_sweep and "full_meta" in estimators and heldout_set == "benchmark":
         fm = estimators["full_meta"]
         results["sensitivity_full_meta"] = sensitivity_sweep(
             lambda x, m: fm.predict(x, m)["total"][0], size_of["full_meta"], model=fm.prior.model)

@@ -1,8 +1,9 @@
 """Clean grayscale source images (DN, float32): bundled photographs and procedural dead leaves.
 
 Training photographs come from scikit-image's bundled samples; held-out photographs from
-matplotlib's bundled sample data (a different package, never used in training). Only images that
-load offline are listed. Photographs are downsampled 2x (area) to suppress their own noise.
+matplotlib's bundled sample data (a different package, never used in training) and, for the
+images-only check, also PyWavelets' bundled photographs. Only images that load offline are listed.
+Photographs are downsampled 2x (area) to suppress their own noise.
 """
 from __future__ import annotations
 
@@ -17,7 +18,11 @@ SKIMAGE_PHOTOS = ("astronaut", "brick", "camera", "cat", "chelsea", "clock", "co
                   "text", "cell", "stereo_motorcycle")
 #: matplotlib sample data used only for the held-out benchmark.
 MATPLOTLIB_PHOTOS = ("grace_hopper.jpg", "s1045.ima.gz", "jacksboro_fault_dem.npz", "Minduka_Present_Blue_Pack.png")
-SPLITS = ("train", "heldout")
+#: PyWavelets' bundled photographs (its ``camera`` is scikit-image's, a training image: not listed).
+PYWAVELETS_PHOTOS = ("aero", "ascent")
+#: train: scikit-image photos + dead leaves; heldout: matplotlib images + dead leaves (the benchmark);
+#: photos: matplotlib + PyWavelets images only (no dead leaves; generalisation to photographs).
+SPLITS = ("train", "heldout", "photos")
 
 
 def to_gray_dn(img: np.ndarray) -> np.ndarray:
@@ -72,6 +77,12 @@ def matplotlib_photos() -> list[np.ndarray]:
     return out
 
 
+def pywavelets_photos() -> list[np.ndarray]:
+    import pywt.data
+
+    return [_downsample(to_gray_dn(getattr(pywt.data, name)())) for name in PYWAVELETS_PHOTOS]
+
+
 def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) -> np.ndarray:
     """A dead-leaves image: occluding disks, power-law radii, random gray levels, slight anti-aliasing."""
     img = np.full((size, size), rng.uniform(0, 255), dtype=np.float32)
@@ -84,9 +95,12 @@ def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) ->
 
 
 def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24) -> list[np.ndarray]:
-    """Clean images of a split: its photographs plus ``n_dead_leaves`` dead-leaves images from ``rng``."""
+    """Clean images of a split (see ``SPLITS``): its photographs plus ``n_dead_leaves`` dead-leaves images
+    from ``rng`` (none for ``photos``)."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if split == "photos":
+        return matplotlib_photos() + pywavelets_photos()
     photos = skimage_photos() if split == "train" else matplotlib_photos()
     return photos + [dead_leaves(rng) for _ in range(n_dead_leaves)]
 
