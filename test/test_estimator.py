@@ -10,9 +10,10 @@ import torch
 
 from noise_monitor.cli import main as cli_main
 from noise_monitor.estimator import load
-from noise_monitor.estimator.data import Scheme, generate, metas_of
+from noise_monitor.estimator.data import Scheme, generate, metas_of, photo_variants_of
 from noise_monitor.estimator.device import resolve_device
 from noise_monitor.estimator.features import compact_inputs
+from noise_monitor.estimator.images import SKIMAGE_PHOTOS, source_images
 from noise_monitor.estimator.inference import WEIGHTS_DIR
 from noise_monitor.estimator.networks import (N_MAPS, N_SCALARS, PAPER_VARIANTS, CompactConfig, ImageNoiseNet, PaperConfig,
                                               PaperNet, count_parameters)
@@ -134,6 +135,27 @@ def test_data_is_seeded_and_consistent(tiny_data):
     clean = ~d["overridden"].any(axis=1) & (d["unexpected"] == 0)
     assert np.allclose(d["truth_xi"][clean], 0.0)
     assert len(metas_of(d)) == 16 and d["tables"].shape[0] == 2
+
+
+def test_photo_variants_rescale_training_photos_reproducibly(tmp_path, capsys):
+    """Photo variants: seeded, 0..255, several scales per photo; 0 keeps older datasets identical; a dataset
+    file cannot silently serve another --photo-variants."""
+    a = source_images("train", np.random.default_rng(4), n_dead_leaves=0, variants=2)
+    b = source_images("train", np.random.default_rng(4), n_dead_leaves=0, variants=2)
+    assert len(a) == 2 * len(SKIMAGE_PHOTOS) and all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert all(0.0 <= im.min() and im.max() <= 255.0 for im in a)
+    astronaut = [im.shape for im in a[:2]]  # 512x512 original: two different downscales, 128-341 px
+    assert astronaut[0] != astronaut[1] and all(128 <= s[0] <= 342 for s in astronaut)
+    plain = generate(8, 32, seed=3, progress=False)
+    assert photo_variants_of(plain) == 0 and photo_variants_of({}) == 0
+    assert np.array_equal(plain["noisy"], generate(8, 32, seed=3, progress=False, photo_variants=0)["noisy"])
+    with pytest.raises(ValueError, match="train split"):
+        source_images("heldout", np.random.default_rng(0), variants=1)
+    args = ["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "1", "--batch", "2",
+            "--patches", "8", "--patch-size", "32", "--threads", "1"]
+    assert cli_main(args + ["--photo-variants", "1"]) == 0
+    assert json.loads(capsys.readouterr().out)["photo_variants"] == 1
+    assert cli_main(args) == 2 and "--photo-variants 1" in capsys.readouterr().err
 
 
 def test_unexpected_noise_makes_xi_negative():

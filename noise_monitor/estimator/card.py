@@ -32,7 +32,7 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
     if train:
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
-                  f"(scikit-image bundled photos + dead leaves, sequential simulator, xi scheme; data seed "
+                  f"(scikit-image bundled photos{_variants(train)} + dead leaves, sequential simulator, xi scheme; data seed "
                   f"{train.get('data_seed', '?')}" + (f", corruption scheme {json.dumps(train['scheme'])}" if "scheme" in train else "")
                   + ")" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
                            " (pre-generated dataset file; the same command without --data regenerates it identically "
@@ -44,6 +44,11 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
     path = weights_dir / f"{name}.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _variants(train: dict) -> str:
+    n = train.get("photo_variants", 0)
+    return f" (each {n}x at a random 1.5-4x downscale and gamma)" if n else ""
 
 
 def _stages(train: dict) -> list[dict]:

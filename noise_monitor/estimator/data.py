@@ -91,17 +91,18 @@ def _metadata(rng: np.random.Generator, sensor: Mapping[str, Any] | None) -> Cam
 
 def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: Scheme = Scheme(),
              group: int = 8, progress: bool = True, effects: EffectSpecs | None = None,
-             sensor: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
+             sensor: Mapping[str, Any] | None = None, photo_variants: int = 0) -> dict[str, np.ndarray]:
     """A seeded dataset of ``n`` noisy patches with truths, metadata and the analytic tables per group.
 
     ``effects``: effect specs beyond the paper's sources (name -> parameters); ``sensor``: static
-    metadata fields that replace the random sensor (operating conditions stay random).
+    metadata fields that replace the random sensor (operating conditions stay random);
+    ``photo_variants``: see ``images.source_images``.
     """
     if n < 1 or patch_size < 8:
         raise ValueError("need n >= 1 patches of at least 8x8 px")
     rng = np.random.default_rng(seed)
     prior = PhysicsPrior(camera_model(effects))  # validates the specs before any work
-    images = source_images(split, rng)
+    images = source_images(split, rng, variants=photo_variants)
     n_groups = -(-n // group)
     clean = sample_clean_patches(images, rng, n, patch_size)
     noisy = np.empty_like(clean)
@@ -141,7 +142,7 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
         "noisy": noisy, "clean": clean, "group_of": group_of, "meta_rows": np.stack(metas),
         "tables": np.stack(tables), "overridden": overridden, "unexpected": unexpected,
         "effects_json": np.array(json.dumps(_plain(effects), sort_keys=True)),
-        "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)),
+        "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)), "photo_variants": np.array(photo_variants),
         **{f"truth_{k}": v for k, v in truth.items()},
     }
 
@@ -153,6 +154,11 @@ def _plain(specs: Mapping | None) -> dict:
 def camera_of(data: dict[str, np.ndarray]) -> tuple[dict, dict]:
     """(effect specs, fixed sensor fields) a dataset was generated with (empty for the paper's camera)."""
     return tuple(json.loads(str(data[k])) if k in data else {} for k in ("effects_json", "sensor_json"))
+
+
+def photo_variants_of(data: dict[str, np.ndarray]) -> int:
+    """Photo variants a dataset was generated with (0 for datasets older than the option)."""
+    return int(data["photo_variants"]) if "photo_variants" in data else 0
 
 
 def save(data: dict[str, np.ndarray], path: Path) -> None:

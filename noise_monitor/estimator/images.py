@@ -45,15 +45,32 @@ def _downsample(a: np.ndarray) -> np.ndarray:
     return cv2.resize(a, (a.shape[1] // 2, a.shape[0] // 2), interpolation=cv2.INTER_AREA)
 
 
-def skimage_photos() -> list[np.ndarray]:
+def _skimage_originals() -> list[np.ndarray]:
     import skimage.data
 
     out = []
     for name in SKIMAGE_PHOTOS:
         img = getattr(skimage.data, name)()
-        if isinstance(img, tuple):
-            img = img[0]
-        out.append(_downsample(to_gray_dn(img)))
+        out.append(to_gray_dn(img[0] if isinstance(img, tuple) else img))
+    return out
+
+
+def skimage_photos() -> list[np.ndarray]:
+    return [_downsample(img) for img in _skimage_originals()]
+
+
+def photo_variants(rng: np.random.Generator, per_photo: int) -> list[np.ndarray]:
+    """``per_photo`` versions of every training photograph, each area-downsampled by a random factor
+    (log-uniform 1.5-4x, for originals of at least 256 px) and with a random gamma (log-uniform 0.6-1.6):
+    the same scenes with texture at other scales and contrasts than the fixed 2x of ``skimage_photos``."""
+    out = []
+    for img in _skimage_originals():
+        for _ in range(per_photo):
+            f = float(np.exp(rng.uniform(np.log(1.5), np.log(4.0)))) if min(img.shape) >= 256 else 1.0
+            im = img if f == 1.0 else cv2.resize(img, (int(img.shape[1] / f), int(img.shape[0] / f)),
+                                                 interpolation=cv2.INTER_AREA)
+            gamma = np.exp(rng.uniform(np.log(0.6), np.log(1.6)))  # float64: the product is computed in float64
+            out.append((255.0 * (im / 255.0) ** gamma).astype(np.float32))
     return out
 
 
@@ -94,14 +111,21 @@ def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) ->
     return cv2.GaussianBlur(img, (0, 0), 0.6)
 
 
-def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24) -> list[np.ndarray]:
+def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
+                  variants: int = 0) -> list[np.ndarray]:
     """Clean images of a split (see ``SPLITS``): its photographs plus ``n_dead_leaves`` dead-leaves images
-    from ``rng`` (none for ``photos``)."""
+    from ``rng`` (none for ``photos``). ``variants`` > 0 (train only): the training photographs as
+    ``photo_variants(rng, variants)`` instead of once at 2x."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if variants < 0 or (variants and split != "train"):
+        raise ValueError(f"photo variants must be >= 0 and only for the train split, got {variants} for {split!r}")
     if split == "photos":
         return matplotlib_photos() + pywavelets_photos()
-    photos = skimage_photos() if split == "train" else matplotlib_photos()
+    if variants:
+        photos = photo_variants(rng, variants)
+    else:
+        photos = skimage_photos() if split == "train" else matplotlib_photos()
     return photos + [dead_leaves(rng) for _ in range(n_dead_leaves)]
 
 

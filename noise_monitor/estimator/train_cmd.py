@@ -9,7 +9,7 @@ from pathlib import Path
 from ..physics import load_profile
 from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
-from .data import Scheme, camera_of, generate, load, save
+from .data import Scheme, camera_of, generate, load, photo_variants_of, save
 from .train import VARIANTS, TrainSettings, train
 
 HELP = "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"
@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data-seed", type=int, default=1, help="seed of the generated dataset")
     p.add_argument("--patches", type=int, default=16000, help="patches to generate")
     p.add_argument("--patch-size", type=int, default=64)
+    p.add_argument("--photo-variants", type=int, default=0,
+                   help="use each training photo N times at a random scale (1.5-4x down) and gamma instead of once "
+                        "at 2x (the shipped full_meta's last stages use 3; 0 = the paper-style recipe)")
     p.add_argument("--width", type=int, default=None, help="conv features (default: 16)")
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -46,6 +49,8 @@ def _check(args: argparse.Namespace) -> None:
     for name in ("steps", "batch", "patches", "threads"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1")
+    if args.photo_variants < 0:
+        raise ValueError("--photo-variants must be >= 0")
     if args.patch_size < 16:
         raise ValueError("--patch-size must be >= 16")
     if args.lr <= 0:
@@ -85,8 +90,12 @@ def run(args: argparse.Namespace) -> int:
         if camera_of(data) != (effects, sensor):
             raise ValueError(f"dataset {data_path} was generated for another camera (effects, sensor) than "
                              f"{args.profile or 'the paper random cameras'}: {camera_of(data)}; give a new --data path")
+        if photo_variants_of(data) != args.photo_variants:
+            raise ValueError(f"dataset {data_path} was generated with --photo-variants {photo_variants_of(data)}, not "
+                             f"{args.photo_variants}; give a new --data path")
     else:
-        data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme(), effects=effects, sensor=sensor)
+        data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme(), effects=effects, sensor=sensor,
+                        photo_variants=args.photo_variants)
         save(data, data_path)
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
@@ -94,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),
+               "photo_variants": args.photo_variants,
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
                "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
                "settings": vars(settings)}
