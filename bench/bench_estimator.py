@@ -55,9 +55,10 @@ def main() -> None:
     ests = {bk: load("full_meta", device="cpu", backend=bk) for bk in ("onnx", "torch")}
     fm = ests["torch"]
     size = fm.patch_size
+    sizes = sorted({size, 128})  # native size and the paper's 128x128 (the net is size-agnostic)
     for bk, est in ests.items():
         est.predict(np.full((1, size, size), 100.0, np.float32), meta)  # build the metadata's tables once
-        for psize in sorted({size, 128}):  # native size and the paper's 128x128 (the net is size-agnostic)
+        for psize in sizes:
             for b in BATCHES:
                 x = rng.uniform(0, 255, (b, psize, psize)).astype(np.float32)
                 rows.append(row(f"full_meta (end to end, {bk})", psize, b, timeit(lambda: est.predict(x, meta), args.reps)))
@@ -87,7 +88,7 @@ def main() -> None:
             rows.append(row(f"{name} (trained size)", est.patch_size, b, timeit(lambda: est.predict(x, meta), args.reps)))
 
     paper = PaperNet(PaperConfig(variant="full_meta_paper")).eval()
-    for psize in sorted({size, 128}):
+    for psize in sizes:
         for b in BATCHES:
             x = torch.rand(b, 1, psize, psize)
             m = torch.rand(b, 11)
@@ -100,7 +101,7 @@ def main() -> None:
     for r in rows:
         print(f"{r['variant']:<44} {r['patch']:>8} {r['batch']:>5} {r['ms_per_patch']:>10.3f} {r['patches_per_s']:>10.1f}")
     speedup = {}
-    for psize in sorted({size, 128}):
+    for psize in sizes:
         best = {name: max(r["patches_per_s"] for r in rows if r["variant"].startswith(name) and r["area_px"] == psize**2)
                 for name in ("full_meta (end to end, onnx)", "paper-size")}
         speedup[f"{psize}x{psize}"] = round(best["full_meta (end to end, onnx)"] / best["paper-size"], 1)

@@ -7,6 +7,7 @@ from pathlib import Path
 import torch
 
 from .evaluate import HELDOUT_SETS
+from .images import PHOTO_DOWNSCALE
 from .networks import count_parameters
 from .train import network_from_checkpoint
 
@@ -48,7 +49,7 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
 
 def _variants(train: dict) -> str:
     n = train.get("photo_variants", 0)
-    return f" (each {n}x at a random 1.5-4x downscale and gamma)" if n else ""
+    return f" (each {n}x at a random {PHOTO_DOWNSCALE[0]}-{PHOTO_DOWNSCALE[1]:g}x downscale and gamma)" if n else ""
 
 
 def _stages(train: dict) -> list[dict]:
@@ -62,7 +63,7 @@ def _benchmark(name: str, label: str, results: dict) -> list[str]:
     heldout_set = results.get("heldout", "benchmark")
     heading = "Held-out benchmark" if heldout_set == "benchmark" else f"Held-out set `{heldout_set}`"
     lines = ["", f"## {heading}, {title}", "",
-             f"{results['patches_per_part']} patches per part, {HELDOUT_SETS[heldout_set][2]}, unseen seeds. "
+             f"{results['patches_per_part']} patches per part, {HELDOUT_SETS[heldout_set].description}, unseen seeds. "
              "RMS (Bias / Std) in DN; alarms: false alarms |xi| > 1 DN on (a), hits on (b)/(c) where |xi_true| > 2 DN.", "",
              "| part | " + " | ".join(ROWS) + " | alarms |", "|---" * (len(ROWS) + 2) + "|"]
     for part, rows in results["parts"].items():

@@ -2,8 +2,8 @@
 
 Held-out images come from other packages than training: the benchmark uses matplotlib's sample
 images plus dead-leaves images (most of its patches), the ``photos`` set matplotlib's and PyWavelets'
-sample images only; noise and crops come from seeds never used in training. Metrics are the paper's: Bias = |mean(est - truth)|,
-Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). Alarms: false alarms = |xi| > 1 DN on (a); hits on
+sample images only; noise and crops come from seeds never used in training. Metrics are the paper's:
+Bias = |mean(est - truth)|, Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). Alarms: false alarms = |xi| > 1 DN on (a); hits on
 (b)/(c) = |xi| > 1 DN with the true sign, among patches with |xi_true| > 2 DN. Peers measure sigma_image
 (xi = physics sigma_model - their estimate).
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -22,11 +22,16 @@ from .data import PARTS, generate, load, metas_of, save
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
 
-#: Held-out sets: data split, seeds per part and a description for reports.
+class HeldoutSet(NamedTuple):
+    split: str  # images.SPLITS
+    seeds: dict[str, int]  # per part
+    description: str  # for reports
+
+
 HELDOUT_SETS = {
-    "benchmark": ("heldout", {"a": 1001, "b": 1002, "c": 1003}, "matplotlib sample images + unseen dead leaves"),
-    "photos": ("photos", {"a": 2001, "b": 2002, "c": 2003},
-               "matplotlib + PyWavelets sample images only (no dead leaves)"),
+    "benchmark": HeldoutSet("heldout", {"a": 1001, "b": 1002, "c": 1003}, "matplotlib sample images + unseen dead leaves"),
+    "photos": HeldoutSet("photos", {"a": 2001, "b": 2002, "c": 2003},
+                         "matplotlib + PyWavelets sample images only (no dead leaves)"),
 }
 ALARM_DN = 1.0
 HIT_TRUTH_DN = 2.0
@@ -47,11 +52,11 @@ def heldout(part: str, n: int, patch_size: int, cache_dir: Path | None = None, p
         raise ValueError(f"part must be one of {tuple(PARTS)}, got {part!r}")
     if heldout_set not in HELDOUT_SETS:
         raise ValueError(f"held-out set must be one of {tuple(HELDOUT_SETS)}, got {heldout_set!r}")
-    split, seeds, _ = HELDOUT_SETS[heldout_set]
-    path = cache_dir / f"{split}_{part}_p{patch_size}_n{n}.npz" if cache_dir else None
+    hs = HELDOUT_SETS[heldout_set]
+    path = cache_dir / f"{hs.split}_{part}_p{patch_size}_n{n}.npz" if cache_dir else None
     if path is not None and path.is_file():
         return load(path)
-    data = generate(n, patch_size, seeds[part], split, PARTS[part], progress=progress)
+    data = generate(n, patch_size, hs.seeds[part], hs.split, PARTS[part], progress=progress)
     if path is not None:
         save(data, path)
     return data

@@ -23,6 +23,9 @@ PYWAVELETS_PHOTOS = ("aero", "ascent")
 #: train: scikit-image photos + dead leaves; heldout: matplotlib images + dead leaves (the benchmark);
 #: photos: matplotlib + PyWavelets images only (no dead leaves; generalisation to photographs).
 SPLITS = ("train", "heldout", "photos")
+#: Ranges (log-uniform) of the area downscale and gamma of ``photo_variants``.
+PHOTO_DOWNSCALE = (1.5, 4.0)
+PHOTO_GAMMA = (0.6, 1.6)
 
 
 def to_gray_dn(img: np.ndarray) -> np.ndarray:
@@ -61,15 +64,15 @@ def skimage_photos() -> list[np.ndarray]:
 
 def photo_variants(rng: np.random.Generator, per_photo: int) -> list[np.ndarray]:
     """``per_photo`` versions of every training photograph, each area-downsampled by a random factor
-    (log-uniform 1.5-4x, for originals of at least 256 px) and with a random gamma (log-uniform 0.6-1.6):
+    (``PHOTO_DOWNSCALE``, for originals of at least 256 px) and with a random gamma (``PHOTO_GAMMA``):
     the same scenes with texture at other scales and contrasts than the fixed 2x of ``skimage_photos``."""
     out = []
     for img in _skimage_originals():
         for _ in range(per_photo):
-            f = float(np.exp(rng.uniform(np.log(1.5), np.log(4.0)))) if min(img.shape) >= 256 else 1.0
+            f = float(np.exp(rng.uniform(*np.log(PHOTO_DOWNSCALE)))) if min(img.shape) >= 256 else 1.0
             im = img if f == 1.0 else cv2.resize(img, (int(img.shape[1] / f), int(img.shape[0] / f)),
                                                  interpolation=cv2.INTER_AREA)
-            gamma = np.exp(rng.uniform(np.log(0.6), np.log(1.6)))  # float64: the product is computed in float64
+            gamma = np.exp(rng.uniform(*np.log(PHOTO_GAMMA)))  # float64: the product is computed in float64
             out.append((255.0 * (im / 255.0) ** gamma).astype(np.float32))
     return out
 

@@ -10,6 +10,7 @@ from ..physics import load_profile
 from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
 from .data import Scheme, camera_of, generate, load, photo_variants_of, save
+from .images import PHOTO_DOWNSCALE
 from .train import VARIANTS, TrainSettings, train
 
 HELP = "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"
@@ -28,8 +29,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--patches", type=int, default=16000, help="patches to generate")
     p.add_argument("--patch-size", type=int, default=64)
     p.add_argument("--photo-variants", type=int, default=0,
-                   help="use each training photo N times at a random scale (1.5-4x down) and gamma instead of once "
-                        "at 2x (the shipped full_meta's last stages use 3; 0 = the paper-style recipe)")
+                   help=f"use each training photo N times at a random {PHOTO_DOWNSCALE[0]}-{PHOTO_DOWNSCALE[1]:g}x "
+                        "downscale and gamma instead of once at 2x (the shipped full_meta's last stages use 3; "
+                        "0 = the paper-style recipe)")
     p.add_argument("--width", type=int, default=None, help="conv features (default: 16)")
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
