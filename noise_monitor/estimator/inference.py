@@ -21,7 +21,7 @@ from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
 from .networks import N_MAPS, N_SCALARS, SIGMA_SCALE
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
-from .train import network_from_checkpoint
+from .networks import network_from_checkpoint
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")

@@ -25,6 +25,7 @@ FULL_META_BRANCHES: dict[str, tuple[str, ...]] = {
 }
 MIN_META = ("gain_db", "sensor_temperature_c", "exposure_time_s")
 PAPER_VARIANTS = ("drne", "wo_meta", "min_meta", "full_meta_paper")
+VARIANTS = ("full_meta",) + PAPER_VARIANTS
 #: Output scale: networks predict sigma / SIGMA_SCALE (DN).
 SIGMA_SCALE = 16.0
 
@@ -183,3 +184,28 @@ class ImageNoiseNet(nn.Module):
 
 def count_parameters(net: nn.Module) -> int:
     return sum(p.numel() for p in net.parameters())
+
+
+def build_network(variant: str, patch_size: int, width: int | None = None, depth: int | None = None) -> torch.nn.Module:
+    """A fresh network of a variant (``width``/``depth`` override the defaults)."""
+    if variant == "full_meta":
+        cfg = CompactConfig(patch_size=patch_size)
+        cfg.width = width or cfg.width
+        cfg.strides = default_strides(depth) if depth else cfg.strides
+        return ImageNoiseNet(cfg)
+    if variant in PAPER_VARIANTS:
+        cfg = PaperConfig(variant=variant, patch_size=patch_size, width=width or 16, blocks=depth or 2, convs_per_block=3)
+        return PaperNet(cfg)
+    raise ValueError(f"unknown variant {variant!r}; choose from {VARIANTS}")
+
+
+def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
+    cfg = dict(ckpt["config"])
+    if ckpt["variant"] == "full_meta":
+        cfg["hidden"], cfg["strides"] = tuple(cfg["hidden"]), tuple(cfg["strides"])
+        net: torch.nn.Module = ImageNoiseNet(CompactConfig(**cfg))
+    else:
+        cfg["dense"] = tuple(cfg["dense"])
+        net = PaperNet(PaperConfig(**cfg))
+    net.load_state_dict(ckpt["state_dict"])
+    return net

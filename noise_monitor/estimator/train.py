@@ -11,10 +11,8 @@ from tqdm import tqdm
 
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import (PAPER_VARIANTS, SIGMA_SCALE, CompactConfig, ImageNoiseNet, PaperConfig, PaperNet,
-                       default_strides)
+from .networks import SIGMA_SCALE, VARIANTS, build_network, network_from_checkpoint
 
-VARIANTS = ("full_meta",) + PAPER_VARIANTS
 HUBER_DELTA_DN = 1.0
 
 
@@ -36,31 +34,6 @@ def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
 
     by_group = np.stack([row_to_meta(r).normalized() for r in data["meta_rows"]])
     return by_group[data["group_of"]]
-
-
-def build_network(variant: str, patch_size: int, width: int | None = None, depth: int | None = None) -> torch.nn.Module:
-    """A fresh network of a variant (``width``/``depth`` override the defaults)."""
-    if variant == "full_meta":
-        cfg = CompactConfig(patch_size=patch_size)
-        cfg.width = width or cfg.width
-        cfg.strides = default_strides(depth) if depth else cfg.strides
-        return ImageNoiseNet(cfg)
-    if variant in PAPER_VARIANTS:
-        cfg = PaperConfig(variant=variant, patch_size=patch_size, width=width or 16, blocks=depth or 2, convs_per_block=3)
-        return PaperNet(cfg)
-    raise ValueError(f"unknown variant {variant!r}; choose from {VARIANTS}")
-
-
-def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
-    cfg = dict(ckpt["config"])
-    if ckpt["variant"] == "full_meta":
-        cfg["hidden"], cfg["strides"] = tuple(cfg["hidden"]), tuple(cfg["strides"])
-        net: torch.nn.Module = ImageNoiseNet(CompactConfig(**cfg))
-    else:
-        cfg["dense"] = tuple(cfg["dense"])
-        net = PaperNet(PaperConfig(**cfg))
-    net.load_state_dict(ckpt["state_dict"])
-    return net
 
 
 def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:

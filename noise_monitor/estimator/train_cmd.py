@@ -11,7 +11,8 @@ from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
 from .data import Scheme, camera_of, generate, load, photo_variants_of, save
 from .images import PHOTO_DOWNSCALE
-from .train import VARIANTS, TrainSettings, train
+from .networks import VARIANTS
+from .train import TrainSettings, train
 
 HELP = "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"
 
