@@ -29,7 +29,7 @@ from noise_monitor.bag.replay import replay
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.estimator import load
 from noise_monitor.monitor import MonitorConfig
-from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC
 
 
 def rss_mb() -> float:

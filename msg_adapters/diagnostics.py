@@ -1,38 +1,18 @@
 """Diagnostic status reports and their DiagnosticArray messages for rclpy and rosbags.
 
 The level is ``bytes`` (length 1) in rclpy and ``int`` in rosbags: this module is the only place where
-that conversion happens. Everything else uses :class:`StatusReport` with int levels.
+that conversion happens. Everything else uses the core's :class:`StatusReport` with int levels
+(``noise_monitor.monitor.status``, re-exported here).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, Iterable
 
-OK, WARN, ERROR, STALE = 0, 1, 2, 3
-LEVEL_NAMES: dict[int, str] = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
+from noise_monitor.monitor.status import ERROR, LEVEL_NAMES, OK, STALE, WARN, StatusReport
 
-
-@dataclass(frozen=True)
-class StatusReport:
-    """One diagnostic status, middleware-neutral (values are strings, numbers as numeric strings)."""
-
-    level: int
-    name: str
-    message: str
-    hardware_id: str
-    values: dict[str, str] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.level not in LEVEL_NAMES:
-            raise ValueError(f"diagnostic level must be one of {sorted(LEVEL_NAMES)}, got {self.level!r}")
-        bad = [k for k, v in self.values.items() if not isinstance(v, str)]
-        if bad:
-            raise ValueError(f"diagnostic values must be strings: {', '.join(bad)}")
-
-    @property
-    def level_name(self) -> str:
-        return LEVEL_NAMES[self.level]
+__all__ = ["ERROR", "LEVEL_NAMES", "OK", "STALE", "WARN", "StatusReport", "jazzy_typestore", "level_of",
+           "reports_from_msg", "to_rclpy", "to_rosbags"]
 
 
 def _stamp(stamp_ns: int) -> tuple[int, int]:

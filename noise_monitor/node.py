@@ -26,7 +26,7 @@ from msg_adapters import (
     resolve_metadata,
 )
 from noise_monitor.monitor import DESCRIPTIONS, Frame, GapCounter, Matched, Monitor, MonitorConfig, StampSynchronizer
-from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
 from noise_monitor.physics import CameraProfile, MetadataError, NoiseModel, load_profile
 
 HELP = "run the live ROS 2 noise monitor node (image + metadata in, /diagnostics and sigma/xi topics out)"

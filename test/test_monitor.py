@@ -21,7 +21,7 @@ from noise_monitor.monitor import (
     XiAlarm,
     select_patches,
 )
-from noise_monitor.monitor.outputs import OUTPUT_TOPICS, output_topics, rclpy_messages, rosbags_messages
+from msg_adapters.outputs import OUTPUT_TOPICS, output_topics, rclpy_messages, rosbags_messages
 from noise_monitor.physics import NoiseModel, load_profile
 
 _LAPLACE = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)

@@ -27,7 +27,7 @@ from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
-from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC
 from noise_monitor.physics import CameraProfile, load_plugin_file, load_profile
 from noise_monitor.physics.effects import registry
 

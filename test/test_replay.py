@@ -17,7 +17,7 @@ from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
-from noise_monitor.monitor.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
 from noise_monitor.physics import load_profile
 
 torch.set_num_threads(1)

@@ -5,7 +5,7 @@ missing/invalid/stale, too few usable patches, ...). The node's behaviour is rep
 same model (profile effects included), same hardware id, same reject path for unusable images, and
 the periodic ``/diagnostics`` idle report (STALE after ``image_timeout_s``) in gaps between images.
 Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
-(``noise_monitor.monitor.outputs``), ``replay.csv`` (one line per frame), ``replay.png`` and
+(``msg_adapters.outputs``), ``replay.csv`` (one line per frame), ``replay.png`` and
 ``summary.json``.
 """
 from __future__ import annotations
@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from msg_adapters.diagnostics import LEVEL_NAMES
 from noise_monitor.monitor import Frame, FrameResult, Monitor, MonitorConfig
 from noise_monitor.monitor.config import read_ros_params
-from noise_monitor.monitor.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
+from noise_monitor.monitor.status import LEVEL_NAMES
+from msg_adapters.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
 from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
 
 from .errors import BagError

@@ -14,21 +14,13 @@ from typing import Any
 
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
+
+from msg_adapters.diagnostics import jazzy_typestore as typestore
 
 from .errors import BagError
 
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
-_TYPESTORE: Typestore | None = None
-
-
-def typestore() -> Typestore:
-    """The ROS 2 Jazzy message types (shared, created once)."""
-    global _TYPESTORE
-    if _TYPESTORE is None:
-        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-    return _TYPESTORE
 
 
 class BagWriter:

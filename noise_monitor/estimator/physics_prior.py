@@ -15,12 +15,12 @@ import cv2
 import numpy as np
 
 from ..physics import CameraMetadata, NoiseModel
+from ..physics.constants import PAPER_EFFECTS as SOURCES
+from ..physics.constants import SMOOTH_KERNEL
 from ..physics.model import TABLE_STEP_DN
 
-SOURCES = ("pn", "dcsn", "rn")
 #: Name of the optional 4th table row: every noise effect of the model beyond the paper's sources.
 EXTRA = "extra"
-SMOOTH_KERNEL = 5
 #: Floor of the per-pixel sigma map used to normalise residuals (DN).
 SIGMA_MAP_FLOOR = 0.25
 

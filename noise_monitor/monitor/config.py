@@ -9,8 +9,10 @@ from typing import Any, Mapping
 
 import yaml
 
+from noise_monitor.physics.constants import MODES
+
 XI_SOURCES = ("auto", "estimator", "model")
-MODEL_MODES = ("joint", "sequential")
+MODEL_MODES = MODES
 ALARM_LEVELS = ("WARN", "ERROR")
 
 #: One-line description per field (used for the node's declared parameters and --help texts).

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from noise_monitor.physics import CameraMetadata, NoiseModel
+from noise_monitor.physics.constants import DN_MAX
 from noise_monitor.physics.model import TABLE_STEP_DN
 
-DN_MAX = 255.0
 
 
 def histogram_weights(maps: np.ndarray) -> np.ndarray:

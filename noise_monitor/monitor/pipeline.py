@@ -12,18 +12,19 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 
-from msg_adapters.diagnostics import ERROR, OK, STALE, WARN, StatusReport
 from noise_monitor.physics import CameraMetadata, EffectError, NoiseModel
+from noise_monitor.physics.constants import PAPER_EFFECTS as SOURCES
+from noise_monitor.physics.constants import SMOOTH_KERNEL
 
 from .alarm import EmaFilter, XiAlarm
 from .config import MonitorConfig
+from .frame import Frame
+from .frame import skip_reason as frame_skip_reason
 from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
+from .status import ERROR, OK, STALE, WARN, StatusReport
 
-SOURCES = ("pn", "dcsn", "rn")
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
-#: Box filter (pixels) estimating a patch's clean intensity map for the model prediction.
-SMOOTH_KERNEL = 5
 
 
 class Estimator(Protocol):
@@ -33,18 +34,6 @@ class Estimator(Protocol):
     name: str
 
     def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | list[CameraMetadata]) -> dict[str, np.ndarray]: ...
-
-
-@dataclass
-class Frame:
-    """One image with the metadata resolved for it (``None`` + ``missing`` when incomplete)."""
-
-    stamp_ns: int
-    image_dn: np.ndarray
-    metadata: CameraMetadata | None
-    missing: list[str] = field(default_factory=list)
-    metadata_age_s: float | None = None  # image stamp minus the stamp of the metadata used
-    metadata_error: str | None = None  # metadata present but invalid (e.g. out of range)
 
 
 def _fmt(value: float) -> str:
@@ -154,32 +143,15 @@ class Monitor:
         """Count and report an input that never became a Frame (e.g. an unsupported image encoding)."""
         self.counters["frames_received"] += 1
         self.last_received_ns = stamp_ns if received_ns is None else received_ns
-        return self._skip(Frame(stamp_ns, np.zeros((0, 0), np.float32), None), reason)
+        return self._skip(Frame(stamp_ns, None, None), reason)
 
     def _alarm_level(self) -> int:
         return ERROR if self.config.alarm_level == "ERROR" else WARN
 
     # --- the pipeline ----------------------------------------------------------------------
     def skip_reason(self, frame: Frame) -> str | None:
-        """Why a frame cannot be evaluated (metadata problems, unusable image), else None."""
-        cfg = self.config
-        if frame.metadata_error:
-            return f"metadata invalid: {frame.metadata_error}"
-        if frame.metadata is None:
-            if frame.missing:
-                return f"metadata missing: {', '.join(frame.missing)}"
-            return "no metadata for this image"
-        if frame.metadata_age_s is not None and abs(frame.metadata_age_s) > cfg.metadata_timeout_s:
-            return (f"metadata stale: {abs(frame.metadata_age_s):.2f} s between image and metadata "
-                    f"(timeout {cfg.metadata_timeout_s:g} s)")
-        img = frame.image_dn
-        if img.ndim != 2:
-            return f"image must be 2-D gray, got shape {img.shape}"
-        if img.shape[0] < self.patch_size or img.shape[1] < self.patch_size:
-            return f"image {img.shape[1]}x{img.shape[0]} is smaller than the patch size {self.patch_size}"
-        if not np.all(np.isfinite(img)):
-            return "image contains NaN or inf"
-        return None
+        """Why a frame cannot be evaluated (unusable image, metadata problems, too small), else None."""
+        return frame_skip_reason(frame, self.config.metadata_timeout_s, self.patch_size)
 
     def process(self, frame: Frame, received_ns: int | None = None) -> FrameResult:
         """Evaluate one frame. ``received_ns``: arrival time on the clock used by :meth:`idle_report`
@@ -192,6 +164,7 @@ class Monitor:
             return self._skip(frame, reason)
         cfg = self.config
         meta = frame.metadata
+        assert meta is not None and frame.image_dn is not None  # skip_reason checked both
         selection = select_patches(frame.image_dn, self.patch_size, cfg)
         if len(selection.corners) < cfg.min_patches:
             return self._skip(frame, f"{len(selection.corners)} usable patches (need {cfg.min_patches}): "

@@ -5,6 +5,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from .constants import MODES
 from .clipping import DN_MAX, POISSON_EXACT_MAX, clipped_pmf, noise_moments, poisson_terms, scatter_pmf
 from .effects import PAPER_EFFECTS, Effect, EffectError, build_effects, make_effect
 from .metadata import CameraMetadata
@@ -16,7 +17,6 @@ TABLE_STEP_DN = 0.5
 _V_GRID = np.arange(0.0, DN_MAX + 1e-9, TABLE_STEP_DN)
 #: Grid carrying the intermediate image of the sequential protocol.
 _Y_GRID = np.arange(0.0, DN_MAX + 1e-9, 0.5)
-MODES = ("joint", "sequential")
 #: The fast simulation path draws Poisson sources exactly below this mean (normal above: skewness < 0.1).
 FAST_POISSON_LAMBDA = 100.0
 SEQUENTIAL_ORDER = ("pn", "rn", "dcsn")

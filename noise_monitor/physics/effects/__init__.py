@@ -1,6 +1,7 @@
 """Noise effects: the plug-in API, the built-in library and the registry."""
-from .base import DISTRIBUTIONS, Effect, EffectError, Param
-from .builtin import BUILTIN_EFFECTS, PAPER_EFFECTS
+from .base import DISTRIBUTIONS, Distribution, Effect, EffectError, Param
+from ..constants import PAPER_EFFECTS
+from .builtin import BUILTIN_EFFECTS
 from .registry import (
     ENTRY_POINT_GROUP,
     available,
@@ -13,6 +14,6 @@ from .registry import (
 )
 
 __all__ = [
-    "DISTRIBUTIONS", "Effect", "EffectError", "Param", "BUILTIN_EFFECTS", "PAPER_EFFECTS", "ENTRY_POINT_GROUP",
+    "DISTRIBUTIONS", "Distribution", "Effect", "EffectError", "Param", "BUILTIN_EFFECTS", "PAPER_EFFECTS", "ENTRY_POINT_GROUP",
     "available", "build_effects", "effect_class", "load_plugin_file", "make_effect", "parse_effect_arg", "register",
 ]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any, ClassVar
 
 import numpy as np
@@ -25,7 +26,19 @@ import numpy as np
 from ..sampling import poisson, standard_normal
 from ..sensor import Conditions
 
-DISTRIBUTIONS = ("poisson", "gaussian", "mixture", "quantization", "modifier")
+
+
+class Distribution(StrEnum):
+    """How an effect combines with the others under clipping (a str: plug-ins may declare the plain name)."""
+
+    POISSON = "poisson"
+    GAUSSIAN = "gaussian"
+    MIXTURE = "mixture"
+    QUANTIZATION = "quantization"
+    MODIFIER = "modifier"
+
+
+DISTRIBUTIONS = tuple(d.value for d in Distribution)
 
 
 class EffectError(ValueError):
@@ -49,12 +62,17 @@ class Effect:
     """Base class of all noise effects (built-in and plug-in)."""
 
     name: ClassVar[str] = ""
-    distribution: ClassVar[str] = "gaussian"
+    distribution: ClassVar[Distribution] = Distribution.GAUSSIAN
     temporal: ClassVar[bool] = True
     params: ClassVar[tuple[Param, ...]] = ()
     description: ClassVar[str] = ""
     #: plain-language reading of the effect's signature in residuals (format fields: the parameters)
     signature: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.distribution in DISTRIBUTIONS:  # a plain name from a plug-in becomes the enum member
+            cls.distribution = Distribution(cls.distribution)
 
     def __init__(self, **values: float) -> None:
         known = {p.name: p for p in self.params}
@@ -95,9 +113,6 @@ class Effect:
         except (KeyError, ValueError, IndexError):
             return self.signature
 
-    def with_values(self, **values: float) -> "Effect":
-        return type(self)(**{**self.values, **values})
-
     # --- what the analytic model needs (override the one matching `distribution`) ---------------
     def electrons(self, signal_dn: np.ndarray, cond: Conditions) -> np.ndarray:
         """Mean electrons of a Poisson source at clean signal ``signal_dn``."""
@@ -127,16 +142,16 @@ class Effect:
         (see :meth:`noise_monitor.physics.NoiseModel.predict`).
         """
         s = np.asarray(signal_dn)
-        if self.distribution == "poisson":
+        if self.distribution is Distribution.POISSON:
             lam = np.asarray(self.electrons(s, cond))
             return np.broadcast_to(cond.dn_per_e**2 * (lam.reshape(-1)[0] if _constant(lam) else lam), s.shape)
-        if self.distribution == "gaussian":
+        if self.distribution is Distribution.GAUSSIAN:
             sig = np.asarray(self.sigma_dn(s, cond))
             return np.broadcast_to(sig.reshape(-1)[0] ** 2 if _constant(sig) else sig**2, s.shape)
-        if self.distribution == "mixture":
+        if self.distribution is Distribution.MIXTURE:
             frac, off = self.mixture(s, cond)
             return np.broadcast_to(frac * (1.0 - frac) * np.asarray(off, dtype=float) ** 2, s.shape)
-        if self.distribution == "quantization":
+        if self.distribution is Distribution.QUANTIZATION:
             return np.full(s.shape, self.lsb_dn(cond) ** 2 / 12.0)
         return np.zeros(s.shape)
 
@@ -175,26 +190,26 @@ class Effect:
     #: Poisson effects as one normal of the summed variance (true for effects using the default sampler)
     @classmethod
     def mergeable(cls) -> bool:
-        return cls.distribution in ("poisson", "gaussian") and cls.temporal and cls.sample is Effect.sample
+        return cls.distribution in (Distribution.POISSON, Distribution.GAUSSIAN) and cls.temporal and cls.sample is Effect.sample
 
     def sample(self, signal_dn: np.ndarray, cond: Conditions, rng: np.random.Generator) -> np.ndarray:
         """Noise in DN to add to ``signal_dn`` (before clipping); float32, same shape."""
         s = signal_dn
-        if self.distribution == "poisson":
+        if self.distribution is Distribution.POISSON:
             lam = np.broadcast_to(np.asarray(self.electrons(s, cond), dtype=np.float64), s.shape)
             return (cond.dn_per_e * (poisson(rng, lam) - lam)).astype(np.float32)
-        if self.distribution == "gaussian":
+        if self.distribution is Distribution.GAUSSIAN:
             sigma = np.asarray(self.sigma_dn(s, cond), dtype=np.float32)
             z = standard_normal(rng, s.shape) if self.temporal else self.pattern(s.shape)
             return z * sigma
-        if self.distribution == "mixture":
+        if self.distribution is Distribution.MIXTURE:
             frac, off = self.mixture(s, cond)
             if self.temporal:
                 hit = rng.random(s.shape, dtype=np.float32) < frac
             else:
                 hit = self.hit_mask(s.shape, frac)
             return np.where(hit, np.asarray(off, dtype=np.float32), np.float32(0.0)).astype(np.float32)
-        if self.distribution == "modifier":
+        if self.distribution is Distribution.MODIFIER:
             return np.zeros(s.shape, dtype=np.float32)
         raise EffectError(f"effect {self.name!r}: quantization is applied by the model, not sampled")
 

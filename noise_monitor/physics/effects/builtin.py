@@ -5,7 +5,7 @@ import numpy as np
 
 from ..sampling import standard_normal
 from ..sensor import Conditions, ktc_sigma_v, rounded_normal_variance
-from .base import Effect, Param
+from .base import Distribution, Effect, Param
 
 
 #: Seed of a fixed pattern (not fittable): gives cameras distinct patterns.
@@ -14,7 +14,7 @@ SEED_PARAM = Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True,
 
 class PhotonShotNoise(Effect):
     name = "pn"
-    distribution = "poisson"
+    distribution = Distribution.POISSON
     description = "Photon shot noise: Poisson statistics of the photo-electrons (the paper's PN)."
     signature = "variance grows linearly with the signal and with the gain"
 
@@ -25,7 +25,7 @@ class PhotonShotNoise(Effect):
 
 class DarkCurrentShotNoise(Effect):
     name = "dcsn"
-    distribution = "poisson"
+    distribution = Distribution.POISSON
     description = "Dark-current shot noise: Poisson statistics of thermal electrons, mean subtracted (DCSN)."
     signature = "signal-independent variance growing with exposure time and steeply with temperature"
 
@@ -35,7 +35,7 @@ class DarkCurrentShotNoise(Effect):
 
 class ReadoutNoise(Effect):
     name = "rn"
-    distribution = "gaussian"
+    distribution = Distribution.GAUSSIAN
     description = "Readout noise: source follower (white, flicker, RTS through CDS) and CMOS kTC reset noise."
     signature = "signal-independent variance proportional to the square of the gain"
 
@@ -135,7 +135,7 @@ class ColumnOffsets(_LineOffsets):
 
 class Quantization(Effect):
     name = "quantization"
-    distribution = "quantization"
+    distribution = Distribution.QUANTIZATION
     params = (Param("bits", "bit", 8, (1, 16), integer=True, description="ADC bit depth"),)
     description = "Quantization of the output to the ADC's bit depth (LSB^2/12 on the 8-bit scale)."
     signature = (
@@ -149,7 +149,7 @@ class Quantization(Effect):
 
 class HotPixels(Effect):
     name = "hot_pixels"
-    distribution = "mixture"
+    distribution = Distribution.MIXTURE
     temporal = False
     params = (
         Param("fraction", "1", 1e-3, (0.0, 0.2), description="fraction of hot pixels"),
@@ -181,7 +181,7 @@ class ExtraReadNoise(Effect):
 
 class DarkCurrentLaw(Effect):
     name = "dark_current_law"
-    distribution = "modifier"
+    distribution = Distribution.MODIFIER
     params = (
         Param("scale", "1", 1.0, (0.0, 1e4), description="dark current / band-gap law at 25 degC"),
         Param("rate_per_k", "1/K", 0.0, (-0.5, 0.5), description="extra exponential rate of the dark current with T"),
@@ -198,7 +198,7 @@ class DarkCurrentLaw(Effect):
 
 class GainError(Effect):
     name = "gain_error"
-    distribution = "modifier"
+    distribution = Distribution.MODIFIER
     params = (Param("factor", "1", 1.0, (0.05, 20.0), description="true gain / stated gain"),)
     description = "The camera's gain differs from the gain its metadata states."
     signature = (
@@ -212,7 +212,7 @@ class GainError(Effect):
 
 class ExposureError(Effect):
     name = "exposure_error"
-    distribution = "modifier"
+    distribution = Distribution.MODIFIER
     params = (Param("factor", "1", 1.0, (0.01, 100.0), description="true exposure / stated exposure"),)
     description = "The exposure time differs from the one the metadata states (affects the dark current)."
     signature = "dark-current noise off by a constant factor: true exposure = {factor:.2f} x stated"
@@ -223,7 +223,7 @@ class ExposureError(Effect):
 
 class TemperatureError(Effect):
     name = "temperature_error"
-    distribution = "modifier"
+    distribution = Distribution.MODIFIER
     params = (Param("offset_c", "degC", 0.0, (-60.0, 60.0), description="true - stated sensor temperature"),)
     description = "The sensor temperature differs from the one the metadata states."
     signature = (
@@ -251,4 +251,3 @@ BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     ExposureError,
     TemperatureError,
 )
-PAPER_EFFECTS = ("pn", "dcsn", "rn")

@@ -8,7 +8,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from .base import Effect, EffectError
+from .base import DISTRIBUTIONS, Distribution, Effect, EffectError
 from .builtin import BUILTIN_EFFECTS
 
 ENTRY_POINT_GROUP = "noise_monitor.effects"
@@ -20,8 +20,9 @@ def register(cls: type[Effect]) -> type[Effect]:
     """Register an Effect subclass under its ``name`` (usable as a class decorator)."""
     if not (inspect.isclass(cls) and issubclass(cls, Effect)) or not cls.name:
         raise EffectError(f"{cls!r} is not an Effect subclass with a name")
-    if cls.distribution not in ("poisson", "gaussian", "mixture", "quantization", "modifier"):
-        raise EffectError(f"effect {cls.name!r}: unknown distribution {cls.distribution!r}")
+    if not isinstance(cls.distribution, Distribution):
+        raise EffectError(f"effect {cls.name!r}: unknown distribution {cls.distribution!r}; "
+                          f"choose from {', '.join(DISTRIBUTIONS)}")
     _REGISTRY[cls.name] = cls
     return cls
 

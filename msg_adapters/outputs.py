@@ -9,9 +9,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from msg_adapters.diagnostics import StatusReport, jazzy_typestore, to_rclpy, to_rosbags
+from noise_monitor.monitor.pipeline import FrameResult
+from noise_monitor.monitor.status import StatusReport
 
-from .pipeline import FrameResult
+from .diagnostics import jazzy_typestore, to_rclpy, to_rosbags
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
 DIAGNOSTICS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"

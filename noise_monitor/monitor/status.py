@@ -1,0 +1,25 @@
+"""Diagnostic status levels and the middleware-neutral status report of the monitor."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+LEVEL_NAMES: dict[int, str] = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
+
+
+@dataclass(frozen=True)
+class StatusReport:
+    """One diagnostic status, middleware-neutral (values are strings, numbers as numeric strings)."""
+
+    level: int
+    name: str
+    message: str
+    hardware_id: str
+    values: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.level not in LEVEL_NAMES:
+            raise ValueError(f"diagnostic level must be one of {sorted(LEVEL_NAMES)}, got {self.level!r}")
+        bad = [k for k, v in self.values.items() if not isinstance(v, str)]
+        if bad:
+            raise ValueError(f"diagnostic values must be strings: {', '.join(bad)}")
