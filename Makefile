@@ -17,6 +17,7 @@ $(STAMP): requirements.txt setup.py setup.cfg $(wildcard */__init__.py)
 	touch $(STAMP)
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -p no:cacheprovider test
 
 demo: $(STAMP)

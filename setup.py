@@ -18,7 +18,20 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
         (f"share/{PACKAGE}/bags", glob("bags/**/*", recursive=True)),
     ],
-    install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
+    python_requires=">=3.10",
+    # what `noise-monitor` (replay, analyze, simulate-bag, effects) and the estimator need; exact pins of
+    # the tested set are in requirements.txt (use it as constraints: pip install . -c requirements.txt)
+    install_requires=[
+        "numpy>=1.26", "scipy>=1.11", "PyYAML>=6.0", "opencv-python-headless>=4.8", "torch>=2.2", "onnx>=1.15",
+        "onnxruntime>=1.17", "rosbags>=0.10", "tqdm>=4.60", "matplotlib>=3.7",
+    ],
+    extras_require={
+        # the live node and `play` without a system ROS: ROS 2 Jazzy from PyPI wheels
+        "ros": ["ros-jazzy-rclpy[fastrtps]>=7.1", "ros-jazzy-common-interfaces>=5.3"],
+        # estimator training and evaluation data (scikit-image / PyWavelets sample images)
+        "train": ["scikit-image>=0.22", "PyWavelets>=1.5"],
+        "dev": ["pytest>=8", "hypothesis>=6", "mcap>=1.1", "ruff>=0.15", "mypy>=1.10", "types-PyYAML", "build>=1.0"],
+    },
     zip_safe=True,
     maintainer="noise_monitor developers",
     maintainer_email="dev@noise-monitor.invalid",

@@ -48,7 +48,7 @@ def main() -> None:
             print(f"analyze ({label}, with HTML report): {wall:.1f} s for {m['frames_used']} frames "
                   f"({1e3 * wall / m['frames_used']:.0f} ms/frame), {m['segments']} segments, {m['cells']} cells; "
                   f"best candidate {best['effect']} {best['params']}, rms {s['rms_error_dn']:.3f} DN"
-                  + (f" -> {s['rms_error_after_dn']:.3f} DN" if add else "") + f"  [target <= 60 s]")
+                  + (f" -> {s['rms_error_after_dn']:.3f} DN" if add else "") + "  [target <= 60 s]")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
 

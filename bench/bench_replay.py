@@ -17,9 +17,10 @@ from pathlib import Path
 
 import torch
 
-from noise_monitor.bag.replay import replay, set_inference_threads
+from noise_monitor.bag.replay import replay
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.estimator import load
+from noise_monitor.monitor.runtime import set_inference_threads
 from noise_monitor.paths import share_dir
 
 BUNDLED = (("ev76c661_field.mcap", "ev76c661"), ("icx285_lab.mcap", "icx285"))

@@ -19,7 +19,6 @@ import json
 import time
 from pathlib import Path
 
-
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.estimator.data import Scheme, generate

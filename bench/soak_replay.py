@@ -24,12 +24,12 @@ from pathlib import Path
 import torch
 from mcap.reader import make_reader
 
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.estimator import load
 from noise_monitor.monitor import MonitorConfig
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC
 
 
 def rss_mb() -> float:

@@ -6,11 +6,12 @@ Arguments:
   log_level:=LEVEL    ROS log level (info)
 Input topics are parameters (image_topic, metadata_topic, ...); remap them here or set them in the params file.
 """
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
+
+from launch import LaunchDescription
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -6,8 +6,9 @@ that conversion happens. Everything else uses the core's :class:`StatusReport` w
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from functools import lru_cache
-from typing import Any, Iterable
+from typing import Any
 
 from noise_monitor.monitor.status import ERROR, LEVEL_NAMES, OK, STALE, WARN, StatusReport
 

@@ -7,7 +7,8 @@ key/values named like the CameraMetadata fields, or a vendor message, see :mod:`
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from noise_monitor.physics import CameraMetadata, CameraProfile
 from noise_monitor.physics.metadata import NUMERIC_FIELDS

@@ -6,7 +6,8 @@ converts such a message (rclpy or rosbags) to CameraMetadata fields in SI units.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .errors import AdapterError
 from .metadata import metadata_from_mapping

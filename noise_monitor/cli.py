@@ -1,52 +1,73 @@
 """`noise-monitor` command line: one sub-command per module, each with --help.
 
-A command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``.
+A command module defines ``add_arguments(parser)`` and ``run(args) -> int``; its one-line help lives in
+:data:`COMMANDS`. Only the module of the command being run is imported (``noise-monitor --help`` imports
+none), so start-up costs what the command needs and nothing more.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import sys
+from types import ModuleType
 
-COMMANDS: dict[str, str] = {
-    "node": "noise_monitor.node",
-    "replay": "noise_monitor.bag.replay_cmd",
-    "play": "noise_monitor.bag.play_cmd",
-    "simulate-bag": "noise_monitor.bag.simulate_cmd",
-    "analyze": "noise_monitor.lab.analyze_cmd",
-    "train": "noise_monitor.estimator.train_cmd",
-    "evaluate": "noise_monitor.estimator.evaluate_cmd",
-    "effects": "noise_monitor.physics.effects_cmd",
+#: command -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "node": ("noise_monitor.node",
+             "run the live ROS 2 noise monitor node (image + metadata in, /diagnostics and sigma/xi topics out)"),
+    "replay": ("noise_monitor.bag.replay_cmd",
+               "Replay a bag through the monitor pipeline (as the node would run it) and summarise noise and alarms."),
+    "play": ("noise_monitor.bag.play_cmd",
+             "Publish a bag into live ROS 2 topics (original timing, --rate factor, --loop); no ROS install needed."),
+    "simulate-bag": ("noise_monitor.bag.simulate_cmd",
+                     "Simulate a camera over a scenario and write a rosbag2 bag (MCAP/sqlite3) plus <out>.truth.json."),
+    "analyze": ("noise_monitor.lab.analyze_cmd",
+                "Compare the noise model with the noise measured in a bag, diagnose missing effects, add them, report."),
+    "train": ("noise_monitor.estimator.train_cmd",
+              "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"),
+    "evaluate": ("noise_monitor.estimator.evaluate_cmd",
+                 "evaluate estimators on the held-out benchmark (parts a/b/c, peers, metadata sensitivity sweep)"),
+    "effects": ("noise_monitor.physics.effects_cmd",
+                "List the noise effects (built-in and plug-ins) with their parameters."),
 }
+#: Python packages whose absence means an optional part of the installation is missing.
+OPTIONAL = {"rclpy": "ROS 2 Jazzy's rclpy (pip install \"ros-jazzy-rclpy[fastrtps]\" ros-jazzy-common-interfaces)"}
 
 
-def _available() -> dict[str, object]:
-    mods = {}
-    for name, module in COMMANDS.items():
-        try:
-            mods[name] = importlib.import_module(module)
-        except ModuleNotFoundError as exc:
-            if exc.name and module.startswith(exc.name):
-                continue  # command not part of this build
+def _command_module(name: str) -> ModuleType:
+    """Import the module of one command; a missing optional dependency is a one-line error."""
+    module = COMMANDS[name][0]
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        root = (exc.name or "").split(".")[0]
+        if root in ("noise_monitor", "msg_adapters", ""):
             raise
-    return mods
+        need = OPTIONAL.get(root, f"the Python package {root!r}")
+        print(f"noise-monitor {name}: error: this command needs {need}, which is not installed", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser; only ``command``'s module is imported to add its arguments."""
     parser = argparse.ArgumentParser(
         prog="noise-monitor",
         description="Camera noise source estimation (PN, DCSN, RN, xi) for ROS 2 images and bags.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name, mod in _available().items():
-        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
-        mod.add_arguments(p)
-        p.set_defaults(_run=mod.run)
+    for name, (_, text) in COMMANDS.items():
+        p = sub.add_parser(name, help=text, description=text)
+        if name == command:
+            mod = _command_module(name)
+            mod.add_arguments(p)
+            p.set_defaults(_run=mod.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    command = next((a for a in argv if not a.startswith("-")), None)
+    args = build_parser(command if command in COMMANDS else None).parse_args(argv)
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:

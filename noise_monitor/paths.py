@@ -1,15 +1,18 @@
 """Locate the package's data folders (config/, bags/) in a source checkout or a ROS install."""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 _SOURCE_ROOT = Path(__file__).resolve().parent.parent
 
 
 def share_dir() -> Path:
-    """Folder holding config/, launch/ and bags/: the source checkout, else the ament share dir."""
-    if (_SOURCE_ROOT / "config" / "cameras").is_dir():
-        return _SOURCE_ROOT
+    """Folder holding config/, launch/ and bags/: the source checkout, a pip install's
+    ``<prefix>/share/noise_monitor``, else the ament share dir of a ROS install."""
+    for root in (_SOURCE_ROOT, Path(sys.prefix) / "share" / "noise_monitor"):
+        if (root / "config" / "cameras").is_dir():
+            return root
     try:
         from ament_index_python.packages import get_package_share_directory
 

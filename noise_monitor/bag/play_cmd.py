@@ -6,8 +6,6 @@ import json
 
 from .play import play
 
-HELP = "Publish a bag into live ROS 2 topics (original timing, --rate factor, --loop); no ROS install needed."
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3) or a bare .mcap / .db3 file")

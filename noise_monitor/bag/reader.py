@@ -7,21 +7,28 @@ registered (rosbags typesys), so vendor types deserialise without their packages
 """
 from __future__ import annotations
 
-import bisect
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, get_typestore
 
-from msg_adapters import AdapterError, camera_geometry, image_to_gray_dn
-from msg_adapters.metadata import KNOWN_FIELDS, ALIASES, metadata_from_diagnostics, metadata_from_mapping
-from msg_adapters.metadata import metadata_from_temperature, resolve_metadata
+from msg_adapters import AdapterError, camera_geometry, prepare_frame
+from msg_adapters.metadata import (
+    ALIASES,
+    KNOWN_FIELDS,
+    metadata_from_diagnostics,
+    metadata_from_mapping,
+    metadata_from_temperature,
+)
 from msg_adapters.vendor import VENDOR_TYPES, metadata_from_vendor, register_vendor_types
-from noise_monitor.physics import CameraMetadata, CameraProfile, MetadataError, load_profile
+from noise_monitor.monitor.frame import Frame
+from noise_monitor.monitor.runtime import FrameOptions
+from noise_monitor.monitor.sync import match_stamp
+from noise_monitor.physics import CameraProfile, load_profile
 
 from .errors import BagError
 
@@ -29,9 +36,6 @@ IMAGE_TYPE = "sensor_msgs/msg/Image"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
-#: Any exception raised inside rosbags (its own errors, and struct/zstd/decoding errors on damaged bytes)
-#: means the bag cannot be read; it becomes a BagError naming the bag.
-_READ_ERRORS = (Exception,)
 _METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
 
 
@@ -40,22 +44,6 @@ class DamagedMessage:
     """Stands in for a message whose bytes do not decode (the reason names it)."""
 
     reason: str
-
-
-@dataclass
-class BagFrame:
-    """One image of a bag with its metadata, or the reason it cannot be processed."""
-
-    index: int
-    stamp_ns: int
-    image_dn: np.ndarray | None
-    metadata: CameraMetadata | None
-    missing: list[str] = field(default_factory=list)
-    skip_reason: str | None = None
-    raw_metadata: dict[str, Any] = field(default_factory=dict)
-    metadata_error: str | None = None  # metadata present but invalid (out of range, not a number)
-    metadata_age_s: float | None = None  # image stamp minus the stamp of the metadata message used
-    log_time_ns: int | None = None  # when the recorder received the image (bag log time)
 
 
 def _stamp_ns(msg: Any, log_time: int) -> int:
@@ -96,7 +84,7 @@ class BagReader:
         try:
             self._reader = AnyReader([self._bag_path], default_typestore=store)
             self._reader.open()
-        except _READ_ERRORS as exc:
+        except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
             reason = exc or type(exc).__name__
             raise BagError(f"cannot read bag {self.path}: {reason} (corrupt or truncated?)") from None
         self.topics: dict[str, str] = {c.topic: c.msgtype for c in self._reader.connections}
@@ -199,11 +187,11 @@ class BagReader:
                     raise BagError(f"bag {self.path} is damaged: read {seen} of the {expected} messages its index "
                                    f"lists on {', '.join(topics)}") from None
                 return
-            except _READ_ERRORS as exc:
+            except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
                 raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
             try:
                 msg = self._reader.deserialize(raw, conn.msgtype)
-            except _READ_ERRORS as exc:
+            except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
                 msg = DamagedMessage(f"damaged {conn.msgtype} message ({len(raw)} bytes) on {conn.topic} at log time "
                                      f"{log_time} ns does not decode: {exc or type(exc).__name__}")
             seen += 1
@@ -218,7 +206,7 @@ class BagReader:
                 conn, log_time, raw = next(it)
             except StopIteration:
                 return
-            except _READ_ERRORS as exc:
+            except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
                 raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
             yield conn.topic, conn.msgtype, log_time, bytes(raw)
 
@@ -252,58 +240,39 @@ class BagReader:
 
     # --- frames ----------------------------------------------------------------------------------
     def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None,
-               sync_tolerance_s: float = 0.01, color: str = "luma") -> Iterator[BagFrame]:
-        """Yield every image as a :class:`BagFrame` in log-time order, prepared as the node prepares it.
+               sync_tolerance_s: float = 0.01, color: str = "luma") -> Iterator[Frame]:
+        """Yield every image as a :class:`Frame` in log-time order, prepared as the node prepares it
+        (``msg_adapters.prepare_frame``).
 
-        Metadata is the message whose header stamp is nearest the image stamp within ``sync_tolerance_s``
-        (equal stamps are the contract), else the latest older one; it is merged over ``profile``
-        (dynamic values win) and the latest Temperature. Unusable CameraInfo/Temperature messages are
-        ignored. Frames that cannot be evaluated carry ``skip_reason`` worded like the monitor's:
-        ``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``.
+        Metadata follows the monitor's matching rule (:func:`noise_monitor.monitor.sync.match_stamp`: the
+        message nearest the image stamp within ``sync_tolerance_s``, else the latest older one); it is merged
+        over ``profile`` (dynamic values win) and the Temperature matched the same way. Unusable
+        CameraInfo/Temperature messages are ignored. ``Frame.skip_reason`` says why a frame cannot be
+        evaluated (``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``).
         """
         prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
-        depth = bit_depth or (prof.bit_depth if prof else None)
+        options = FrameOptions(prof, bit_depth or (prof.bit_depth if prof else None), color)
         meta_t, meta_v = self._timeline(self.metadata_topic, self._metadata_of)
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
         info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
         tol = int(sync_tolerance_s * 1e9)
         for index, (_, log_time, msg) in enumerate(self.messages([self.image_topic])):
             stamp = _stamp_ns(msg, log_time)
-            mi = _match(meta_t, stamp, tol)
-            raw = meta_v[mi] if mi is not None else {}
-            temp = _usable(_at(temp_v, _match(temp_t, stamp, tol)))
-            geom = _usable(_at(info_v, _match(info_t, stamp, tol)))
-            frame = BagFrame(index, stamp, None, None, raw_metadata=dict(raw) if isinstance(raw, dict) else {},
-                             metadata_age_s=(stamp - meta_t[mi]) / 1e9 if mi is not None else None,
-                             log_time_ns=int(log_time))
-            try:
-                if isinstance(msg, DamagedMessage):
-                    raise AdapterError(msg.reason)
-                frame.image_dn = image_to_gray_dn(msg, bit_depth=depth, color=color)
-                if geom is not None:
-                    geom.check_image(int(msg.height), int(msg.width))
-            except AdapterError as exc:
-                frame.image_dn = None
-                frame.skip_reason = f"image unusable: {exc}"
-                yield frame
-                continue
-            try:
-                if isinstance(raw, Exception):
-                    raise raw
-                temp_c = temp["sensor_temperature_c"] if temp else None
-                frame.metadata, frame.missing = resolve_metadata(prof, raw, temp_c)
-                if frame.metadata is None:
-                    frame.skip_reason = "metadata missing: " + ", ".join(frame.missing)
-            except (MetadataError, AdapterError) as exc:
-                frame.metadata_error = str(exc)
-                frame.skip_reason = f"metadata invalid: {exc}"
-            yield frame
+            mi = match_stamp(meta_t, stamp, tol)
+            temp = _usable(_at(temp_v, match_stamp(temp_t, stamp, tol)))
+            yield prepare_frame(
+                msg, stamp, options, metadata=meta_v[mi] if mi is not None else None,
+                metadata_stamp_ns=meta_t[mi] if mi is not None else None,
+                temperature_c=temp["sensor_temperature_c"] if temp else None,
+                geometry=_usable(_at(info_v, match_stamp(info_t, stamp, tol))),
+                image_error=msg.reason if isinstance(msg, DamagedMessage) else None,
+                index=index, log_time_ns=int(log_time))
 
     def close(self) -> None:
         if getattr(self._reader, "stack", None):
             self._reader.close()
 
-    def __enter__(self) -> "BagReader":
+    def __enter__(self) -> BagReader:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -313,15 +282,6 @@ class BagReader:
 def _usable(value: Any) -> Any:
     """A side-topic value, or None when its message could not be converted."""
     return None if isinstance(value, Exception) else value
-
-
-def _match(stamps: list[int], stamp: int, tolerance_ns: int) -> int | None:
-    """Index of the stamp nearest ``stamp`` within the tolerance, else of the latest older one."""
-    i = bisect.bisect_right(stamps, stamp)
-    near = [j for j in (i - 1, i) if 0 <= j < len(stamps) and abs(stamps[j] - stamp) <= tolerance_ns]
-    if near:
-        return min(near, key=lambda j: abs(stamps[j] - stamp))
-    return i - 1 if i else None
 
 
 def _at(values: list[Any], i: int | None) -> Any:

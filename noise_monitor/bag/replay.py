@@ -11,7 +11,6 @@ Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
 from __future__ import annotations
 
 import json
-import os
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -20,17 +19,25 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from noise_monitor.monitor import Frame, FrameResult, Monitor, MonitorConfig
-from noise_monitor.monitor.config import read_ros_params
-from noise_monitor.monitor.status import LEVEL_NAMES
 from msg_adapters.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
-from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
+from noise_monitor.monitor.runtime import MonitorRuntime
+from noise_monitor.monitor.status import LEVEL_NAMES
+from noise_monitor.physics import CameraProfile
 
 from .errors import BagError
 from .plot import plot_replay
-from .reader import BagFrame, open_bag
-from .results import (CONDITION_KEYS, FrameTable, alarm_episodes, skip_reasons, skipped_frames, source_summaries,
-                      truth_check, write_csv)
+from .reader import open_bag
+from .results import (
+    CONDITION_KEYS,
+    FrameTable,
+    alarm_episodes,
+    skip_reasons,
+    skipped_frames,
+    source_summaries,
+    truth_check,
+    write_csv,
+)
 from .simulate import truth_path
 from .writer import BagWriter, typestore
 
@@ -39,38 +46,12 @@ MAX_LISTED_SKIPS = 1000
 OUTPUT_FILES = {"mcap": "replay.mcap", "csv": "replay.csv", "png": "replay.png", "json": "summary.json"}
 
 
-def _settings(config: MonitorConfig | str | Path | None) -> tuple[MonitorConfig, dict[str, Any]]:
-    """Monitor config and the node parameters (params file: default config/node.yaml)."""
-    if isinstance(config, MonitorConfig):
-        return config, {}
-    params = read_ros_params(config)
-    return MonitorConfig.from_mapping(params, ignore_unknown=True), params
-
-
-def _record(table: FrameTable, bf: BagFrame, res: FrameResult) -> None:
+def _record(table: FrameTable, bf: Frame, res: FrameResult) -> None:
     meta = bf.metadata
     table.append(index=bf.index, stamp_ns=res.stamp_ns, processed=res.processed, level=res.level,
                  alarm_active=res.alarm_active, alarm_state=res.alarm_state, cause=res.cause,
                  skip_reason=res.skip_reason, numbers=res.numeric(),
                  conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {})
-
-
-def evaluate(monitor: Monitor, bf: BagFrame) -> FrameResult:
-    """One bag frame through the monitor exactly as the node's worker does it."""
-    if bf.image_dn is None:
-        return monitor.reject(bf.stamp_ns, bf.skip_reason or "image unusable")
-    return monitor.process(Frame(stamp_ns=bf.stamp_ns, image_dn=bf.image_dn, metadata=bf.metadata,
-                                 missing=list(bf.missing), metadata_age_s=bf.metadata_age_s,
-                                 metadata_error=bf.metadata_error))
-
-
-def set_inference_threads(threads: int) -> None:
-    """torch intra-op threads: ``threads``, or all cores but one when 0 (the node's rule)."""
-    import torch
-
-    if threads < 0:
-        raise ValueError(f"threads must be >= 0, got {threads}")
-    torch.set_num_threads(threads or max(1, (os.cpu_count() or 2) - 1))
 
 
 def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:
@@ -112,14 +93,15 @@ def replay(
 ) -> dict[str, Any]:
     """Run the monitor over every image of ``bag``; returns the JSON summary (and writes outputs).
 
-    ``config``: a MonitorConfig or a node params YAML (default config/node.yaml, whose model, weights, device,
-    camera_name, hardware_id, bit_depth, color, sync_tolerance_s, diagnostics_rate_hz and threads apply
-    too unless given here). ``estimator``: an object honouring the estimator contract (default:
-    ``noise_monitor.estimator.load(model_name, device)``). ``threads``: torch CPU threads as the node sets
-    them (0 = all cores but one; more threads than free cores slow inference down several-fold).
+    The monitor is the node's (:class:`MonitorRuntime`): ``config`` is a node params YAML (default
+    config/node.yaml, whose model, weights, device, camera_name, hardware_id, bit_depth, color,
+    sync_tolerance_s, diagnostics_rate_hz and threads apply unless given here) or a MonitorConfig (the
+    other parameters then take their defaults). ``estimator``: an object honouring the estimator contract
+    (default: ``noise_monitor.estimator.load(model_name, device)``). ``threads``: torch CPU threads as the
+    node sets them (0 = all cores but one; more threads than free cores slow inference down several-fold).
     """
-    cfg, params = _settings(config)
-    prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
+    overrides = {"model": model_name, "weights": str(weights) if weights else None, "device": device,
+                 "camera_name": camera_name, "hardware_id": hardware_id, "bit_depth": bit_depth, "threads": threads}
     out = Path(out_dir) if out_dir is not None else None
     mcap_path = out / OUTPUT_FILES["mcap"] if out is not None else None
     table = FrameTable()
@@ -129,19 +111,13 @@ def replay(
         reader = stack.enter_context(open_bag(bag, image_topic=image_topic, metadata_topic=metadata_topic,
                                               camera_info_topic=camera_info_topic,
                                               temperature_topic=temperature_topic))
-        model = NoiseModel(extra=prof.effects if prof else None)
-        if estimator is None:  # the estimator's physics prior is the profile's model, as in the node
-            from noise_monitor.estimator import load
-
-            estimator = load(model_name or params.get("model", "full_meta"),
-                             device=device or params.get("device", "cpu"),
-                             weights=weights or params.get("weights") or None, model=model)
-        set_inference_threads(int(params.get("threads", 0)) if threads is None else threads)
-        camera = camera_name or params.get("camera_name") or "camera"
-        hw = hardware_id or params.get("hardware_id") or f"{prof.name if prof else 'unknown'}/{camera}"
-        monitor = Monitor(cfg, estimator, model, camera, hw)
-        depth = bit_depth or int(params.get("bit_depth", 0)) or None
-        diag_period_ns = int(1e9 / float(params.get("diagnostics_rate_hz", 1.0)))
+        if isinstance(config, MonitorConfig):
+            rt = MonitorRuntime({k: v for k, v in overrides.items() if v is not None}, profile=profile,
+                                estimator=estimator, config=config)
+        else:
+            rt = MonitorRuntime.from_params_file(config, overrides, profile=profile, estimator=estimator)
+        prof, cfg, monitor, hw = rt.profile, rt.config, rt.monitor, rt.hardware_id
+        diag_period_ns = rt.diagnostics_period_ns
         if mcap_path is not None:
             out.mkdir(parents=True, exist_ok=True)
             mcap_path.unlink(missing_ok=True)
@@ -150,8 +126,9 @@ def replay(
         n_images, bag_duration = len(reader), reader.duration_s
         topics = {"image": reader.image_topic, "metadata": reader.metadata_topic,
                   "camera_info": reader.camera_info_topic, "temperature": reader.temperature_topic}
-        frames = reader.frames(prof, bit_depth=depth, sync_tolerance_s=float(params.get("sync_tolerance_s", 0.01)),
-                               color=str(params.get("color", "luma")))
+        opts = rt.frame_options
+        frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
+                               color=opts.color)
         last_pub: int | None = None
         last_log = 0
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
@@ -165,7 +142,7 @@ def replay(
                                                        typestore=typestore()).items():
                         writer.write(topic, msg, t)
                     t += diag_period_ns
-            res = evaluate(monitor, bf)
+            res = rt.process(bf)
             _record(table, bf, res)
             if writer is not None:
                 for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
@@ -180,7 +157,7 @@ def replay(
     summary: dict[str, Any] = {
         "bag": str(bag),
         "profile": prof.name if prof else None,
-        "estimator": getattr(estimator, "name", str(model_name)),
+        "estimator": getattr(rt.estimator, "name", str(rt.params["model"])),
         "hardware_id": hw,
         "topics_in": topics,
         "topics_out": output_topics(namespace),

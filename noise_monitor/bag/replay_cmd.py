@@ -8,8 +8,6 @@ from typing import Any
 
 from .replay import replay
 
-HELP = "Replay a bag through the monitor pipeline (as the node would run it) and summarise noise and alarms."
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3) or a bare .mcap / .db3 file")

@@ -78,7 +78,7 @@ class FrameTable:
                 self._texts[name].set(i, self._codes.setdefault(text, len(self._codes)))
                 if len(self._vocab) < len(self._codes):
                     self._vocab.append(text)
-        for key, value in conditions.items():
+        for key in conditions:
             if key not in self._conditions:
                 self._conditions.append(key)
         for key, value in (*conditions.items(), *numbers.items()):

@@ -7,8 +7,8 @@ brightness and whether the camera pans. Corruption episodes cover ``EPISODE`` of
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 #: Campaign-time window of the unexpected-noise episodes.
 EPISODE = (0.4, 0.7)

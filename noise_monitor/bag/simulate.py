@@ -9,8 +9,9 @@ model's sigma for the stated metadata and the resulting true xi = sigma_model - 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm

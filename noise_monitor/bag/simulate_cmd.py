@@ -9,8 +9,6 @@ from noise_monitor.physics import load_plugin_file
 from .scenarios import SCENARIOS
 from .simulate import load_truth, simulate_bag, truth_path
 
-HELP = "Simulate a camera over a scenario and write a rosbag2 bag (MCAP/sqlite3) plus <out>.truth.json."
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", help="output bag: NAME.mcap (one MCAP file) or a folder name (rosbag2 directory)")

@@ -42,7 +42,7 @@ class BagWriter:
         self._connections: dict[tuple[str, str], Any] = {}
         self.counts: dict[str, int] = {}
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         target = self.path
         if self.bare:

@@ -8,8 +8,7 @@ import torch
 
 from .evaluate import HELDOUT_SETS
 from .images import PHOTO_DOWNSCALE
-from .networks import count_parameters
-from .networks import network_from_checkpoint
+from .networks import count_parameters, network_from_checkpoint
 
 ROWS = ("pn", "dcsn", "rn", "sigma_image", "xi")
 

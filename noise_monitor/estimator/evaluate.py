@@ -10,8 +10,9 @@ Bias = |mean(est - truth)|, Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -21,6 +22,7 @@ from ..physics.sensitivity import SWEEP_INTENSITIES, SWEEPS, reference_metadata
 from .data import PARTS, generate, load, metas_of, save
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
+
 
 class HeldoutSet(NamedTuple):
     split: str  # images.SPLITS

@@ -13,8 +13,6 @@ from .evaluate import HELDOUT_SETS, heldout, peer_predictions, score, sensitivit
 from .inference import NAMES, WEIGHTS_DIR, load
 from .physics_prior import PhysicsPrior
 
-HELP = "evaluate estimators on the held-out benchmark (parts a/b/c, peers, metadata sensitivity sweep)"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variants", nargs="+", default=None, choices=NAMES,

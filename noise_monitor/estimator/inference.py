@@ -10,8 +10,8 @@ includes it. The paper-family variants return their branch outputs (``drne``: to
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import torch
@@ -19,9 +19,8 @@ import torch
 from ..physics import CameraMetadata, NoiseModel
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import N_MAPS, N_SCALARS, SIGMA_SCALE
+from .networks import N_MAPS, N_SCALARS, SIGMA_SCALE, network_from_checkpoint
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
-from .networks import network_from_checkpoint
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")

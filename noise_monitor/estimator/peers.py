@@ -2,7 +2,7 @@
 block-based B+F (Shin et al. 2005). Each maps a patch (H, W) in DN to a noise sigma in DN."""
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import cv2
 import numpy as np

@@ -11,7 +11,7 @@ from tqdm import tqdm
 
 from .device import resolve_device
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import SIGMA_SCALE, VARIANTS, build_network, network_from_checkpoint
+from .networks import SIGMA_SCALE, build_network
 
 HUBER_DELTA_DN = 1.0
 

@@ -14,8 +14,6 @@ from .images import PHOTO_DOWNSCALE
 from .networks import VARIANTS
 from .train import TrainSettings, train
 
-HELP = "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", required=True, choices=VARIANTS)

@@ -5,8 +5,6 @@ import argparse
 
 from .analyze import analyze, write_json
 
-HELP = "Compare the noise model with the noise measured in a bag, diagnose missing effects, add them, report."
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="rosbag2 directory (MCAP or sqlite3) or .mcap file")

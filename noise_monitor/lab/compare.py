@@ -10,8 +10,8 @@ change of variance a set of effects makes (cheap, no new tables) to this clip-aw
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.special import ndtr
@@ -20,8 +20,8 @@ from ..physics import CameraMetadata, CameraProfile, Effect, EffectError, NoiseM
 from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
 from ..physics.sensor import Conditions
-from .quantization import quantized_variance
 from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMeasurement
+from .quantization import quantized_variance
 
 MEASURED = ("temporal", "fixed", "column", "row", "outlier")
 #: assumed standard error of the quantization-step measurement beyond its statistical error (DN)

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -85,7 +86,7 @@ class EffectSpec:
     free: tuple[str, ...]
 
     @classmethod
-    def fit_all(cls, effect_cls: type[Effect]) -> "EffectSpec":
+    def fit_all(cls, effect_cls: type[Effect]) -> EffectSpec:
         return cls(effect_cls, {}, tuple(p.name for p in effect_cls.params if p.fittable))
 
 

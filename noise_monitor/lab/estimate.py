@@ -4,12 +4,14 @@ missing effect is added (and again after fine-tuning the estimator with ``noise-
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
-from ..monitor import Frame, Monitor, MonitorConfig
+from ..monitor import Frame, MonitorConfig
+from ..monitor.runtime import MonitorRuntime
 from ..physics import NoiseModel
 
 #: Per-frame numbers kept from the monitor (DN).
@@ -26,30 +28,26 @@ def _stats(v: list[float]) -> dict[str, float | None]:
             "p5": round(float(np.percentile(a, 5)), 4), "p95": round(float(np.percentile(a, 95)), 4)}
 
 
-def estimator_views(frames: Iterable[Any], models: Mapping[str, NoiseModel], estimator: str = "full_meta",
+def estimator_views(frames: Iterable[Frame], models: Mapping[str, NoiseModel], estimator: str = "full_meta",
                     weights: str | Path | None = None, device: str = "cpu",
                     config: MonitorConfig = MonitorConfig()) -> dict[str, dict[str, Any]]:
-    """One pass over ``frames`` (``image_dn``, ``metadata``, ``stamp_ns``) through a monitor per model.
+    """One pass over ``frames`` through the shared monitor runtime, one per model (the node's skip rules:
+    frames the replay would skip are skipped here too).
 
     Returns per model name: frames evaluated / skipped (by reason), xi / sigma_image / sigma_model
     statistics (mean, its standard error, p5, p95 in DN), the mean |xi| and the per-frame series
     (``time_s``, ``xi``).
     """
-    from ..estimator import load
-
-    monitors = {name: Monitor(config, load(estimator, device=device, weights=weights, model=model), model, "lab", "lab")
-                for name, model in models.items()}
+    params = {"model": estimator, "weights": str(weights) if weights else "", "device": device, "camera_name": "lab",
+              "hardware_id": "lab"}
+    runtimes = {name: MonitorRuntime(params, model=model, config=config) for name, model in models.items()}
     series: dict[str, dict[str, list[float]]] = {name: {k: [] for k in ("time_s", *KEYS)} for name in models}
     skipped: dict[str, Counter] = {name: Counter() for name in models}
     t0 = None
     for f in frames:
-        image, meta = getattr(f, "image_dn", None), getattr(f, "metadata", None)
         t0 = f.stamp_ns if t0 is None else t0
-        for name, monitor in monitors.items():
-            if image is None or meta is None:
-                skipped[name][getattr(f, "skip_reason", None) or "no image or metadata"] += 1
-                continue
-            res = monitor.process(Frame(stamp_ns=f.stamp_ns, image_dn=image, metadata=meta))
+        for name, rt in runtimes.items():
+            res = rt.process(f)
             if not res.processed:
                 skipped[name][res.skip_reason or "not evaluated"] += 1
                 continue

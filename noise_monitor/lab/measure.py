@@ -19,12 +19,15 @@ intensity bin) carries the standard error of its mean over blocks.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
 
+from ..monitor.config import MonitorConfig
+from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
 
 BLOCK = 8
@@ -389,15 +392,17 @@ def _quant_step(hist: np.ndarray, bin_dn: float) -> tuple[float, float]:
 
 
 def measure_frames(
-    frames: Iterable[Any],
+    frames: Iterable[Frame],
     block: int = BLOCK,
     tolerance: SegmentTolerance = SegmentTolerance(),
     progress: Any = None,
+    metadata_timeout_s: float = MonitorConfig.metadata_timeout_s,
 ) -> Measurements:
-    """Measure noise from frames (objects with ``image_dn``, ``metadata``, ``stamp_ns``).
+    """Measure noise from frames.
 
-    Frames without an image or metadata are skipped (counted by reason); the image size must not
-    change. ``progress`` is an optional tqdm-like object updated once per frame.
+    Frames the monitor would skip (unusable image, invalid, missing or stale metadata) are skipped here
+    too, counted by reason; the image size must not change. ``progress`` is an optional tqdm-like
+    object updated once per frame.
     """
     if block < 4:
         raise ValueError(f"block size must be >= 4 pixels, got {block}")
@@ -414,7 +419,7 @@ def measure_frames(
         total += 1
         if progress is not None:
             progress.update(1)
-        reason = _skip_reason(fr)
+        reason = skip_reason(fr, metadata_timeout_s)
         if reason:
             skipped[reason] = skipped.get(reason, 0) + 1
             continue
@@ -433,6 +438,7 @@ def measure_frames(
         idx = np.clip(np.rint(img / hist_bin).astype(np.int64), 0, hist.size - 1)
         hist += np.bincount(idx.ravel(), minlength=hist.size)
         meta = fr.metadata
+        assert meta is not None  # skip_reason checked it
         if acc is None or len(acc.frames) >= tolerance.max_frames or not tolerance.same(acc.metas[0], meta):
             if acc is not None:
                 segments.append(acc.finish(grid))
@@ -460,19 +466,3 @@ def measure_frames(
         skipped=skipped,
         shape=tuple(shape),
     )
-
-
-def _skip_reason(fr: Any) -> str | None:
-    if getattr(fr, "skip_reason", None):
-        return str(fr.skip_reason)
-    if getattr(fr, "image_dn", None) is None:
-        return "no image"
-    if getattr(fr, "metadata", None) is None:
-        missing = getattr(fr, "missing", None)
-        return f"missing metadata ({', '.join(missing)})" if missing else "no metadata"
-    img = np.asarray(fr.image_dn)
-    if img.ndim != 2:
-        return f"not a gray image (shape {img.shape})"
-    if not np.all(np.isfinite(img)):
-        return "image has NaN or inf"
-    return None

@@ -2,12 +2,12 @@
 motion between conditions, noise from ``NoiseModel.simulate(mode="joint")`` and 8-bit output."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from ..physics import CameraMetadata, CameraProfile, NoiseModel
+from ..monitor.frame import Frame
+from ..physics import CameraProfile, NoiseModel
 
 #: (gain dB, exposure s, temperature degC) per condition: gain, exposure and temperature sweeps.
 DEFAULT_SWEEP: tuple[tuple[float, float, float], ...] = (
@@ -20,16 +20,6 @@ DEFAULT_SWEEP: tuple[tuple[float, float, float], ...] = (
     (6.0, 0.05, 45.0),
     (6.0, 0.05, 65.0),
 )
-
-
-@dataclass(frozen=True)
-class SimFrame:
-    """A simulated camera frame (the fields the lab reads from bag frames)."""
-
-    index: int
-    stamp_ns: int
-    image_dn: np.ndarray
-    metadata: CameraMetadata
 
 
 def tiled_scene(height: int, width: int, seed: int = 0, tile: int = 32) -> np.ndarray:
@@ -54,7 +44,7 @@ def simulate_frames(
     height: int = 128,
     seed: int = 0,
     frame_period_ns: int = 50_000_000,
-) -> list[SimFrame]:
+) -> list[Frame]:
     """Frames of a camera (paper model + ``effects``) viewing a static scene; the camera moves between
     conditions (integer shifts) and is still within one. Output rounded to 8 bit like a mono8 camera."""
     model = NoiseModel(extra=effects)
@@ -67,5 +57,5 @@ def simulate_frames(
         for _ in range(frames_per_condition):
             noisy, _ = model.simulate(clean, meta, rng, mode="joint")
             i = len(frames)
-            frames.append(SimFrame(i, i * frame_period_ns, np.rint(np.clip(noisy, 0, 255)).astype(np.float32), meta))
+            frames.append(Frame(i * frame_period_ns, np.rint(np.clip(noisy, 0, 255)).astype(np.float32), meta, index=i))
     return frames

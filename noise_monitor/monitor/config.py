@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 
@@ -99,7 +100,7 @@ class MonitorConfig:
         return tuple(f.name for f in dataclasses.fields(cls))
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], ignore_unknown: bool = False) -> "MonitorConfig":
+    def from_mapping(cls, values: Mapping[str, Any], ignore_unknown: bool = False) -> MonitorConfig:
         """Build from a mapping of field names (e.g. node parameters); unknown keys are an error."""
         names = set(cls.field_names())
         unknown = sorted(set(values) - names)
@@ -108,7 +109,7 @@ class MonitorConfig:
         return cls(**{k: v for k, v in values.items() if k in names})
 
     @classmethod
-    def from_yaml(cls, path: str | Path | None = None) -> "MonitorConfig":
+    def from_yaml(cls, path: str | Path | None = None) -> MonitorConfig:
         """The monitor settings of a ROS params file (default: the package's config/node.yaml).
 
         Reads the ``ros__parameters`` of the first node entry and keeps the monitor's fields (other node

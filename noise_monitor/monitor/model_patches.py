@@ -14,7 +14,6 @@ from noise_monitor.physics.constants import DN_MAX
 from noise_monitor.physics.model import TABLE_STEP_DN
 
 
-
 def histogram_weights(maps: np.ndarray) -> np.ndarray:
     """(N, G) linear-interpolation weights of each map's pixels on the grid 0, step, ..., 255 (rows sum to 1)."""
     n = maps.shape[0]

@@ -6,6 +6,7 @@ metadata stamped before it (sample-and-hold; the caller judges its age) or with 
 """
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from dataclasses import dataclass
 from typing import Generic, TypeVar
@@ -14,6 +15,23 @@ import numpy as np
 
 T = TypeVar("T")
 M = TypeVar("M")
+
+
+def nearest_within(stamps: list[int], stamp_ns: int, tolerance_ns: int) -> int | None:
+    """Index of the sorted ``stamps`` entry nearest ``stamp_ns`` within the tolerance, else None."""
+    i = bisect.bisect_right(stamps, stamp_ns)
+    near = [j for j in (i - 1, i) if 0 <= j < len(stamps) and abs(stamps[j] - stamp_ns) <= tolerance_ns]
+    return min(near, key=lambda j: abs(stamps[j] - stamp_ns)) if near else None
+
+
+def match_stamp(stamps: list[int], stamp_ns: int, tolerance_ns: int) -> int | None:
+    """The metadata matching rule of node, replay and lab: the stamp nearest the image stamp within the
+    tolerance, else the latest one before it (sample-and-hold; the monitor judges its age), else None."""
+    near = nearest_within(stamps, stamp_ns, tolerance_ns)
+    if near is not None:
+        return near
+    i = bisect.bisect_right(stamps, stamp_ns)
+    return i - 1 if i else None
 
 
 @dataclass(frozen=True)
@@ -40,21 +58,20 @@ class StampSynchronizer(Generic[T, M]):
             raise ValueError("tolerance_s and wait_s must be >= 0, history and max_pending >= 1")
         self.tol_ns = int(tolerance_s * 1e9)
         self.wait_ns = int(wait_s * 1e9)
-        self.metadata: deque[tuple[int, M]] = deque(maxlen=history)
+        self.history = history
+        self._stamps: list[int] = []  # sorted metadata stamps and their values
+        self._values: list[M] = []
         self.pending: deque[tuple[int, T, int]] = deque()
         self.max_pending = max_pending
 
+    def _at(self, i: int | None) -> tuple[int, M] | None:
+        return None if i is None else (self._stamps[i], self._values[i])
+
     def _exact(self, stamp_ns: int) -> tuple[int, M] | None:
-        best = None
-        for s, m in self.metadata:
-            d = abs(s - stamp_ns)
-            if d <= self.tol_ns and (best is None or d < abs(best[0] - stamp_ns)):
-                best = (s, m)
-        return best
+        return self._at(nearest_within(self._stamps, stamp_ns, self.tol_ns))
 
     def _held(self, stamp_ns: int) -> tuple[int, M] | None:
-        older = [(s, m) for s, m in self.metadata if s <= stamp_ns + self.tol_ns]
-        return max(older, key=lambda sm: sm[0]) if older else None
+        return self._at(match_stamp(self._stamps, stamp_ns, self.tol_ns))
 
     @staticmethod
     def _pair(stamp: int, image: T, received: int, meta: tuple[int, M] | None) -> Matched[T, M]:
@@ -62,7 +79,11 @@ class StampSynchronizer(Generic[T, M]):
 
     def add_metadata(self, stamp_ns: int, metadata: M) -> list[Matched[T, M]]:
         """Store metadata; returns the waiting images it completes."""
-        self.metadata.append((stamp_ns, metadata))
+        i = bisect.bisect_right(self._stamps, stamp_ns)
+        self._stamps.insert(i, stamp_ns)
+        self._values.insert(i, metadata)
+        if len(self._stamps) > self.history:  # forget the oldest
+            del self._stamps[0], self._values[0]
         out, keep = [], deque()
         for stamp, image, received in self.pending:
             if abs(stamp - stamp_ns) <= self.tol_ns:
@@ -93,7 +114,8 @@ class StampSynchronizer(Generic[T, M]):
         return out
 
     def clear(self) -> None:
-        self.metadata.clear()
+        self._stamps.clear()
+        self._values.clear()
         self.pending.clear()
 
 

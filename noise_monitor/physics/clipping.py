@@ -11,6 +11,7 @@ import numpy as np
 from scipy.special import gammaln, ndtr
 
 from .constants import DN_MAX
+
 POISSON_EXACT_MAX = 1000.0
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 _TINY_SIGMA = 1e-9

@@ -6,8 +6,6 @@ import json
 
 from .effects import available, load_plugin_file
 
-HELP = "List the noise effects (built-in and plug-ins) with their parameters."
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE", help="load effects from FILE")

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 import yaml
@@ -158,7 +159,7 @@ class CameraMetadata:
         return 255.0 / self.full_well_e
 
     # --- conversions --------------------------------------------------------------------
-    def replace(self, **changes: Any) -> "CameraMetadata":
+    def replace(self, **changes: Any) -> CameraMetadata:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
@@ -169,7 +170,7 @@ class CameraMetadata:
         return out
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> "CameraMetadata":
+    def from_mapping(cls, values: Mapping[str, Any]) -> CameraMetadata:
         """Build from a mapping of field names; names every missing or unknown field in the error."""
         known = set(NUMERIC_FIELDS) | {"sensor_type", "bit_depth"}
         unknown = sorted(set(values) - known)

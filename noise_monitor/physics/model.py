@@ -1,12 +1,12 @@
 """NoiseModel: analytic per-source prediction (clip-aware) and Monte-Carlo simulation."""
 from __future__ import annotations
 
-from typing import Iterable, Mapping
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-from .constants import MODES
 from .clipping import DN_MAX, POISSON_EXACT_MAX, clipped_pmf, noise_moments, poisson_terms, scatter_pmf
+from .constants import MODES
 from .effects import PAPER_EFFECTS, Effect, EffectError, build_effects, make_effect
 from .metadata import CameraMetadata
 from .sampling import standard_normal
@@ -53,7 +53,7 @@ class NoiseModel:
         """Effects that add noise (every effect but the modifiers)."""
         return [e for e in self.effects if e.distribution != "modifier"]
 
-    def with_effects(self, *extra: Effect | str) -> "NoiseModel":
+    def with_effects(self, *extra: Effect | str) -> NoiseModel:
         """A new model with more effects (an effect of the same name is replaced)."""
         new = build_effects(list(extra))
         names = {e.name for e in new}

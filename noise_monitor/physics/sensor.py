@@ -97,10 +97,10 @@ class Conditions:
     dark_rate_per_k: float = 0.0
 
     @classmethod
-    def from_meta(cls, meta: CameraMetadata) -> "Conditions":
+    def from_meta(cls, meta: CameraMetadata) -> Conditions:
         return cls(meta=meta, gain=meta.gain, exposure_time_s=meta.exposure_time_s, temperature_k=meta.temperature_k)
 
-    def replace(self, **changes) -> "Conditions":
+    def replace(self, **changes) -> Conditions:
         return replace(self, **changes)
 
     @property

@@ -1,6 +1,6 @@
 """Noise effects: the plug-in API, the built-in library and the registry."""
-from .base import DISTRIBUTIONS, Distribution, Effect, EffectError, Param
 from ..constants import PAPER_EFFECTS
+from .base import DISTRIBUTIONS, Distribution, Effect, EffectError, Param
 from .builtin import BUILTIN_EFFECTS
 from .registry import (
     ENTRY_POINT_GROUP,

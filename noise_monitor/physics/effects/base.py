@@ -27,7 +27,6 @@ from ..sampling import poisson, standard_normal
 from ..sensor import Conditions
 
 
-
 class Distribution(StrEnum):
     """How an effect combines with the others under clipping (a str: plug-ins may declare the plain name)."""
 

@@ -7,7 +7,6 @@ from ..sampling import standard_normal
 from ..sensor import Conditions, ktc_sigma_v, rounded_normal_variance
 from .base import Distribution, Effect, Param
 
-
 #: Seed of a fixed pattern (not fittable): gives cameras distinct patterns.
 SEED_PARAM = Param("seed", "1", 0, (0, 2**31 - 1), fittable=False, integer=True, description="pattern seed")
 

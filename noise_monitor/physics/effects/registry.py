@@ -4,9 +4,9 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import sys
+from collections.abc import Iterable, Mapping
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Iterable, Mapping
 
 from .base import DISTRIBUTIONS, Distribution, Effect, EffectError
 from .builtin import BUILTIN_EFFECTS

@@ -1,17 +1,16 @@
 """Model-independent measurement on in-memory frame sequences (fast, no bags)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 import torch
 
 from noise_monitor.lab.compare import Comparison, baseline_effects, outlier_expectation
-from noise_monitor.lab.quantization import quantized_variance
 from noise_monitor.lab.measure import measure_frames
+from noise_monitor.lab.quantization import quantized_variance
 from noise_monitor.lab.synthetic import simulate_frames
-from noise_monitor.physics import NoiseModel, load_profile
+from noise_monitor.monitor.frame import Frame
+from noise_monitor.physics import CameraMetadata, NoiseModel, load_profile
 
 torch.set_num_threads(1)
 PROFILE = load_profile("icx285")
@@ -86,17 +85,13 @@ def test_quantized_variance_limits() -> None:
     assert added[0] < 1e-3 and fixed[0] < 1e-3  # one flat region on an output level: nothing varies
 
 
-@dataclass
-class _Frame:
-    image_dn: np.ndarray | None
-    metadata: object
-    stamp_ns: int = 0
-    skip_reason: str | None = None
+def _Frame(image_dn: np.ndarray | None, metadata: CameraMetadata | None, image_error: str | None = None) -> Frame:
+    return Frame(0, image_dn, metadata, image_error=image_error)
 
 
 def test_unusable_input_gives_clear_errors() -> None:
     meta = PROFILE.metadata(gain_db=0.0, exposure_time_s=0.01, sensor_temperature_c=25.0)
-    with pytest.raises(ValueError, match="no usable frames.*no metadata: 1"):
+    with pytest.raises(ValueError, match="no usable frames.*no metadata for this image: 1"):
         measure_frames([_Frame(np.zeros((64, 64)), None)])
     with pytest.raises(ValueError, match="smaller than one"):
         measure_frames([_Frame(np.zeros((4, 64)), meta)])
@@ -106,5 +101,5 @@ def test_unusable_input_gives_clear_errors() -> None:
     with pytest.raises(ValueError, match="no flat, unclipped"):
         measure_frames([_Frame(flat, meta), _Frame(flat, meta)])
     good = simulate_frames(PROFILE, conditions=SWEEP[:1], frames_per_condition=2, width=64, height=64)
-    meas = measure_frames([*good, _Frame(np.zeros((32, 32)), meta), _Frame(None, meta, skip_reason="corrupt")])
-    assert meas.skipped == {"image size changed": 1, "corrupt": 1}
+    meas = measure_frames([*good, _Frame(np.zeros((32, 32)), meta), _Frame(None, meta, image_error="corrupt")])
+    assert meas.skipped == {"image size changed": 1, "image unusable: corrupt": 1}

@@ -10,6 +10,7 @@ import pytest
 import torch
 from mcap.reader import make_reader
 
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import truth_check
@@ -17,7 +18,6 @@ from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
 from noise_monitor.physics import load_profile
 
 torch.set_num_threads(1)
@@ -175,7 +175,14 @@ def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):
 
 def test_frame_table_columns_episodes_and_csv(tmp_path):
     """Columns across a storage-block boundary, late keys, skipped frames, an episode at the end."""
-    from noise_monitor.bag.results import BLOCK_ROWS, FrameTable, alarm_episodes, skip_reasons, source_summaries, write_csv
+    from noise_monitor.bag.results import (
+        BLOCK_ROWS,
+        FrameTable,
+        alarm_episodes,
+        skip_reasons,
+        source_summaries,
+        write_csv,
+    )
 
     table, n = FrameTable(), BLOCK_ROWS + 10
     for i in range(n):

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from noise_monitor.physics import (
-    NORMALIZED_ORDER, PAPER_RANGES, CameraMetadata, MetadataError, db_to_factor, factor_to_db, load_profile,
+    NORMALIZED_ORDER,
+    PAPER_RANGES,
+    CameraMetadata,
+    MetadataError,
+    db_to_factor,
+    factor_to_db,
+    load_profile,
     sample_metadata,
 )
 from noise_monitor.physics.metadata import celsius_to_kelvin, kelvin_to_celsius, profile_from_mapping

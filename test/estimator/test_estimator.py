@@ -15,12 +15,20 @@ from noise_monitor.estimator.device import resolve_device
 from noise_monitor.estimator.features import compact_inputs
 from noise_monitor.estimator.images import SKIMAGE_PHOTOS, source_images
 from noise_monitor.estimator.inference import WEIGHTS_DIR
-from noise_monitor.estimator.networks import (N_MAPS, N_SCALARS, PAPER_VARIANTS, CompactConfig, ImageNoiseNet, PaperConfig,
-                                              PaperNet, count_parameters)
+from noise_monitor.estimator.networks import (
+    N_MAPS,
+    N_SCALARS,
+    PAPER_VARIANTS,
+    CompactConfig,
+    ImageNoiseNet,
+    PaperConfig,
+    PaperNet,
+    count_parameters,
+)
 from noise_monitor.estimator.peers import PEERS
 from noise_monitor.estimator.physics_prior import PhysicsPrior, box_smooth, shrink_noise
 from noise_monitor.estimator.train import TrainSettings, train
-from noise_monitor.physics import load_profile, sample_metadata
+from noise_monitor.physics import load_profile
 
 torch.set_num_threads(1)
 

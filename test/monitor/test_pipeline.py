@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from msg_adapters import ERROR, OK, STALE, WARN, reports_from_msg
+from msg_adapters.outputs import OUTPUT_TOPICS, output_topics, rclpy_messages, rosbags_messages
 from noise_monitor.monitor import (
     CAUSE_IMAGE_NOISIER,
     CAUSE_MODEL_NOISIER,
@@ -21,7 +22,6 @@ from noise_monitor.monitor import (
     XiAlarm,
     select_patches,
 )
-from msg_adapters.outputs import OUTPUT_TOPICS, output_topics, rclpy_messages, rosbags_messages
 from noise_monitor.physics import NoiseModel, load_profile
 
 _LAPLACE = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)

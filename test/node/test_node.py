@@ -7,7 +7,8 @@ and their metadata; the test spins one executor with spin_once and timeouts (no 
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest

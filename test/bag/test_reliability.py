@@ -19,6 +19,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC
 from noise_monitor.bag import BagError
 from noise_monitor.bag.messages import camera_info_msg, header, image_msg, metadata_msg
 from noise_monitor.bag.reader import open_bag
@@ -27,7 +28,6 @@ from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC
 from noise_monitor.physics import CameraProfile, load_plugin_file, load_profile
 from noise_monitor.physics.effects import registry
 

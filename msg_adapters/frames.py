@@ -1,0 +1,50 @@
+"""Image message + metadata -> the monitor's :class:`Frame`: the one frame preparation of node, replay and lab."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from noise_monitor.monitor.frame import Frame
+from noise_monitor.monitor.runtime import FrameOptions
+from noise_monitor.physics import MetadataError
+
+from .camera_info import CameraGeometry
+from .errors import AdapterError
+from .image import image_to_gray_dn
+from .metadata import resolve_metadata
+
+
+def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
+                  metadata: Mapping[str, Any] | Exception | str | None = None,
+                  metadata_stamp_ns: int | None = None, temperature_c: float | None = None,
+                  geometry: CameraGeometry | None = None, image_error: str | None = None,
+                  index: int = 0, log_time_ns: int | None = None) -> Frame:
+    """Convert an image message and the metadata chosen for it into a Frame.
+
+    ``metadata``: the per-frame key/values (merged over the profile of ``options`` and the latest
+    ``temperature_c``), or the error (an exception or its text) of a metadata message that could not be
+    read. ``geometry``: the latest CameraInfo, checked against the image size. ``image_error``: the image
+    message is known to be unusable (e.g. damaged bytes in a bag). Problems end up in the Frame's
+    ``image_error`` / ``metadata_error`` / ``missing``, never as exceptions.
+    """
+    raw = metadata if isinstance(metadata, Mapping) else {}
+    frame = Frame(stamp_ns, None, None, index=index, log_time_ns=log_time_ns, raw_metadata=dict(raw),
+                  metadata_age_s=None if metadata_stamp_ns is None else (stamp_ns - metadata_stamp_ns) / 1e9)
+    try:
+        if image_error:
+            raise AdapterError(image_error)
+        frame.image_dn = image_to_gray_dn(image_msg, bit_depth=options.bit_depth, color=options.color)
+        if geometry is not None:
+            geometry.check_image(int(image_msg.height), int(image_msg.width))
+    except AdapterError as exc:
+        frame.image_dn = None
+        frame.image_error = str(exc)
+        return frame
+    if isinstance(metadata, (Exception, str)):
+        frame.metadata_error = str(metadata)
+        return frame
+    try:
+        frame.metadata, frame.missing = resolve_metadata(options.profile, raw, temperature_c)
+    except (MetadataError, AdapterError) as exc:
+        frame.metadata_error = str(exc)
+    return frame

@@ -1,0 +1,162 @@
+"""Parameters -> a configured monitor: the one runtime shared by the live node, the bag replay and the lab.
+
+The node declares :func:`parameter_table` as ROS parameters; replay reads the same table from a params
+file (default ``config/node.yaml``) plus command-line overrides; the lab uses the defaults. Either way
+:class:`MonitorRuntime` turns the values into the camera profile, the noise model (the profile's effects
+included), the estimator (loaded once), the :class:`Monitor` and the :class:`FrameOptions` with which
+``msg_adapters.prepare_frame`` converts messages into :class:`Frame` objects.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+
+from .config import DESCRIPTIONS, MonitorConfig, read_ros_params
+from .frame import Frame
+from .pipeline import Estimator, FrameResult, Monitor
+
+COLORS = ("luma", "green")
+#: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
+RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS)"),
+    "metadata_topic": ("metadata", "diagnostic_msgs/DiagnosticArray with CameraMetadata key/values; '' = none"),
+    "camera_info_topic": ("camera_info", "sensor_msgs/CameraInfo (image size/binning/ROI check); '' = none"),
+    "temperature_topic": ("", "sensor_msgs/Temperature with the sensor temperature in degC; '' = none"),
+    "camera_name": ("camera", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'"),
+    "hardware_id": ("", "diagnostic hardware_id; '' = '<profile name>/<camera_name>'"),
+    "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
+    "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
+    "color": ("luma", "reduction of colour images to gray: luma or green"),
+    "model": ("full_meta", "estimator variant (noise_monitor.estimator.load)"),
+    "weights": ("", "estimator checkpoint (.pt written by `noise-monitor train`); '' = the bundled weights"),
+    "device": ("cpu", "inference device: cpu, cuda or auto"),
+    "threads": (0, "CPU threads for inference; 0 = all cores but one (keeps one for message handling)"),
+    "max_rate_hz": (0.0, "evaluate at most this many frames per second (others are dropped); 0 = no limit"),
+    "sync_tolerance_s": (0.01, "image and metadata header stamps closer than this belong together"),
+    "sync_wait_s": (0.1, "an image waits this long for its metadata, then takes the latest older one"),
+    "expected_rate_hz": (0.0, "the camera's frame rate, for an exact frames_lost count; 0 = inferred from stamp gaps"),
+    "diagnostics_rate_hz": (1.0, "minimum /diagnostics rate, also without images (STALE)"),
+}
+#: Largest accepted diagnostics_rate_hz (a timer faster than this only burns CPU).
+MAX_DIAGNOSTICS_RATE_HZ = 1000.0
+
+
+def parameter_table() -> dict[str, tuple[Any, str]]:
+    """Every parameter: the runtime's plus each MonitorConfig field (same defaults and descriptions)."""
+    defaults = MonitorConfig()
+    table = dict(RUNTIME_PARAMETERS)
+    for name in MonitorConfig.field_names():
+        table[name] = (getattr(defaults, name), DESCRIPTIONS[name])
+    return table
+
+
+def coerce(name: str, value: Any, default: Any) -> Any:
+    """A parameter value as the type of its default (ints accepted for floats); clear error otherwise."""
+    kind = type(default)
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if not isinstance(value, kind) or isinstance(value, bool) != isinstance(default, bool):
+        raise ValueError(f"parameter {name} must be of type {kind.__name__}, got {value!r}")
+    return value
+
+
+def check_parameters(p: Mapping[str, Any]) -> None:
+    """Range checks of the runtime parameters (MonitorConfig checks its own)."""
+    if p["color"] not in COLORS:
+        raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
+    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth"):
+        if not p[name] >= 0 or not math.isfinite(p[name]):
+            raise ValueError(f"parameter {name} must be a finite number >= 0, got {p[name]}")
+    if p["bit_depth"] > 16:
+        raise ValueError(f"parameter bit_depth must be in 0..16, got {p['bit_depth']}")
+    if not 0 < p["diagnostics_rate_hz"] <= MAX_DIAGNOSTICS_RATE_HZ:
+        raise ValueError(f"parameter diagnostics_rate_hz must be in (0, {MAX_DIAGNOSTICS_RATE_HZ:g}], "
+                         f"got {p['diagnostics_rate_hz']}")
+    if not p["image_topic"]:
+        raise ValueError("parameter image_topic must not be empty")
+
+
+def resolve_parameters(values: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Defaults overridden by ``values``, type-coerced and range-checked; unknown names are an error."""
+    table = parameter_table()
+    values = dict(values or {})
+    unknown = sorted(set(values) - set(table))
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {', '.join(unknown)}")
+    params = {name: coerce(name, values.get(name, default), default) for name, (default, _) in table.items()}
+    check_parameters(params)
+    return params
+
+
+def set_inference_threads(threads: int) -> None:
+    """torch intra-op threads: ``threads``, or all cores but one when 0."""
+    import torch
+
+    if threads < 0:
+        raise ValueError(f"threads must be >= 0, got {threads}")
+    torch.set_num_threads(threads or max(1, (os.cpu_count() or 2) - 1))
+
+
+@dataclass(frozen=True)
+class FrameOptions:
+    """How messages become frames: static metadata, bit depth of 16-bit images, colour reduction."""
+
+    profile: CameraProfile | None = None
+    bit_depth: int | None = None
+    color: str = "luma"
+
+
+class MonitorRuntime:
+    """Resolved parameters, profile, noise model, estimator and the :class:`Monitor` of one camera.
+
+    ``profile`` (a CameraProfile or a name/path) and ``estimator`` override the parameters' choice;
+    ``model`` replaces the profile's noise model (the lab compares models); ``config`` replaces the
+    MonitorConfig built from the parameters.
+    """
+
+    def __init__(self, params: Mapping[str, Any] | None = None, *, profile: CameraProfile | str | Path | None = None,
+                 estimator: Estimator | None = None, model: NoiseModel | None = None,
+                 config: MonitorConfig | None = None) -> None:
+        p = resolve_parameters(params)
+        self.params = p
+        self.config = config or MonitorConfig.from_mapping({k: p[k] for k in MonitorConfig.field_names()})
+        if isinstance(profile, CameraProfile):
+            self.profile: CameraProfile | None = profile
+        else:
+            name = profile or p["profile"]
+            self.profile = load_profile(name) if name else None
+        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None)
+        set_inference_threads(p["threads"])
+        if estimator is None:  # the estimator's physics prior is this camera's model
+            from noise_monitor.estimator import load
+
+            estimator = load(p["model"], device=p["device"], weights=p["weights"] or None, model=self.model)
+        self.estimator = estimator
+        profile_name = self.profile.name if self.profile else "unknown"
+        self.hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
+        self.monitor = Monitor(self.config, estimator, self.model, p["camera_name"], self.hardware_id)
+        depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
+        self.frame_options = FrameOptions(self.profile, depth, p["color"])
+
+    @classmethod
+    def from_params_file(cls, path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+                         **kwargs: Any) -> MonitorRuntime:
+        """The runtime of a ROS params file (default: the package's config/node.yaml) with ``overrides``
+        (e.g. command-line options; None values are ignored)."""
+        params = read_ros_params(path)
+        params.update({k: v for k, v in (overrides or {}).items() if v is not None})
+        return cls(params, **kwargs)
+
+    @property
+    def diagnostics_period_ns(self) -> int:
+        return int(1e9 / self.params["diagnostics_rate_hz"])
+
+    def process(self, frame: Frame, received_ns: int | None = None) -> FrameResult:
+        """One frame through the monitor."""
+        return self.monitor.process(frame, received_ns=received_ns)
