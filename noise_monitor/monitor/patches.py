@@ -43,18 +43,13 @@ class PatchSelection:
 
 @dataclass(frozen=True)
 class _Layout:
-    """Candidate grid: corners at (y0 + i*stride, x0 + j*stride); a patch spans ``cells`` x ``cells`` cells."""
+    """Candidate grid: corners at (y0 + i*stride, x0 + j*stride) of patches of ``size`` pixels."""
 
     y0: int
     x0: int
     stride: int
     ny: int
     nx: int
-
-    @property
-    def cells(self) -> int:
-        return 0 if not self.stride else self.size // self.stride
-
     size: int = 0
 
     def corners(self) -> list[tuple[int, int]]:
@@ -72,11 +67,6 @@ def _layout(height: int, width: int, size: int, k: int) -> _Layout:
     y0 = ((height - size) - (ny - 1) * stride) // 2
     x0 = ((width - size) - (nx - 1) * stride) // 2
     return _Layout(y0, x0, stride, ny, nx, size)
-
-
-def candidate_corners(height: int, width: int, size: int, k: int) -> list[tuple[int, int]]:
-    """Top-left corners of the candidate patches (see :func:`_layout`)."""
-    return _layout(height, width, size, k).corners()
 
 
 def _patch_sums(a: np.ndarray, lay: _Layout, scale: int = 1) -> np.ndarray:

@@ -200,10 +200,6 @@ class NoiseModel:
             out["total"] = np.sqrt(sum(np.asarray(out[e.name]) ** 2 for e in self.noise_effects))
         return {k: (float(v) if np.ndim(v) == 0 else v) for k, v in out.items()}
 
-    def noise_level_function(self, meta: CameraMetadata, mode: str = "joint") -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """(intensity grid in DN, sigma per effect and total on it)."""
-        return _V_GRID.copy(), self.predict(_V_GRID, meta, mode)
-
     # --- Monte-Carlo ------------------------------------------------------------------------
     def simulate(
         self,
