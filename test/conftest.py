@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import os
+import tempfile
 
 # Before rclpy is imported anywhere: isolate this process's DDS traffic.
 os.environ["ROS_DOMAIN_ID"] = str(100 + os.getpid() % 100)
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("OMP_NUM_THREADS", "2")
+# exported estimator networks are cached per test session, not in the user's ~/.cache
+os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="noise_monitor_test_cache_")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

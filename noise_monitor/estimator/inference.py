@@ -6,20 +6,24 @@ sigma_image = the compact network's measurement of the noise actually in the pat
 sigma_image; total = sigma_model (the paper's total without xi). With a camera model of more effects
 (``model``, or the effects a network was fine-tuned with), ``extra`` is their joint sigma and sigma_model
 includes it. The paper-family variants return their branch outputs (``drne``: total only).
+
+On the CPU, Full-Meta runs on ONNX Runtime from the checkpoint's ONNX companion
+(:mod:`.onnx_weights`) without importing torch; torch is imported for CUDA, the torch backend, the
+paper-family variants and checkpoints without a companion (exported once, then cached).
 """
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-import torch
 
 from ..physics import CameraMetadata, NoiseModel
-from .device import resolve_device
+from . import onnx_weights
 from .features import SIGMA_MODEL_FLOOR, compact_inputs
-from .networks import N_MAPS, N_SCALARS, SIGMA_SCALE, network_from_checkpoint
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -62,16 +66,21 @@ def validate_metas(metas, n: int) -> list[CameraMetadata]:
     return list(metas)
 
 
+INFO_KEYS = ("step", "elapsed_s", "settings")
+
+
 class _Base:
     name: str
     patch_size: int
 
-    def __init__(self, ckpt: dict, device: torch.device) -> None:
+    def __init__(self, ckpt: dict, device: Any) -> None:
+        from .networks import network_from_checkpoint
+
         self.device = device
         self.net = network_from_checkpoint(ckpt).to(device).eval()
         self.patch_size = int(ckpt["config"]["patch_size"])
         self.name = ckpt["variant"]
-        self.info = {k: ckpt[k] for k in ("step", "elapsed_s", "settings") if k in ckpt}
+        self.info = {k: ckpt[k] for k in INFO_KEYS if k in ckpt}
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} patch {self.patch_size} on {self.device}>"
@@ -80,12 +89,16 @@ class _Base:
 BACKENDS = ("auto", "torch", "onnx")
 
 
-def onnx_session(net: torch.nn.Module, example: tuple[torch.Tensor, ...], threads: int | None = None):
-    """An ONNX Runtime CPU session of ``net`` (dynamic batch and patch size), exported in memory."""
-    import io
-    import warnings
+def default_threads() -> int:
+    """CPU threads for inference when not given: all cores but one (one stays for message handling)."""
+    return max(1, (os.cpu_count() or 2) - 1)
 
-    import onnxruntime as ort
+
+def export_onnx(net: Any, example: tuple[Any, ...]) -> tuple[bytes, list[str]]:
+    """``net`` exported to ONNX in memory (dynamic batch and patch size) and its input names."""
+    import io
+
+    import torch
 
     names = [f"in{i}" for i in range(len(example))]
     axes = {n: ({0: "batch", 2: "h", 3: "w"} if t.ndim == 4 else {0: "batch"}) for n, t in zip(names, example)}
@@ -94,10 +107,21 @@ def onnx_session(net: torch.nn.Module, example: tuple[torch.Tensor, ...], thread
         warnings.simplefilter("ignore")  # torch's TorchScript exporter deprecation notices
         torch.onnx.export(net, example, buf, input_names=names, output_names=["out"],
                           dynamic_axes={**axes, "out": {0: "batch"}}, dynamo=False)
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = threads or torch.get_num_threads()
-    opts.log_severity_level = 3
-    return ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"]), names
+    return buf.getvalue(), names
+
+
+def onnx_session(net: Any, example: tuple[Any, ...], threads: int | None = None) -> tuple[Any, list[str]]:
+    """An ONNX Runtime CPU session of ``net`` (dynamic batch and patch size), exported in memory."""
+    data, names = export_onnx(net, example)
+    return onnx_weights.session(data, threads or default_threads()), names
+
+
+def _compact_example(patch_size: int) -> tuple[Any, Any]:
+    import torch
+
+    from .networks import N_MAPS, N_SCALARS
+
+    return torch.zeros(2, N_MAPS, patch_size, patch_size), torch.zeros(2, N_SCALARS)
 
 
 class FullMetaEstimator(_Base):
@@ -107,29 +131,49 @@ class FullMetaEstimator(_Base):
     CPU (measured faster here, bench/bench_estimator.py), torch on CUDA.
     """
 
-    def __init__(self, ckpt: dict, device: torch.device, model: NoiseModel | None = None, backend: str = "auto") -> None:
+    def __init__(self, ckpt: dict, device: Any, model: NoiseModel | None = None, backend: str = "auto",
+                 threads: int | None = None) -> None:
         super().__init__(ckpt, device)
-        #: the camera effects the network was trained with (empty: the paper's sources only)
-        self.trained_effects: dict = dict(ckpt.get("effects") or {})
-        self.prior = PhysicsPrior(model if model is not None else NoiseModel(extra=self.trained_effects))
-        lacking = sorted(set(self.trained_effects) - set(self.prior.model.names))
-        if lacking:
-            warnings.warn(f"estimator weights were trained for a camera with {', '.join(lacking)}, which the given "
-                          "noise model lacks: sigma_model and xi will be biased (use the profile the weights were "
-                          "fine-tuned for)", stacklevel=3)
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        self._setup(dict(ckpt.get("effects") or {}), model)
         if backend == "onnx" and device.type != "cpu":
             raise ValueError("the onnx backend runs on CPU only; use backend='torch' with CUDA")
         self.backend = "onnx" if backend == "onnx" or (backend == "auto" and device.type == "cpu") else "torch"
         self._session = None
         if self.backend == "onnx":
-            p = self.patch_size
-            self._session, self._inputs = onnx_session(self.net, (torch.zeros(2, N_MAPS, p, p), torch.zeros(2, N_SCALARS)))
+            self._session, self._inputs = onnx_session(self.net, _compact_example(self.patch_size), threads)
+
+    @classmethod
+    def from_onnx(cls, session: Any, meta: dict[str, Any], model: NoiseModel | None = None) -> FullMetaEstimator:
+        """The estimator of an ONNX companion (CPU, no torch)."""
+        est = cls.__new__(cls)
+        est.device, est.net, est.backend = "cpu", None, "onnx"
+        est.patch_size, est.name, est.info = int(meta["patch_size"]), meta["variant"], dict(meta.get("info") or {})
+        est._session, est._inputs = session, [i.name for i in session.get_inputs()]
+        est._setup(dict(meta.get("effects") or {}), model)
+        return est
+
+    def _setup(self, trained_effects: dict, model: NoiseModel | None) -> None:
+        #: the camera effects the network was trained with (empty: the paper's sources only)
+        self.trained_effects = trained_effects
+        self.prior = PhysicsPrior(model if model is not None else NoiseModel(extra=self.trained_effects))
+        lacking = sorted(set(self.trained_effects) - set(self.prior.model.names))
+        if lacking:
+            warnings.warn(f"estimator weights were trained for a camera with {', '.join(lacking)}, which the given "
+                          "noise model lacks: sigma_model and xi will be biased (use the profile the weights were "
+                          "fine-tuned for)", stacklevel=4)
+
+    def companion(self, source_sha256: str) -> bytes:
+        """This network as an ONNX companion of the checkpoint with that SHA-256 (torch backend objects)."""
+        data, _ = export_onnx(self.net, _compact_example(self.patch_size))
+        return onnx_weights.with_metadata(data, {
+            "source_sha256": source_sha256, "variant": self.name, "patch_size": self.patch_size,
+            "effects": self.trained_effects, "info": self.info})
 
     def _run_net(self, maps: np.ndarray, scalars: np.ndarray) -> np.ndarray:
         if self._session is not None:
             return self._session.run(None, {self._inputs[0]: maps, self._inputs[1]: scalars})[0]
+        import torch
+
         with torch.inference_mode():
             r = self.net(torch.from_numpy(maps).to(self.device), torch.from_numpy(scalars).to(self.device))
         return r.cpu().numpy()
@@ -159,6 +203,10 @@ class PaperEstimator(_Base):
         x = validate_patches(patches_dn)
         ms = validate_metas(metas, len(x))
         meta = np.stack([m.normalized() for m in ms])
+        import torch
+
+        from .networks import SIGMA_SCALE
+
         with torch.inference_mode():
             out = self.net(torch.from_numpy(x[:, None] / np.float32(255.0)).to(self.device), torch.from_numpy(meta).to(self.device))
         res = {k: v.cpu().numpy().astype(np.float64) * SIGMA_SCALE for k, v in out.items()}
@@ -180,17 +228,39 @@ def weights_path(name: str, weights_dir: Path | None = None) -> Path:
 
 
 def load(name: str = "full_meta", device: str = "auto", weights: str | Path | None = None,
-         model: NoiseModel | None = None, backend: str = "auto") -> FullMetaEstimator | PaperEstimator:
+         model: NoiseModel | None = None, backend: str = "auto", threads: int | None = None
+         ) -> FullMetaEstimator | PaperEstimator:
     """Load a trained estimator (bundled weights, or ``weights`` = a .pt file written by training).
 
     ``model``: the NoiseModel of the physics prior (default: the paper's sources plus the effects the
     weights were trained with, see ``noise-monitor train --profile``); ``backend``: see
-    :class:`FullMetaEstimator` (paper-family variants always run in torch).
+    :class:`FullMetaEstimator` (paper-family variants always run in torch); ``threads``: CPU threads of
+    the ONNX Runtime session (default: all cores but one).
     """
-    dev = resolve_device(device)
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     path = Path(weights) if weights is not None else weights_path(name)
     if not path.is_file():
         raise FileNotFoundError(f"weights file {path} not found")
+    threads = threads or default_threads()
+    if device == "cpu" and backend != "torch":  # the fast path: no torch at all
+        found = onnx_weights.find(path, threads)
+        if found is not None and found[1].get("variant") == "full_meta":
+            return FullMetaEstimator.from_onnx(found[0], found[1], model)
+    est = _load_checkpoint(path, device, model, backend, threads)
+    if isinstance(est, FullMetaEstimator) and est.backend == "onnx":  # cache the export for the next start
+        sha = onnx_weights.sha256_of(path)
+        onnx_weights.write(onnx_weights.companions(path, sha)[1], est.companion(sha))
+    return est
+
+
+def _load_checkpoint(path: Path, device: str, model: NoiseModel | None, backend: str,
+                     threads: int) -> FullMetaEstimator | PaperEstimator:
+    import torch
+
+    from .device import resolve_device
+
+    dev = resolve_device(device)
     try:
         ckpt = torch.load(path, map_location=dev, weights_only=True)
     except Exception as exc:  # truncated, empty or not a torch file: unpickling errors of every kind
@@ -199,7 +269,7 @@ def load(name: str = "full_meta", device: str = "auto", weights: str | Path | No
         raise ValueError(f"{path} is not an estimator checkpoint")
     try:
         if ckpt["variant"] == "full_meta":
-            return FullMetaEstimator(ckpt, dev, model, backend)
+            return FullMetaEstimator(ckpt, dev, model, backend, threads)
         return PaperEstimator(ckpt, dev)
     except (KeyError, TypeError, RuntimeError) as exc:  # missing entries, wrong layer shapes
         reason = " ".join(str(exc).split())  # torch's multi-line message on one line

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,13 +95,18 @@ def resolve_parameters(values: Mapping[str, Any] | None = None) -> dict[str, Any
     return params
 
 
-def set_inference_threads(threads: int) -> None:
-    """torch intra-op threads: ``threads``, or all cores but one when 0."""
-    import torch
-
+def inference_threads(threads: int) -> int:
+    """CPU threads for inference: ``threads``, or all cores but one when 0 (one stays for messages)."""
     if threads < 0:
         raise ValueError(f"threads must be >= 0, got {threads}")
-    torch.set_num_threads(threads or max(1, (os.cpu_count() or 2) - 1))
+    return threads or max(1, (os.cpu_count() or 2) - 1)
+
+
+def set_inference_threads(threads: int) -> None:
+    """torch intra-op threads (see :func:`inference_threads`)."""
+    import torch
+
+    torch.set_num_threads(inference_threads(threads))
 
 
 @dataclass(frozen=True)
@@ -132,11 +138,14 @@ class MonitorRuntime:
             name = profile or p["profile"]
             self.profile = load_profile(name) if name else None
         self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None)
-        set_inference_threads(p["threads"])
+        threads = inference_threads(p["threads"])
+        if "torch" in sys.modules or p["device"] != "cpu":  # torch runs (or will run) inference
+            set_inference_threads(threads)
         if estimator is None:  # the estimator's physics prior is this camera's model
             from noise_monitor.estimator import load
 
-            estimator = load(p["model"], device=p["device"], weights=p["weights"] or None, model=self.model)
+            estimator = load(p["model"], device=p["device"], weights=p["weights"] or None, model=self.model,
+                             threads=threads)
         self.estimator = estimator
         profile_name = self.profile.name if self.profile else "unknown"
         self.hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"

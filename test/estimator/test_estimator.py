@@ -205,6 +205,41 @@ def test_onnx_and_torch_backends_agree(meta):
         load("full_meta", device="cpu", backend="tvm")
 
 
+def test_bundled_onnx_companion_is_the_shipped_checkpoint(meta):
+    """The CPU fast path (no torch) runs exactly the network of full_meta.pt."""
+    from noise_monitor.estimator import onnx_weights
+    from noise_monitor.estimator.inference import WEIGHTS_DIR
+
+    found = onnx_weights.find(WEIGHTS_DIR / "full_meta.pt", threads=1)
+    assert found is not None, "full_meta.onnx is stale: regenerate it (see the model card)"
+    fast = load("full_meta", device="cpu")
+    assert fast.net is None and fast.backend == "onnx"
+    x = np.random.default_rng(8).uniform(30, 200, (3, 64, 64)).astype(np.float32)
+    a, b = fast.predict(x, meta), load("full_meta", device="cpu", backend="torch").predict(x, meta)
+    assert all(np.allclose(a[k], b[k], atol=1e-4) for k in a)
+
+
+def test_checkpoints_without_companion_are_exported_once_then_load_without_torch(tmp_path, monkeypatch):
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    from noise_monitor.estimator.inference import WEIGHTS_DIR
+
+    pt = tmp_path / "mine.pt"
+    shutil.copy(WEIGHTS_DIR / "full_meta.pt", pt)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    load("full_meta", device="cpu", weights=pt)  # exports and caches
+    assert len(list((tmp_path / "cache" / "noise_monitor" / "onnx").glob("*.onnx"))) == 1
+    code = ("import sys; from noise_monitor.estimator import load; "
+            f"e = load('full_meta', device='cpu', weights={str(pt)!r}); "
+            "assert e.backend == 'onnx' and 'torch' not in sys.modules, sorted(sys.modules)")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")})
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
 def test_shipped_full_meta_contract(meta):
     est = load("full_meta")
     assert est.name == "full_meta" and est.patch_size >= 16

@@ -100,7 +100,7 @@ def test_cuda_requested_but_absent(device):
 
 @WITHOUT_CUDA
 def test_auto_device_falls_back_to_cpu_and_unknown_devices_are_named():
-    assert load("full_meta", device="auto").device.type == "cpu"
+    assert str(load("full_meta", device="auto").device) == "cpu"
     with pytest.raises(ValueError, match="device must be one of \\('auto', 'cpu', 'cuda'\\).*got 'gpu'"):
         load("full_meta", device="gpu")
 
