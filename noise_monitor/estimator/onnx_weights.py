@@ -78,3 +78,22 @@ def write(path: Path, data: bytes) -> bool:
         return True
     except OSError:
         return False
+
+
+def write_beside(pt_path: Path) -> Path:
+    """Export a Full-Meta checkpoint's companion next to it (``<name>.onnx``; do this when shipping weights)."""
+    from .inference import FullMetaEstimator, load
+
+    est = load("full_meta", device="cpu", weights=pt_path, backend="torch")
+    if not isinstance(est, FullMetaEstimator):
+        raise ValueError(f"{pt_path} is not a full_meta checkpoint")
+    out = pt_path.with_suffix(".onnx")
+    if not write(out, est.companion(sha256_of(pt_path))):
+        raise OSError(f"cannot write {out}")
+    return out
+
+
+if __name__ == "__main__":  # python -m noise_monitor.estimator.onnx_weights WEIGHTS.pt
+    import sys
+
+    print(write_beside(Path(sys.argv[1])))

@@ -211,7 +211,7 @@ def test_bundled_onnx_companion_is_the_shipped_checkpoint(meta):
     from noise_monitor.estimator.inference import WEIGHTS_DIR
 
     found = onnx_weights.find(WEIGHTS_DIR / "full_meta.pt", threads=1)
-    assert found is not None, "full_meta.onnx is stale: regenerate it (see the model card)"
+    assert found is not None, "stale: python -m noise_monitor.estimator.onnx_weights noise_monitor/estimator/weights/full_meta.pt"
     fast = load("full_meta", device="cpu")
     assert fast.net is None and fast.backend == "onnx"
     x = np.random.default_rng(8).uniform(30, 200, (3, 64, 64)).astype(np.float32)
