@@ -30,6 +30,7 @@ from std_msgs.msg import Float32
 
 from msg_adapters import (
     AdapterError,
+    CameraGeometry,
     camera_geometry,
     metadata_from_diagnostics,
     metadata_from_temperature,
@@ -89,7 +90,8 @@ class LatestJobWorker(Generic[J]):
                 if self._stop:
                     return
                 job, self._slot = self._slot, None
-            self._handle(job)
+            if job is not None:
+                self._handle(job)
 
     def stop(self, timeout_s: float = 10.0) -> None:
         with self._cv:
@@ -115,7 +117,7 @@ class NoiseMonitorNode(Node):
         self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
         self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
         self._temperature_c: float | None = None
-        self._geometry = None
+        self._geometry: CameraGeometry | None = None
         self._lock = threading.Lock()
         self._last_accept_ns: int | None = None
         self._last_publish_ns = 0

@@ -1,6 +1,7 @@
 """PNG plot of a replay: per-source sigma and xi over time, alarm spans shaded, skipped frames marked."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ SERIES = (("sigma_pn", "PN (photon shot)", "tab:blue"), ("sigma_dcsn", "DCSN (da
 
 def plot_replay(table: FrameTable, episodes: list[dict[str, Any]], path: Path, title: str,
                 threshold_dn: float, frame_period_s: float = 0.0,
-                truth_spans: list[tuple[float, float, str]] = ()) -> Path:
+                truth_spans: Sequence[tuple[float, float, str]] = ()) -> Path:
     """Two stacked panels sharing the time axis (seconds since the first frame).
 
     ``truth_spans`` (start s, end s, label): known corruptions of a simulated bag, hatched.
@@ -87,4 +88,4 @@ def _plot_conditions(ax: plt.Axes, table: FrameTable) -> None:
     ax_e.yaxis.set_minor_formatter(NullFormatter())
     ax_e.set_ylabel("exposure [ms]")
     lines = ax.get_lines() + ax_e.get_lines()
-    ax.legend(lines, [ln.get_label() for ln in lines], loc="upper left", fontsize=8, framealpha=0.8)
+    ax.legend(lines, [str(ln.get_label()) for ln in lines], loc="upper left", fontsize=8, framealpha=0.8)

@@ -256,6 +256,8 @@ class BagReader:
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
         info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
         tol = int(sync_tolerance_s * 1e9)
+        if self.image_topic is None:
+            raise BagError(f"bag {self.path} was opened without topic detection: no image topic")
         for index, (_, log_time, msg) in enumerate(self.messages([self.image_topic])):
             stamp = _stamp_ns(msg, log_time)
             mi = match_stamp(meta_t, stamp, tol)

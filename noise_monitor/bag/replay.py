@@ -118,7 +118,7 @@ def replay(
             rt = MonitorRuntime.from_params_file(config, overrides, profile=profile, estimator=estimator)
         prof, cfg, monitor, hw = rt.profile, rt.config, rt.monitor, rt.hardware_id
         diag_period_ns = rt.diagnostics_period_ns
-        if mcap_path is not None:
+        if out is not None and mcap_path is not None:
             out.mkdir(parents=True, exist_ok=True)
             mcap_path.unlink(missing_ok=True)
         writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None

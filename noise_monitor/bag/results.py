@@ -28,7 +28,8 @@ class _Column:
     __slots__ = ("dtype", "fill", "blocks")
 
     def __init__(self, dtype: type, fill: Any) -> None:
-        self.dtype, self.fill, self.blocks = dtype, fill, []
+        self.dtype, self.fill = dtype, fill
+        self.blocks: list[np.ndarray] = []
 
     def set(self, row: int, value: Any) -> None:
         b, i = divmod(row, BLOCK_ROWS)
@@ -81,11 +82,11 @@ class FrameTable:
         for key in conditions:
             if key not in self._conditions:
                 self._conditions.append(key)
-        for key, value in (*conditions.items(), *numbers.items()):
+        for key, number in (*conditions.items(), *numbers.items()):
             col = self._numbers.get(key)
             if col is None:
                 col = self._numbers[key] = _Column(np.float32, np.nan)
-            col.set(i, value)
+            col.set(i, number)
         self._n += 1
 
     def column(self, name: str) -> np.ndarray:

@@ -50,7 +50,7 @@ def simulate_frames(
     model = NoiseModel(extra=effects)
     rng = np.random.default_rng(seed)
     scene = tiled_scene(height, width, seed)
-    frames = []
+    frames: list[Frame] = []
     for c, (gain_db, exposure, temp) in enumerate(conditions):
         meta = profile.metadata(gain_db=gain_db, exposure_time_s=exposure, sensor_temperature_c=temp)
         clean = np.roll(scene, (3 * c, 5 * c), axis=(0, 1))

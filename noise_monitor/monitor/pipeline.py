@@ -68,6 +68,8 @@ class FrameResult:
         """Numbers of a processed frame (for plots, CSV and the numeric topics); empty when skipped."""
         if not self.processed:
             return {}
+        assert self.xi is not None and self.xi_filtered is not None and self.xi_model is not None
+        assert self.patches is not None  # processed frames carry all of them
         out = {f"sigma_{k}": self.sigma[k] for k in SOURCES + ("total",)}
         out["xi"] = float(self.xi)
         out["xi_filtered"] = float(self.xi_filtered)

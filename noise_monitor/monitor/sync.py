@@ -84,7 +84,8 @@ class StampSynchronizer(Generic[T, M]):
         self._values.insert(i, metadata)
         if len(self._stamps) > self.history:  # forget the oldest
             del self._stamps[0], self._values[0]
-        out, keep = [], deque()
+        out: list[Matched[T, M]] = []
+        keep: deque[tuple[int, T, int]] = deque()
         for stamp, image, received in self.pending:
             if abs(stamp - stamp_ns) <= self.tol_ns:
                 out.append(self._pair(stamp, image, received, (stamp_ns, metadata)))

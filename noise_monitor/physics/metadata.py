@@ -257,13 +257,14 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
     if unknown:
         raise MetadataError(f"{source}: unknown key(s) {', '.join(unknown)}; allowed: name, effects, {', '.join(sorted(known))}")
     # validate present values by building a metadata object with placeholder values for missing fields
-    placeholder = {n: PAPER_RANGES[n][0] if n != "pixel_clock_hz" else 1e7 for n in NUMERIC_FIELDS}
+    placeholder: dict[str, Any] = {n: PAPER_RANGES[n][0] if n != "pixel_clock_hz" else 1e7 for n in NUMERIC_FIELDS}
     placeholder["sensor_type"] = "ccd"
     try:
         checked = CameraMetadata.from_mapping({**placeholder, **doc})
     except MetadataError as exc:
         raise MetadataError(f"{source}: {exc}") from exc
     doc = {k: getattr(checked, k) for k in doc}  # typed values (YAML may give '90.0e6' as a string)
+    effects: dict[str, dict[str, Any]]
     if isinstance(effects_spec, (list, tuple)):
         effects = {str(e): {} for e in effects_spec}
     elif isinstance(effects_spec, dict):

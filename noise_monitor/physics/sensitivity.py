@@ -45,7 +45,7 @@ PAPER_NOISE_MODEL_TABLE: dict[str, list[float]] = {
 
 
 def reference_metadata() -> CameraMetadata:
-    return CameraMetadata(**REFERENCE_VALUES)
+    return CameraMetadata.from_mapping(REFERENCE_VALUES)
 
 
 def sweep_cells(row: str) -> list[tuple[float, CameraMetadata]]:

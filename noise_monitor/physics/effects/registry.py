@@ -45,6 +45,8 @@ def load_plugin_file(path: str | Path) -> list[str]:
     if not p.is_file():
         raise EffectError(f"effect plug-in file {p} does not exist")
     spec = importlib.util.spec_from_file_location(f"noise_monitor_plugin_{p.stem}", p)
+    if spec is None or spec.loader is None:
+        raise EffectError(f"effect plug-in {p} is not an importable Python file")
     module = importlib.util.module_from_spec(spec)
     try:
         spec.loader.exec_module(module)
@@ -103,7 +105,7 @@ def build_effects(spec: Iterable[str] | Mapping[str, Mapping[str, float]] | None
         return []
     if isinstance(spec, Mapping):
         return [make_effect(n, **dict(v or {})) for n, v in spec.items()]
-    out = []
+    out: list[Effect] = []
     for item in spec:
         if isinstance(item, Effect):
             out.append(item)
