@@ -37,6 +37,10 @@ DESCRIPTIONS: dict[str, str] = {
     "metadata_timeout_s": "metadata older than this (relative to the image) -> WARN, frame not evaluated",
     "min_patches": "fewer usable patches than this -> WARN, frame not evaluated",
     "alarm_level": "diagnostic level of an xi alarm: WARN or ERROR",
+    "temporal_frames": "frames of a static hold whose differences measure the temporal noise (sigma_temporal); "
+                       "0 = off (single-image measurement only)",
+    "temporal_min_frames": "frames a static hold needs before its temporal measurement enters xi",
+    "image_xi_error_dn": "typical error (DN) of the single-image xi, weighing it against the temporal one",
 }
 
 
@@ -62,6 +66,9 @@ class MonitorConfig:
     metadata_timeout_s: float = 2.0
     min_patches: int = 1
     alarm_level: str = "ERROR"
+    temporal_frames: int = 16
+    temporal_min_frames: int = 4
+    image_xi_error_dn: float = 0.3
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -90,6 +97,9 @@ class MonitorConfig:
             (self.image_timeout_s > 0 and self.metadata_timeout_s > 0, "timeouts must be > 0"),
             (1 <= self.min_patches <= self.patches_per_frame, "min_patches must be in [1, patches_per_frame]"),
             (self.alarm_level in ALARM_LEVELS, f"alarm_level must be one of {ALARM_LEVELS}"),
+            (self.temporal_frames == 0 or 2 <= self.temporal_frames <= 256, "temporal_frames must be 0 or in 2..256"),
+            (2 <= self.temporal_min_frames, "temporal_min_frames must be >= 2"),
+            (self.image_xi_error_dn > 0, "image_xi_error_dn must be > 0"),
         ]
         for ok, reason in checks:
             if not ok:

@@ -23,6 +23,7 @@ from .frame import skip_reason as frame_skip_reason
 from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
+from .temporal import TemporalMeasurement, TemporalNoise
 
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
 
@@ -56,6 +57,10 @@ class FrameResult:
     xi: float | None = None  # this frame's xi (per Monitor.xi_source)
     xi_filtered: float | None = None
     xi_model: float | None = None  # analytic sigma_model (this model, these patches) - estimated image noise
+    xi_image: float | None = None  # the single-image measurement's xi (per Monitor.xi_source)
+    xi_temporal: float | None = None  # the model's temporal noise - the frame differences' (static holds)
+    temporal_weight: float = 0.0  # share of xi_temporal in xi (inverse-variance weights)
+    temporal_frames: int = 0  # frames of the current static hold measured
     filtered: dict[str, float] = field(default_factory=dict)
     alarm_active: bool = False
     alarm_state: str = "ok"
@@ -76,6 +81,12 @@ class FrameResult:
         out["xi_estimator"] = self.sigma["xi"]
         out["sigma_image"] = self.sigma["image"]
         out["xi_model"] = float(self.xi_model)
+        out["xi_image"] = float(self.xi_image if self.xi_image is not None else self.xi)
+        if self.xi_temporal is not None:
+            out["xi_temporal"] = float(self.xi_temporal)
+            out["sigma_temporal"] = self.sigma["temporal"]
+        out["temporal_weight"] = self.temporal_weight
+        out["temporal_frames"] = float(self.temporal_frames)
         out["sigma_model"] = self.model["total"]
         out.update({f"sigma_model_{k}": v for k, v in self.model.items() if k != "total"})
         out.update({f"sigma_{k}_filtered": self.filtered[k] for k in SOURCES + ("total",)})
@@ -87,8 +98,15 @@ class FrameResult:
     def values(self) -> dict[str, str]:
         """Diagnostic key/values: numbers as numeric strings, plus the frame counters."""
         vals = {k: _fmt(v) for k, v in self.numeric().items()}
+        if self.processed:
+            vals["xi_measurement"] = self.xi_measurement
         vals.update({k: str(v) for k, v in self.counters.items()})
         return vals
+
+    @property
+    def xi_measurement(self) -> str:
+        """Which measurement drove xi: the frame differences of a static hold, or the single image."""
+        return "temporal" if self.temporal_weight >= 0.5 else "image"
 
     def report(self) -> StatusReport:
         return StatusReport(self.level, self.name, self.message, self.hardware_id, self.values())
@@ -109,6 +127,10 @@ class Monitor:
         extra_effects = set(model.names) - set(SOURCES)
         self.xi_source = config.xi_source if config.xi_source != "auto" else ("model" if extra_effects else "estimator")
         self.filter = EmaFilter(config.filter_alpha)
+        self.temporal = TemporalNoise(config.temporal_frames, config.temporal_min_frames)
+        # frame differences hold the temporal noise only: compare them with the model's temporal effects
+        fixed = [e for e in model.effects if not e.temporal]
+        self.temporal_model = NoiseModel([e for e in model.effects if e.temporal]) if fixed else model
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames)
         self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
@@ -188,7 +210,17 @@ class Monitor:
         image_pp = np.asarray(est.get("sigma_image", est["total"]), dtype=np.float64).reshape(-1)
         sigma["image"] = float(np.median(image_pp))
         xi_model = float(np.median(model_pp["total"] - image_pp))
-        xi = sigma["xi"] if self.xi_source == "estimator" else xi_model
+        xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
+        xi, xi_t, weight, held = xi_image, None, 0.0, 0
+        tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
+        if tm is not None:
+            held = tm.frames
+            found = self._xi_temporal(tm, meta, sigma)
+            if found is not None:
+                xi_t, err_t = found
+                w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
+                weight = w_t / (w_t + w_i)
+                xi = weight * xi_t + (1.0 - weight) * xi_image
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")
         state = self.alarm.update(xi_f)
@@ -196,9 +228,27 @@ class Monitor:
         level, message = self._status(xi_f, meta)
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
-            xi_model=xi_model, filtered=filtered, alarm_active=state.active, alarm_state=state.name,
+            xi_model=xi_model, xi_image=xi_image, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
+            filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, processing_ms=(time.perf_counter() - t0) * 1e3,
         )
+
+    def _xi_temporal(self, tm: TemporalMeasurement, meta: CameraMetadata,
+                     sigma: dict[str, float]) -> tuple[float, float] | None:
+        """(xi of the static hold's temporal measurement, its standard error), None without accepted blocks.
+
+        The model is evaluated on the hold's temporal mean (the scene without its temporal noise)."""
+        ok = np.isfinite(tm.sigma_dn)
+        if not ok.any():
+            return None
+        smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in tm.mean_patches[ok]])
+        model_t = predict_patches(self.temporal_model, smooth, meta, self.config.model_mode)["total"]
+        d = model_t - tm.sigma_dn[ok]
+        n = int(ok.sum())
+        spread = float(np.std(d)) if n > 1 else 0.0
+        err = 1.2533 * max(float(np.sqrt(np.mean(tm.err_dn[ok] ** 2))), spread) / np.sqrt(n)  # of a median
+        sigma["temporal"] = float(np.median(tm.sigma_dn[ok]))
+        return float(np.median(d)), err
 
     def _status(self, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
         cfg, state = self.config, self.alarm.state

@@ -1,0 +1,125 @@
+"""Temporal noise from frame differences where the scene is static.
+
+Three steps, no model and no lab dependencies (the live monitor reuses them for ``sigma_temporal``):
+
+1. :func:`global_shift`: the camera's global motion between two frames by phase correlation
+   (OpenCV, Hanning window, sub-pixel); :func:`static_runs` cuts a sequence into runs of frames whose
+   consecutive shifts stay below ``STATIC_SHIFT_PX``.
+2. :func:`block_temporal` on a static run: per B x B block, each frame's deviation from the run's
+   temporal mean is regressed on what scene changes would put there (a per-frame offset, a brightness
+   scaling ``mean - <mean>``, and sub-pixel motion: the mean image's x and y gradients). For pure noise
+   the explained energy is a small, F-distributed fraction; a block is accepted when its F-test
+   p-value exceeds ``p_value`` (residual motion, flicker or a moving object reject it).
+3. For accepted blocks, the temporal variance is the per-pixel unbiased variance over the run averaged
+   over the block, with its standard error from the spread of the per-pixel variances (never below the
+   Gaussian value ``var * sqrt(2 / ((k - 1) n))``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+from scipy.stats import f as f_dist
+
+#: largest |global shift| (px) between consecutive frames of a static run (phase correlation on a
+#: weakly textured noisy frame scatters by up to ~0.1 px; slower drifts are left to the block test)
+STATIC_SHIFT_PX = 0.25
+#: F-test p-value below which a block's frame differences are not pure noise
+P_VALUE = 1e-4
+#: regressors of the pure-noise test: offset, brightness scaling, x and y motion
+N_REGRESSORS = 4
+
+
+@lru_cache(maxsize=8)
+def _window(height: int, width: int) -> np.ndarray:
+    return cv2.createHanningWindow((width, height), cv2.CV_64F)
+
+
+def global_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """(dx, dy, response): translation of ``b`` relative to ``a`` in pixels (phase correlation, sub-pixel)
+    and the correlation peak's response (near 1 for a clean translation, near 0 for no match)."""
+    a64 = np.array(a, dtype=np.float64)  # copies: OpenCV windows its inputs in place
+    b64 = np.array(b, dtype=np.float64)
+    if a64.shape != b64.shape or a64.ndim != 2:
+        raise ValueError(f"global_shift needs two gray images of one size, got {a64.shape} and {b64.shape}")
+    (dx, dy), response = cv2.phaseCorrelate(a64, b64, _window(*a64.shape))
+    return float(dx), float(dy), float(response)
+
+
+def static_runs(shifts: np.ndarray, limit_px: float = STATIC_SHIFT_PX) -> list[tuple[int, int]]:
+    """[start, stop) frame ranges of runs with every consecutive shift ``shifts[i]`` (frame i -> i + 1,
+    shape (n - 1, 2)) below ``limit_px``; single frames are runs of length 1."""
+    moved = np.hypot(*np.asarray(shifts, dtype=float).reshape(-1, 2).T) > limit_px
+    runs, start = [], 0
+    for i, m in enumerate(moved):
+        if m:
+            runs.append((start, i + 1))
+            start = i + 1
+    runs.append((start, len(moved) + 1))
+    return runs
+
+
+@dataclass
+class BlockTemporal:
+    """Per-block temporal statistics of a static run (blocks row-major over the image's block grid)."""
+
+    block: int
+    grid: tuple[int, int]
+    frames: int
+    mean_dn: np.ndarray  # (N,) block mean of the temporal mean image
+    variance_dn2: np.ndarray  # (N,) per-pixel temporal variance, block average (unbiased)
+    variance_err_dn2: np.ndarray  # (N,) its standard error
+    p_value: np.ndarray  # (N,) pure-noise test
+    accepted: np.ndarray  # (N,) bool: the block's frame differences fit pure noise
+
+    def sigma_dn(self) -> tuple[float, float]:
+        """Temporal sigma over all accepted blocks and its standard error (NaN if none)."""
+        if not self.accepted.any():
+            return float("nan"), float("nan")
+        v = self.variance_dn2[self.accepted]
+        e = self.variance_err_dn2[self.accepted]
+        var = float(v.mean())
+        err = float(math.sqrt(np.sum(e**2)) / v.size)
+        s = math.sqrt(max(var, 0.0))
+        return s, err / (2.0 * max(s, 1e-6))
+
+
+def blocks_of(img: np.ndarray, b: int) -> np.ndarray:
+    """(..., N, b*b) blocks of the last two axes, row-major over the block grid (edges cut)."""
+    h, w = (img.shape[-2] // b) * b, (img.shape[-1] // b) * b
+    lead = img.shape[:-2]
+    x = img[..., :h, :w].reshape(*lead, h // b, b, w // b, b)
+    x = np.moveaxis(x, -3, -2)
+    return x.reshape(*lead, (h // b) * (w // b), b * b)
+
+
+def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE) -> BlockTemporal:
+    """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN)."""
+    x = np.asarray(stack, dtype=np.float64)
+    if x.ndim != 3 or x.shape[0] < 2:
+        raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
+    k = x.shape[0]
+    n = block * block
+    if x.shape[1] < block or x.shape[2] < block:
+        raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
+    mean = x.mean(axis=0)
+    gy, gx = np.gradient(mean)
+    mb = blocks_of(mean, block)  # (N, n)
+    design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, block),
+                       blocks_of(gy, block)], axis=2)  # (N, n, 4)
+    q, _ = np.linalg.qr(design)
+    d = blocks_of(x, block) - mb[None]  # (k, N, n)
+    explained = np.sum(np.einsum("knp,npr->knr", d, q) ** 2, axis=(0, 2))
+    total = np.sum(d * d, axis=(0, 2))
+    d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (n - N_REGRESSORS)
+    ratio = (explained / d1) / np.maximum((total - explained) / d2, 1e-12)
+    p = f_dist.sf(ratio, d1, d2)
+    per_pixel = np.sum(d * d, axis=0) / (k - 1)  # (N, n)
+    var = per_pixel.mean(axis=1)
+    gauss = var * math.sqrt(2.0 / ((k - 1) * n))
+    err = np.maximum(per_pixel.std(axis=1, ddof=1) / math.sqrt(n), gauss)
+    grid = (x.shape[1] // block, x.shape[2] // block)
+    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value)

@@ -1,0 +1,116 @@
+"""The stream's measurement of the noise: frame differences on static patches (``sigma_temporal``).
+
+While the camera holds still (global shift between consecutive frames below a fraction of a pixel,
+same gain and exposure, temperature within a tolerance), the patches chosen on the first frame of the
+hold are cut from every frame at the same sensor position. Frame differences cancel the scene, so
+their statistics measure the temporal noise without reading texture as noise; each 8x8 block must pass
+the pure-noise test of :func:`noise_monitor.measure.block_temporal` (a moving object, residual motion or
+flicker rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, hot pixels) is the same in
+every frame and so absent from this measurement: it is compared with the model's temporal effects only.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from noise_monitor.measure import block_temporal, global_shift
+from noise_monitor.measure.temporal import STATIC_SHIFT_PX
+from noise_monitor.physics import CameraMetadata
+
+#: edge (px) of the downsampled frame the global motion is estimated on
+MOTION_SIZE_PX = 256
+#: metadata drift tolerated inside one hold
+GAIN_TOL_DB, EXPOSURE_TOL_REL, TEMPERATURE_TOL_C = 0.05, 0.01, 1.0
+BLOCK = 8
+
+
+@dataclass(frozen=True)
+class TemporalMeasurement:
+    """Per patch of the hold: temporal sigma (NaN without accepted blocks) and its standard error."""
+
+    corners: list[tuple[int, int]]
+    size: int
+    sigma_dn: np.ndarray
+    err_dn: np.ndarray
+    mean_patches: np.ndarray  # (K, size, size) temporal mean of the hold: the scene without temporal noise
+    frames: int
+    accepted_fraction: float
+
+
+def _same_conditions(a: CameraMetadata, b: CameraMetadata) -> bool:
+    return (a.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
+            == b.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
+            and abs(a.gain_db - b.gain_db) <= GAIN_TOL_DB
+            and abs(a.exposure_time_s - b.exposure_time_s) <= EXPOSURE_TOL_REL * a.exposure_time_s
+            and abs(a.sensor_temperature_c - b.sensor_temperature_c) <= TEMPERATURE_TOL_C)
+
+
+class TemporalNoise:
+    """Collects the patches of a static hold and measures their temporal noise (see module docstring)."""
+
+    def __init__(self, max_frames: int, min_frames: int) -> None:
+        self.max_frames, self.min_frames = max_frames, min_frames
+        self._stack: deque[np.ndarray] = deque(maxlen=max_frames)
+        self._corners: list[tuple[int, int]] = []
+        self._size = 0
+        self._meta: CameraMetadata | None = None
+        self._small: np.ndarray | None = None
+        self._scale = 1.0
+        self.holds = 0  # static holds started (resets)
+
+    def reset(self) -> None:
+        self._stack.clear()
+        self._corners, self._meta, self._small = [], None, None
+
+    def _motion_image(self, image: np.ndarray) -> np.ndarray:
+        h, w = image.shape
+        self._scale = max(1.0, max(h, w) / MOTION_SIZE_PX)
+        size = (max(8, round(w / self._scale)), max(8, round(h / self._scale)))
+        return cv2.resize(image.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+
+    def _static(self, image: np.ndarray, meta: CameraMetadata, size: int) -> bool:
+        """Whether this frame continues the current hold (and updates the motion reference)."""
+        small = self._motion_image(image)
+        prev, self._small = self._small, small
+        if prev is None or prev.shape != small.shape or self._meta is None or size != self._size:
+            return False
+        if not _same_conditions(self._meta, meta):
+            return False
+        dx, dy, _ = global_shift(prev, small)
+        return math.hypot(dx, dy) * self._scale <= STATIC_SHIFT_PX
+
+    def update(self, image: np.ndarray, meta: CameraMetadata, corners: list[tuple[int, int]],
+               size: int) -> TemporalMeasurement | None:
+        """Add a frame (its chosen patch corners start a new hold); the hold's measurement once it has
+        ``min_frames`` frames, else None."""
+        if self.max_frames < 2:
+            return None
+        if not self._static(image, meta, size):
+            self._stack.clear()
+            self._corners, self._size, self._meta = list(corners), size, meta
+            self.holds += 1
+        if not self._corners:
+            return None
+        self._stack.append(np.stack([image[y:y + size, x:x + size] for y, x in self._corners]).astype(np.float32))
+        k = len(self._stack)
+        if k < max(2, self.min_frames):
+            return None
+        n_patches = len(self._corners)
+        frames = np.stack(self._stack)  # (k, K, s, s)
+        stats = block_temporal(frames.reshape(k, n_patches * size, size), BLOCK)
+        per_patch = (size // BLOCK) ** 2
+        acc = stats.accepted.reshape(n_patches, per_patch)
+        var = stats.variance_dn2.reshape(n_patches, per_patch)
+        err = stats.variance_err_dn2.reshape(n_patches, per_patch)
+        n_acc = acc.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = np.where(acc, var, 0.0).sum(axis=1) / n_acc
+            v_err = np.sqrt(np.where(acc, err**2, 0.0).sum(axis=1)) / n_acc
+            sigma = np.sqrt(np.maximum(v, 0.0))
+            sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
+        return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
+                                   float(stats.accepted.mean()))
