@@ -96,6 +96,10 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
              lambda u: Step(stated_factors={"sensor_temperature_c": 2.0} if _in_episode(u) else {})),
     Scenario("lab", "static chart, 16 blocks of constant gain/exposure/temperature", _lab),
     Scenario("field", "dusk drive: gain, exposure and temperature rise, +N(0, 5 DN) image noise episode", _field),
+    # simulated by noise_monitor.profiles.ptc_sim (flat fields and dark frames, not a scene)
+    Scenario("ptc", "EMVA 1288 photon-transfer recording for `characterize`: flat fields over an exposure series "
+                    "with dark pairs, dark pairs at 3 more temperatures (>= 60 frames; 200 recommended)",
+             lambda u: Step(moving=False)),
 )}
 
 

@@ -85,6 +85,11 @@ def simulate_bag(
         raise ValueError(f"hold_s must be >= 0, got {hold_s}")
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
+    if scen.name == "ptc":
+        from noise_monitor.profiles.ptc_sim import simulate_ptc
+
+        return simulate_ptc(out, prof, effects, frames=frames, width=width, height=height, seed=seed,
+                            storage=storage, fps=fps, namespace=namespace)
     effect_specs = [*(f"{k}:" + ",".join(f"{p}={v}" for p, v in vals.items()) if vals else k
                       for k, vals in prof.effects.items()), *effects]
     sim_model = NoiseModel(extra=effect_specs)

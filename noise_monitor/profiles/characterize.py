@@ -1,0 +1,336 @@
+"""EMVA 1288 (release 4.0) characterization of a camera from a photon-transfer recording (a bag).
+
+The recording: flat fields (a uniform light source, constant irradiance) over a series of exposure
+times, a dark set (lens cap on) at the exposures, optionally dark sets at more sensor temperatures.
+Consecutive frames with equal gain, exposure, temperature and level form a *set* (at least a pair).
+Per (gain, temperature) the sets whose mean lies within ``dark_tolerance`` of the lowest set are dark,
+the others flat. Everything is computed on the node's 8-bit scale and reported in electrons, with K
+also in the camera's native DN:
+
+- temporal variance of a set: the variance of the difference image of each pair / 2 (pairs averaged);
+  spatial variance: the variance of the set's average image minus temporal variance / L;
+- K: slope of (sigma_y^2 - sigma_y.dark^2) vs (mu_y - mu_y.dark) through the origin, up to 70 % of
+  saturation (flats without clipped pixels); standard error from the fit residuals;
+- saturation: the dark-subtracted mean at the maximum of the temporal variance (parabola through the
+  maximum and its neighbours), divided by K;
+- temporal dark noise: sqrt(sigma_y.dark^2 - LSB^2/12) / K at the shortest exposure, read noise from
+  the intercept of sigma_y.dark^2 vs exposure;
+- dark current: slope of mu_y.dark vs exposure / K per temperature; doubling temperature: ln 2 / slope
+  of ln(dark current) vs temperature (two temperatures or more);
+- DSNU: sqrt(spatial variance of the dark set) / K; PRNU: sqrt(s_y^2 - s_y.dark^2) / (mu_y - mu_y.dark)
+  on the flat set nearest 50 % of saturation (the largest sets are used);
+- linearity error: deviation of mu_y - mu_y.dark from a straight line in exposure between 5 % and 95 %
+  of saturation, in % of the line.
+
+Quantum efficiency (and so anything in photons) needs a calibrated irradiance: not determined.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from noise_monitor.bag.reader import open_bag
+
+#: Sets whose mean is within this fraction of the range above the lowest set (same gain, T) are dark.
+DARK_TOLERANCE = 0.02
+#: A new set starts where the mean jumps by more than this fraction of the range.
+SET_SPLIT = 0.005
+K_FIT_MAX = 0.70
+LINEARITY_RANGE = (0.05, 0.95)
+
+
+class CharacterizeError(ValueError):
+    """The recording cannot be characterized (the reason says what is missing)."""
+
+
+@dataclass
+class FrameSet:
+    """Consecutive frames of equal conditions and level."""
+
+    gain_db: float
+    exposure_time_s: float
+    temperature_c: float | None
+    first_index: int
+    images: list[np.ndarray] = field(default_factory=list)
+    kind: str = ""
+    mean: float = 0.0
+    temporal_var: float = 0.0
+    spatial_var: float = 0.0
+    clipped_fraction: float = 0.0
+
+    @property
+    def size(self) -> int:
+        return len(self.images)
+
+    def compute(self) -> None:
+        stack = np.stack(self.images).astype(np.float64)
+        self.mean = float(stack.mean())
+        pairs = [np.var(stack[i] - stack[i + 1]) / 2.0 for i in range(0, len(stack) - 1, 2)]
+        self.temporal_var = float(np.mean(pairs))
+        self.spatial_var = float(np.var(stack.mean(axis=0)) - self.temporal_var / len(stack))
+        self.clipped_fraction = float(np.mean(stack >= 255.0 - 1e-3))
+        self.images = self.images[:0] + [np.empty(0)] * len(self.images)  # keep the count, free the pixels
+
+
+@dataclass
+class Recording:
+    sets: list[FrameSet]
+    bit_depth: int
+    shape: tuple[int, int]
+    frames: int
+    skipped: dict[str, int]
+    static: dict[str, Any]
+
+    @property
+    def lsb(self) -> float:
+        """One native code on the 8-bit scale."""
+        return 255.0 / (2**self.bit_depth - 1)
+
+
+def _bit_depth(path: str | Path, override: int | None, topics: dict[str, str | None]) -> int:
+    """Bits per pixel: the override, the metadata's bit_depth, else the image container's width."""
+    if override:
+        return override
+    with open_bag(path, **topics) as reader:
+        for frame in reader.frames():
+            bd = frame.raw_metadata.get("bit_depth")
+            if bd is not None:
+                return int(bd)
+            break
+        for _, _, msg in reader.messages([reader.image_topic]):  # no metadata: the container width
+            return 16 if "16" in str(getattr(msg, "encoding", "")) else 8
+    return 8
+
+
+def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: str | None = None,
+                   metadata_topic: str | None = None, temperature_topic: str | None = None) -> Recording:
+    """Frames of a bag grouped into sets (see module doc)."""
+    topics = {"image_topic": image_topic, "metadata_topic": metadata_topic, "temperature_topic": temperature_topic}
+    depth = _bit_depth(path, bit_depth, topics)
+    sets: list[FrameSet] = []
+    skipped: dict[str, int] = {}
+    shape = None
+    static: dict[str, Any] = {}
+    count = 0
+    with open_bag(path, **topics) as reader:
+        for frame in reader.frames(bit_depth=depth):
+            count += 1
+            if frame.image_dn is None:
+                reason = frame.skip_reason or "image unusable"
+                skipped[reason] = skipped.get(reason, 0) + 1
+                continue
+            img = frame.image_dn
+            if shape is None:
+                shape = img.shape
+            elif img.shape != shape:
+                raise CharacterizeError(f"frame {frame.index} is {img.shape[1]}x{img.shape[0]} pixels, the first "
+                                        f"{shape[1]}x{shape[0]}: a recording must keep its image size")
+            meta = {**frame.raw_metadata, **(frame.metadata.as_dict() if frame.metadata else {})}
+            if meta.get("exposure_time_s") is None:
+                raise CharacterizeError(f"frame {frame.index} has no exposure_time_s in its metadata: the dark current "
+                                        "and linearity need each frame's exposure")
+            for k in ("sensor_type", "pixel_size_m"):
+                if meta.get(k) is not None:
+                    static.setdefault(k, meta[k])
+            key = (float(meta.get("gain_db") or 0.0), float(meta["exposure_time_s"]),
+                   None if meta.get("sensor_temperature_c") is None else float(meta["sensor_temperature_c"]))
+            mean = float(img.mean())
+            last = sets[-1] if sets else None
+            if (last is None or (last.gain_db, last.exposure_time_s, last.temperature_c) != key
+                    or abs(float(np.mean(last.images[0])) - mean) > SET_SPLIT * 255.0):
+                last = FrameSet(*key, first_index=frame.index)
+                sets.append(last)
+            last.images.append(img)
+    if shape is None:
+        raise CharacterizeError(f"{path}: no usable image")
+    singles = sum(1 for s in sets if s.size < 2)
+    if singles:
+        skipped["single frame of its conditions (no pair for the difference image)"] = singles
+    sets = [s for s in sets if s.size >= 2]
+    for s in sets:
+        s.compute()
+    return Recording(sets, depth, shape, count, skipped, static)
+
+
+def _fit_line(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares line (slope, intercept) and their standard errors."""
+    if len(x) < 3:
+        p = np.polyfit(x, y, 1)
+        return p, np.full(2, np.nan)
+    p, cov = np.polyfit(x, y, 1, cov="unscaled")
+    resid = y - np.polyval(p, x)
+    s2 = float(resid @ resid) / (len(x) - 2)
+    return p, np.sqrt(np.diag(cov) * s2)
+
+
+def _value(v: float | None, se: float | None, unit: str) -> dict[str, Any]:
+    return {"value": v, "stderr": None if se is None or not math.isfinite(se) else se, "unit": unit}
+
+
+def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict[str, Any]:
+    """The EMVA figures of a recording (each with its standard error) and the points behind the plots."""
+    notes: list[str] = []
+    groups: dict[tuple[float, float | None], list[FrameSet]] = {}
+    for s in rec.sets:
+        groups.setdefault((s.gain_db, s.temperature_c), []).append(s)
+    for members in groups.values():
+        floor = min(s.mean for s in members)
+        for s in members:
+            s.kind = "dark" if s.mean <= floor + dark_tolerance * 255.0 else "flat"
+    flats_by_group = {g: [s for s in m if s.kind == "flat"] for g, m in groups.items()}
+    base = max(groups, key=lambda g: (len(flats_by_group[g]), -g[0]))
+    gain0, temp0 = base
+    if len({g for g, _ in groups}) > 1:
+        notes.append(f"several gains recorded: the analysis uses {gain0:g} dB (the one with most flat fields)")
+    flats = sorted(flats_by_group[base], key=lambda s: s.exposure_time_s)
+    darks = sorted((s for s in groups[base] if s.kind == "dark"), key=lambda s: s.exposure_time_s)
+    dark_t = np.array([s.exposure_time_s for s in darks])
+    if len(np.unique(dark_t)) < 2:
+        raise CharacterizeError("no dark frames (lens cap on) at two or more exposure times"
+                                f"{'' if temp0 is None else f' at {temp0:g} degC'}: dark subtraction and dark "
+                                "current cannot be determined")
+    unclipped = [s for s in flats if s.clipped_fraction < 1e-4]
+    if len(unclipped) < 3:
+        raise CharacterizeError(f"only {len(unclipped)} flat-field set(s) without saturated pixels (of {len(flats)}): "
+                                "the photon transfer curve (K) cannot be determined")
+    dark_mean_fit, _ = _fit_line(dark_t, np.array([s.mean for s in darks]))
+    dark_var_fit, dark_var_se = _fit_line(dark_t, np.array([s.temporal_var for s in darks]))
+
+    def dark_at(s: FrameSet) -> tuple[float, float, float]:
+        same = [d for d in darks if math.isclose(d.exposure_time_s, s.exposure_time_s, rel_tol=1e-9)]
+        if same:
+            d = max(same, key=lambda d: d.size)
+            return d.mean, d.temporal_var, d.spatial_var
+        t = s.exposure_time_s
+        return float(np.polyval(dark_mean_fit, t)), float(np.polyval(dark_var_fit, t)), float("nan")
+
+    ref = np.array([dark_at(s) for s in flats])
+    x = np.array([s.mean for s in flats]) - ref[:, 0]  # mu_y - mu_y.dark (8-bit DN)
+    y = np.array([s.temporal_var for s in flats]) - ref[:, 1]
+    t_flat = np.array([s.exposure_time_s for s in flats])
+    # saturation: variance maximum (needs a drop after it)
+    i = int(np.argmax(y))
+    sat_dn = None
+    if 0 < i < len(y) - 1:
+        a, b, _ = np.polyfit(x[i - 1:i + 2], y[i - 1:i + 2], 2)
+        sat_dn = float(np.clip(-b / (2 * a), x[i - 1], x[i + 1])) if a < 0 else float(x[i])
+    else:
+        notes.append("saturation not determined: the variance has no maximum inside the exposure series "
+                     "(record flat fields beyond saturation)")
+    limit = K_FIT_MAX * (sat_dn if sat_dn else x[np.array([s.clipped_fraction < 1e-4 for s in flats])].max())
+    sel = (x <= limit) & np.array([s.clipped_fraction < 1e-4 for s in flats]) & (x > 0)
+    if sel.sum() < 3:
+        raise CharacterizeError(f"only {int(sel.sum())} flat-field set(s) in the linear range below 70 % of "
+                                "saturation: K cannot be determined")
+    k8 = float((x[sel] @ y[sel]) / (x[sel] @ x[sel]))
+    resid = y[sel] - k8 * x[sel]
+    k8_se = math.sqrt(float(resid @ resid) / max(int(sel.sum()) - 1, 1) / float(x[sel] @ x[sel]))
+    rel_k = k8_se / k8
+    adc = 2**rec.bit_depth - 1
+    q = rec.lsb**2 / 12.0
+    npix = rec.shape[0] * rec.shape[1]
+    # dark noise at the shortest exposure, read noise from the intercept
+    d0 = darks[0]  # sigma_d at the shortest exposure from the line through all dark variances (less noisy)
+    sd2 = max(float(np.polyval(dark_var_fit, d0.exposure_time_s)) - q, 0.0)
+    sd = math.sqrt(sd2) / k8
+    sd_se = sd * math.hypot(rel_k, 0.5 * math.hypot(dark_var_se[1], dark_var_se[0] * d0.exposure_time_s) / max(sd2, 1e-30))
+    rn2 = dark_var_fit[1] - q
+    read = math.sqrt(rn2) / k8 if rn2 > 0 else None
+    read_se = read * math.hypot(rel_k, 0.5 * dark_var_se[1] / rn2) if read else None
+    # dark current per temperature and its doubling temperature
+    currents: dict[str, dict[str, Any]] = {}
+    series = []
+    for (g, temp), members in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] or 0.0)):
+        if g != gain0:
+            continue
+        ds = [s for s in members if s.kind == "dark"]
+        ts = np.array([s.exposure_time_s for s in ds])
+        if len(np.unique(ts)) < 2:
+            continue
+        p, se = _fit_line(ts, np.array([s.mean for s in ds]))
+        rate = p[0] / k8
+        rate_se = abs(rate) * math.hypot(rel_k, se[0] / p[0]) if p[0] and math.isfinite(se[0]) else None
+        label = "unknown" if temp is None else f"{temp:g}"
+        currents[label] = _value(rate, rate_se, "e-/s")
+        series.append({"temperature_c": temp, "exposure_s": ts.tolist(), "mean_dn": [s.mean for s in ds],
+                       "fit": p.tolist(), "rate_e_per_s": rate})
+    temps = [(s["temperature_c"], s["rate_e_per_s"], currents[f"{s['temperature_c']:g}"]["stderr"])
+             for s in series if s["temperature_c"] is not None and s["rate_e_per_s"] > 0]
+    doubling = _value(None, None, "K")
+    if len(temps) >= 2:
+        tt = np.array([v[0] for v in temps])
+        ly = np.log([v[1] for v in temps])
+        w = np.array([1.0 / (v[2] / v[1]) if v[2] else 1.0 for v in temps])
+        p, cov = np.polyfit(tt, ly, 1, w=w, cov="unscaled") if len(temps) > 2 else (np.polyfit(tt, ly, 1), None)
+        td = math.log(2.0) / p[0] if p[0] > 0 else None
+        td_se = td * math.sqrt(cov[0, 0]) / p[0] if (td and cov is not None) else None
+        doubling = _value(td, td_se, "K")
+    else:
+        notes.append("doubling temperature not determined: dark frames at one temperature only")
+    # DSNU: the largest dark set at the longest exposure; PRNU: the largest flat set nearest 50 % saturation
+    dsnu_set = max(darks, key=lambda s: (s.size, s.exposure_time_s))
+    s2d = max(dsnu_set.spatial_var, 0.0)
+    dsnu = math.sqrt(s2d) / k8
+    n_eff = npix
+    dsnu_se = dsnu * math.hypot(rel_k, 0.5 * math.sqrt(2.0 / n_eff) * (dsnu_set.spatial_var + dsnu_set.temporal_var
+                                                                        / dsnu_set.size) / max(s2d, 1e-30))
+    prnu = _value(None, None, "%")
+    if sat_dn:
+        cands = [j for j in range(len(flats)) if sel[j] or x[j] <= 0.7 * sat_dn]
+        j = min(cands, key=lambda j: (-flats[j].size, abs(x[j] - 0.5 * sat_dn)))
+        _, _, s2_dark = dark_at(flats[j])
+        if math.isfinite(s2_dark):
+            s2 = flats[j].spatial_var - s2_dark
+            val = 100.0 * math.sqrt(max(s2, 0.0)) / x[j]
+            se = val * 0.5 * math.sqrt(2.0 / npix) * (flats[j].spatial_var + flats[j].temporal_var / flats[j].size) \
+                / max(s2, 1e-30)
+            prnu = _value(val, se, "%")
+        else:
+            notes.append("PRNU not determined: no dark set at the exposure of the 50 % flat field")
+    # linearity
+    lin = {"exposure_s": t_flat.tolist(), "signal_dn": x.tolist()}
+    le = _value(None, None, "%")
+    if sat_dn:
+        m = (x >= LINEARITY_RANGE[0] * sat_dn) & (x <= LINEARITY_RANGE[1] * sat_dn)
+        if m.sum() >= 3:
+            p = np.polyfit(t_flat[m], x[m], 1)
+            dev = 100.0 * (x[m] - np.polyval(p, t_flat[m])) / np.polyval(p, t_flat[m])
+            worst = float(dev[np.argmax(np.abs(dev))])
+            se = float(np.std(dev, ddof=1) / math.sqrt(m.sum()))
+            le = _value(worst, se, "%")
+            lin.update(fit=p.tolist(), range_mask=m.tolist(), deviation_pct=dev.tolist())
+    figures = {
+        "system_gain_dn_per_e": _value(k8 * adc / 255.0, k8_se * adc / 255.0, f"DN/e- ({rec.bit_depth} bit)"),
+        "system_gain_dn8_per_e": _value(k8, k8_se, "DN/e- (8-bit scale)"),
+        "temporal_dark_noise_e": _value(sd, sd_se, "e-"),
+        "read_noise_e": _value(read, read_se, "e-"),
+        "saturation_capacity_e": _value(sat_dn / k8 if sat_dn else None,
+                                        sat_dn / k8 * rel_k if sat_dn else None, "e-"),
+        "dark_current_e_per_s": currents,
+        "doubling_temperature_k": doubling,
+        "dsnu_e": _value(dsnu, dsnu_se, "e-"),
+        "prnu_pct": prnu,
+        "linearity_error_pct": le,
+        "quantum_efficiency": _value(None, None, "%"),
+    }
+    notes.append("quantum efficiency not determined: it needs a calibrated irradiance (photons per pixel)")
+    return {
+        "figures": figures,
+        "conditions": {"gain_db": gain0, "temperature_c": temp0, "bit_depth": rec.bit_depth,
+                       "width": rec.shape[1], "height": rec.shape[0], "frames": rec.frames,
+                       "sets": len(rec.sets), "flat_sets": len(flats), "dark_sets": len(darks),
+                       "temporal_dark_noise_exposure_s": d0.exposure_time_s,
+                       "dsnu_exposure_s": dsnu_set.exposure_time_s,
+                       "dark_noise_at_dsnu_exposure_e": math.sqrt(max(float(np.polyval(dark_var_fit, dsnu_set.exposure_time_s)) - q, 0.0)) / k8,
+                       "skipped": rec.skipped},
+        "notes": notes,
+        "points": {"ptc": {"signal_dn": x.tolist(), "variance_dn2": y.tolist(), "k_fit": sel.tolist(),
+                           "saturation_dn": sat_dn},
+                   "dark": series, "linearity": lin,
+                   "dark_variance": {"exposure_s": dark_t.tolist(), "variance_dn2": [s.temporal_var for s in darks]}},
+        "static": rec.static,
+    }
