@@ -29,6 +29,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
                  "evaluate estimators on the held-out benchmark (parts a/b/c, peers, metadata sensitivity sweep)"),
     "effects": ("noise_monitor.physics.effects_cmd",
                 "List the noise effects (built-in and plug-ins) with their parameters."),
+    "profile": ("noise_monitor.profiles.profile_cmd",
+                "Make camera profiles: from-emva turns an EMVA 1288 datasheet (YAML) into a profile for the node."),
+    "characterize": ("noise_monitor.profiles.characterize_cmd",
+                     "Characterize a camera from a photon-transfer recording (EMVA 1288): K, dark noise, saturation, "
+                     "dark current, DSNU, PRNU, linearity; HTML report, JSON and a profile for the node."),
 }
 #: Python packages whose absence means an optional part of the installation is missing.
 OPTIONAL = {"rclpy": "ROS 2 Jazzy's rclpy (pip install \"ros-jazzy-rclpy[fastrtps]\" ros-jazzy-common-interfaces)"}

@@ -35,6 +35,9 @@ import numpy as np
 
 from noise_monitor.bag.reader import open_bag
 
+from .datasheet import Datasheet, datasheet_from_mapping
+from .emva import fit_dark_law
+
 #: Sets whose mean is within this fraction of the range above the lowest set (same gain, T) are dark.
 DARK_TOLERANCE = 0.02
 #: A new set starts where the mean jumps by more than this fraction of the range.
@@ -329,8 +332,59 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
                        "skipped": rec.skipped},
         "notes": notes,
         "points": {"ptc": {"signal_dn": x.tolist(), "variance_dn2": y.tolist(), "k_fit": sel.tolist(),
+                           "unclipped": [s.clipped_fraction < 1e-4 for s in flats],
                            "saturation_dn": sat_dn},
                    "dark": series, "linearity": lin,
                    "dark_variance": {"exposure_s": dark_t.tolist(), "variance_dn2": [s.temporal_var for s in darks]}},
         "static": rec.static,
     }
+
+
+def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | None = None,
+                          pixel_size_um: float | None = None) -> tuple[Datasheet | None, list[str]]:
+    """The measured figures as a datasheet for :func:`profile_from_datasheet`, or None and the reasons."""
+    f, cond, static = result["figures"], result["conditions"], result["static"]
+    sensor_type = sensor_type or static.get("sensor_type")
+    if pixel_size_um is None and static.get("pixel_size_m") is not None:
+        pixel_size_um = float(static["pixel_size_m"]) * 1e6
+    missing = []
+    if sensor_type is None:
+        missing.append("the sensor type (not in the metadata: give --sensor-type)")
+    if pixel_size_um is None:
+        missing.append("the pixel size (not in the metadata: give --pixel-size-um)")
+    if f["saturation_capacity_e"]["value"] is None:
+        missing.append("the saturation capacity")
+    temp = cond["temperature_c"]
+    if temp is None:
+        missing.append("the sensor temperature of the dark frames")
+    rate = f["dark_current_e_per_s"].get(f"{temp:g}" if temp is not None else "unknown")
+    if rate is None:
+        missing.append("the dark current")
+    if missing:
+        return None, ["profile not written: the recording does not determine " + "; ".join(missing)]
+    notes = []
+    mu = rate["value"]
+    if mu < 0:
+        if rate["stderr"] is None or mu < -2.0 * rate["stderr"]:
+            return None, [f"profile not written: the dark current is negative ({mu:.3g} e-/s): check the dark frames"]
+        notes.append(f"dark current {mu:.3g} +- {rate['stderr']:.2g} e-/s is zero within its uncertainty: 0 used")
+        mu = 0.0
+    td = f["doubling_temperature_k"]["value"]
+    measured = [(float(t), v["value"], (v["stderr"] or 0.0) / v["value"]) for t, v in f["dark_current_e_per_s"].items()
+                if t != "unknown" and v["value"] and v["value"] > 0]
+    measured.sort(key=lambda m: (m[0] != temp, m[0]))  # the analysed temperature first
+    if len(measured) >= 2 and measured[0][0] == temp:
+        mu, td = fit_dark_law(pixel_size_um * 1e-6, *map(list, zip(*measured)))
+        notes.append(f"profile: the model's dark-current law fitted to {len(measured)} temperatures "
+                     f"({mu:.4g} e-/s at {temp:g} degC, doubling {td:.3g} K there)")
+    doc = {
+        "name": name, "sensor_type": sensor_type, "bit_depth": cond["bit_depth"], "pixel_size_um": pixel_size_um,
+        "system_gain_dn_per_e": f["system_gain_dn_per_e"]["value"],
+        "temporal_dark_noise_e": cond["dark_noise_at_dsnu_exposure_e"],
+        "saturation_capacity_e": f["saturation_capacity_e"]["value"],
+        "dark_current": {"e_per_s": mu, "temperature_c": temp,
+                         "doubling_temperature_k": td},
+        "dsnu_e": f["dsnu_e"]["value"], "prnu_pct": f["prnu_pct"]["value"],
+        "measurement": {"exposure_time_s": cond["dsnu_exposure_s"], "temperature_c": temp},
+    }
+    return datasheet_from_mapping(doc, source=name), notes

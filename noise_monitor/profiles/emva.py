@@ -61,8 +61,10 @@ class ProfileResult:
     derived: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
-    def to_yaml(self, datasheet: Datasheet) -> str:
-        head = [f"# Camera profile from the EMVA 1288 datasheet of {datasheet.name} (noise-monitor profile from-emva)."]
+    def to_yaml(self, datasheet: Datasheet, source: str = "") -> str:
+        """The profile YAML, headed by comments: its source, the quantum efficiency and the notes."""
+        source = source or f"the EMVA 1288 datasheet of {datasheet.name} (noise-monitor profile from-emva)"
+        head = [f"# Camera profile from {source}."]
         if datasheet.quantum_efficiency_pct is not None:
             wl = f" at {datasheet.wavelength_nm:g} nm" if datasheet.wavelength_nm else ""
             head.append(f"# Quantum efficiency {datasheet.quantum_efficiency_pct:g} %{wl} (not a model field: "
@@ -191,8 +193,9 @@ def round_trip(ds: Datasheet, profile: CameraProfile) -> list[dict[str, Any]]:
             err = abs(got)  # absolute for a zero figure
         else:
             err = (got - want) / want
-        out.append({"field": name, "datasheet": want, "predicted": got, "rel_error": err,
-                    "ok": err is not None and abs(err) <= TOLERANCE})
+        out.append({"field": name, "datasheet": want, "predicted": None if got is None else float(got),
+                    "rel_error": None if err is None else float(err),
+                    "ok": bool(err is not None and abs(err) <= TOLERANCE)})
     return out
 
 
@@ -202,6 +205,32 @@ def _law_rate(meta_unit: CameraMetadata, t1_c: float, td_k: float) -> float:
     b1 = dark_electrons(meta_unit, 1.0, t1_c + 273.15)
     b2 = dark_electrons(meta_unit, 1.0, t1_c + td_k + 273.15)
     return (math.log(2.0) - math.log(b2 / b1)) / td_k
+
+
+def fit_dark_law(pixel_size_m: float, temperatures_c: list[float], rates_e_per_s: list[float],
+                 rel_errors: list[float] | None = None) -> tuple[float, float]:
+    """(mu_I at the first temperature, doubling temperature there) of the model's law fitted to measurements.
+
+    The model's dark current is D b(T) exp(r (T - 25 degC)) (b: band-gap law): ln(mu_I / b) is linear in T,
+    so (ln D, r) is a weighted straight-line fit; the doubling temperature is the model's at the first T.
+    """
+    unit = CameraMetadata.from_mapping({"sensor_type": "ccd", "full_well_e": 1e4, "pixel_size_m": pixel_size_m,
+                                        "dark_signal_fom_na_cm2": 1.0, "pixel_clock_hz": 1e7,
+                                        "sense_node_gain_v_per_e": 5e-6, "sense_node_reset_factor": 0.0,
+                                        "thermal_white_noise_v_per_sqrt_hz": 1e-8, "gain_db": 0.0,
+                                        "exposure_time_s": 1.0, "sensor_temperature_c": 25.0})
+    tk = np.asarray(temperatures_c, dtype=float) + 273.15
+    lnb = np.log([dark_electrons(unit, 1.0, t) for t in tk])
+    y = np.log(np.asarray(rates_e_per_s, dtype=float)) - lnb
+    w = None if rel_errors is None else 1.0 / np.maximum(np.asarray(rel_errors, dtype=float), 1e-6)
+    rate, ln_d = np.polyfit(tk - T_REF_K, y, 1, w=w)
+
+    def ln_mu(t_k: float) -> float:
+        return ln_d + math.log(dark_electrons(unit, 1.0, t_k)) + rate * (t_k - T_REF_K)
+
+    t0 = float(tk[0])
+    td = brentq(lambda d: ln_mu(t0 + d) - ln_mu(t0) - math.log(2.0), 0.1, 200.0)
+    return math.exp(ln_mu(t0)), float(td)
 
 
 def _solve_white_noise(sensor_type: str, a_sn: float, f_clk: float, read_var_e2: float) -> tuple[float, float]:
@@ -301,8 +330,8 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
         "law_rate_per_k": rate, "law_scale": scale})
     sat = predict_datasheet(profile, ds)["saturation_capacity_e"]
     if abs(sat / ds.saturation_capacity_e - 1.0) > TOLERANCE:
-        notes.append(f"saturation not reproduced: the model saturates at the ADC range ({sat:.4g} e- by the EMVA "
-                     f"variance maximum), the datasheet states {ds.saturation_capacity_e:g} e- "
+        notes.append(f"saturation not reproduced: the model saturates at the ADC range ({sat:.0f} e- by the EMVA "
+                     f"variance maximum), the figures give {ds.saturation_capacity_e:.0f} e- "
                      f"({sat_dn / adc:.1%} of the ADC range): a full well or black level below the ADC range is not "
                      "in the model")
     return result

@@ -1,0 +1,94 @@
+"""`noise-monitor characterize BAG --out DIR`: EMVA 1288 figures, report and profile from a recording."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .characterize import DARK_TOLERANCE, characterize, datasheet_from_result, read_recording
+from .emva import TOLERANCE, dark_current_e_per_s, profile_from_datasheet, round_trip
+from .profile_cmd import print_round_trip
+from .report import plots, write_html
+
+HELP = ("Characterize a camera from a photon-transfer recording (EMVA 1288): K, dark noise, saturation, dark "
+        "current, DSNU, PRNU, linearity; HTML report, JSON and a profile for the node.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="recording: flat fields over an exposure series with dark frames (lens cap) "
+                                    "at the exposures, optionally at several temperatures (simulate-bag --scenario ptc)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder: report.html, PNG plots, "
+                                                                    "characterize.json, profile.yaml")
+    parser.add_argument("--json", metavar="PATH", help="also write the figures JSON here")
+    parser.add_argument("--name", help="profile name (default: the bag's name)")
+    parser.add_argument("--bit-depth", type=int, help="ADC bits of the images (default: metadata, else the "
+                                                      "image container)")
+    parser.add_argument("--sensor-type", choices=("ccd", "cmos"), help="for the profile when the metadata lacks it")
+    parser.add_argument("--pixel-size-um", type=float, help="for the profile when the metadata lacks it")
+    parser.add_argument("--dark-tolerance", type=float, default=DARK_TOLERANCE,
+                        help=f"sets within this fraction of the range above the darkest set are dark "
+                             f"(default {DARK_TOLERANCE})")
+    parser.add_argument("--image-topic", help="override the auto-detected image topic")
+    parser.add_argument("--metadata-topic", help="override the auto-detected metadata topic")
+    parser.add_argument("--temperature-topic", help="override the auto-detected Temperature topic")
+
+
+def dark_current_rows(result: dict, profile) -> list[dict]:
+    """The measured dark current at every temperature beside the profile's model."""
+    rows = []
+    for temp, v in result["figures"]["dark_current_e_per_s"].items():
+        if temp == "unknown" or not v["value"]:
+            continue
+        got = dark_current_e_per_s(profile, float(temp))
+        err = (got - v["value"]) / v["value"]
+        rows.append({"field": f"measured dark_current_e_per_s@{temp}C", "datasheet": v["value"], "predicted": got,
+                     "rel_error": float(err), "ok": bool(abs(err) <= TOLERANCE)})
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.bit_depth is not None and not 1 <= args.bit_depth <= 16:
+        raise ValueError(f"--bit-depth must be in 1..16, got {args.bit_depth}")
+    if not 0 < args.dark_tolerance < 1:
+        raise ValueError(f"--dark-tolerance must be in (0, 1), got {args.dark_tolerance}")
+    rec = read_recording(args.bag, bit_depth=args.bit_depth, image_topic=args.image_topic,
+                         metadata_topic=args.metadata_topic, temperature_topic=args.temperature_topic)
+    result = characterize(rec, dark_tolerance=args.dark_tolerance)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    name = args.name or Path(args.bag.rstrip("/")).name.split(".")[0]
+    ds, notes = datasheet_from_result(result, name, args.sensor_type, args.pixel_size_um)
+    result["notes"] += notes
+    profile = rows = profile_file = None
+    if ds is not None:
+        made = profile_from_datasheet(ds)
+        profile, rows = made.profile, round_trip(ds, made.profile) + dark_current_rows(result, made.profile)
+        profile_file = out / "profile.yaml"
+        profile_file.write_text(made.to_yaml(ds, source=f"the photon-transfer recording {args.bag} "
+                                                        "(noise-monitor characterize)"))
+        result["notes"] += made.notes
+        result["profile"] = {"path": str(profile_file), "round_trip": rows}
+    files = plots(result, out, profile)
+    report = write_html(result, out, files, args.bag, rows, str(profile_file) if profile_file else None)
+    text = json.dumps({k: v for k, v in result.items()}, indent=2)
+    (out / "characterize.json").write_text(text)
+    if args.json:
+        Path(args.json).write_text(text)
+    f = result["figures"]
+    print(f"{args.bag}: {result['conditions']['frames']} frames, {result['conditions']['flat_sets']} flat and "
+          f"{result['conditions']['dark_sets']} dark sets")
+    for key in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
+                "doubling_temperature_k", "dsnu_e", "prnu_pct", "linearity_error_pct"):
+        v = f[key]
+        val = "not determined" if v["value"] is None else f"{v['value']:.5g}" + (
+            f" +- {v['stderr']:.2g}" if v["stderr"] is not None else "")
+        print(f"  {key:24s} {val} {v['unit']}")
+    for temp, v in f["dark_current_e_per_s"].items():
+        print(f"  dark current at {temp} degC: {v['value']:.4g} +- {v['stderr'] or 0:.2g} e-/s")
+    for n in result["notes"]:
+        print(f"  note: {n}")
+    if rows:
+        print(f"profile {profile_file}; its model predicts the measured figures back:")
+        print_round_trip(rows, given="measured")
+    print(f"report {report}")
+    return 0
