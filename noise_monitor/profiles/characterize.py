@@ -11,8 +11,8 @@ also in the camera's native DN:
   spatial variance: the variance of the set's average image minus temporal variance / L;
 - K: slope of (sigma_y^2 - sigma_y.dark^2) vs (mu_y - mu_y.dark) through the origin, up to 70 % of
   saturation (flats without clipped pixels); standard error from the fit residuals;
-- saturation: the dark-subtracted mean at the maximum of the temporal variance (parabola through the
-  maximum and its neighbours), divided by K;
+- saturation: the dark-subtracted mean of the set with the maximum temporal variance, divided by K
+  (its resolution is the spacing of the exposure levels near saturation);
 - temporal dark noise: sqrt(sigma_y.dark^2 - LSB^2/12) / K at the shortest exposure, read noise from
   the intercept of sigma_y.dark^2 vs exposure;
 - dark current: slope of mu_y.dark vs exposure / K per temperature; doubling temperature: ln 2 / slope
@@ -219,8 +219,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     i = int(np.argmax(y))
     sat_dn = None
     if 0 < i < len(y) - 1:
-        a, b, _ = np.polyfit(x[i - 1:i + 2], y[i - 1:i + 2], 2)
-        sat_dn = float(np.clip(-b / (2 * a), x[i - 1], x[i + 1])) if a < 0 else float(x[i])
+        sat_dn = float(x[i])  # EMVA: the measured point of maximum variance (resolution: the level spacing)
     else:
         notes.append("saturation not determined: the variance has no maximum inside the exposure series "
                      "(record flat fields beyond saturation)")

@@ -157,11 +157,9 @@ def predict_datasheet(profile: CameraProfile, ds: Datasheet) -> dict[str, Any]:
         out["doubling_temperature_k"] = (t2 - t1) * math.log(2.0) / math.log(mu2 / out["dark_current_e_per_s"]) \
             if mu2 > out["dark_current_e_per_s"] > 0 else None
     effects = {e.name: e for e in build_effects(profile.effects)}
-    if "dsnu" in effects and t_meas:
-        out["dsnu_e"] = math.sqrt(float(effects["dsnu"].variance_dn2(0.0, cond))) / cond.dn_per_e
-    if "prnu" in effects:
-        s50 = 0.5 * 255.0
-        out["prnu_pct"] = 100.0 * math.sqrt(float(effects["prnu"].variance_dn2(s50, cond))) / s50
+    out["dsnu_e"] = math.sqrt(float(effects["dsnu"].variance_dn2(0.0, cond))) / cond.dn_per_e if "dsnu" in effects else 0.0
+    s50 = 0.5 * 255.0
+    out["prnu_pct"] = 100.0 * math.sqrt(float(effects["prnu"].variance_dn2(s50, cond))) / s50 if "prnu" in effects else 0.0
     return out
 
 
@@ -182,9 +180,9 @@ def round_trip(ds: Datasheet, profile: CameraProfile) -> list[dict[str, Any]]:
                      pred["dark_current_e_per_s_at_t_plus_td"]))
         rows.append(("doubling_temperature_k", ds.doubling_temperature_k, pred["doubling_temperature_k"]))
     if ds.dsnu_e is not None:
-        rows.append(("dsnu_e", ds.dsnu_e, pred.get("dsnu_e")))
+        rows.append(("dsnu_e", ds.dsnu_e, pred["dsnu_e"]))
     if ds.prnu_pct is not None:
-        rows.append(("prnu_pct", ds.prnu_pct, pred.get("prnu_pct")))
+        rows.append(("prnu_pct", ds.prnu_pct, pred["prnu_pct"]))
     out = []
     for name, want, got in rows:
         if got is None:

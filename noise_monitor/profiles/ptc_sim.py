@@ -31,9 +31,10 @@ GAIN_DB = 0.0
 BASE_TEMPERATURE_C = 30.0
 EXTRA_TEMPERATURES_C = (40.0, 50.0, 60.0)
 MAX_EXPOSURE_S = 0.2
-#: Highest flat signal relative to the ADC range (beyond saturation, so the variance maximum is seen).
-TOP_LEVEL = 1.12
-#: Fraction of the exposure levels placed between 85 % and TOP_LEVEL of the range (saturation region).
+#: Highest flat signal relative to the range above the black level (beyond saturation: the variance
+#: maximum is seen); DENSE_FRACTION of the levels lie between DENSE_FROM and TOP_LEVEL (saturation region).
+TOP_LEVEL = 1.06
+DENSE_FROM = 0.88
 DENSE_FRACTION = 0.4
 SPATIAL_FRAMES = 8
 MIN_FRAMES = 60
@@ -49,23 +50,27 @@ class PlannedFrame:
     signal_dn: float  # clean flat signal on the 8-bit scale (0 for dark)
 
 
-def plan(frames: int) -> list[PlannedFrame]:
-    """The recording for a budget of ``frames`` images (the levels fill what the fixed sets leave)."""
+def plan(frames: int, signal_range_dn: float = 255.0) -> list[PlannedFrame]:
+    """The recording for a budget of ``frames`` images (the levels fill what the fixed sets leave).
+
+    Levels are fractions of ``signal_range_dn`` (the ADC range above the black level), as an operator
+    sets the light so that the series spans the camera's range.
+    """
     if frames < MIN_FRAMES:
         raise ValueError(f"the ptc scenario needs at least {MIN_FRAMES} frames, got {frames}")
     dark_exposures = (0.25 * MAX_EXPOSURE_S, 0.5 * MAX_EXPOSURE_S, MAX_EXPOSURE_S)
     fixed = 2 * len(dark_exposures) * len(EXTRA_TEMPERATURES_C) + 2 * (SPATIAL_FRAMES - 2)
     levels = (frames - fixed) // 4
     n_dense = int(round(levels * DENSE_FRACTION))
-    rel = np.concatenate([np.linspace(0.05, 0.85, levels - n_dense, endpoint=False),
-                          np.linspace(0.85, TOP_LEVEL, n_dense)])
+    rel = np.concatenate([np.linspace(0.05, DENSE_FROM, levels - n_dense, endpoint=False),
+                          np.linspace(DENSE_FROM, TOP_LEVEL, n_dense)])
     t_of = MAX_EXPOSURE_S / TOP_LEVEL  # signal proportional to exposure: TOP_LEVEL at MAX_EXPOSURE_S
     spatial = int(np.argmin(np.abs(rel - 0.5)))
     out: list[PlannedFrame] = []
     for i, r in enumerate(rel):
         t = float(r * t_of)
         n = SPATIAL_FRAMES if i == spatial else 2
-        out += [PlannedFrame("flat", t, BASE_TEMPERATURE_C, float(r * 255.0))] * n
+        out += [PlannedFrame("flat", t, BASE_TEMPERATURE_C, float(r * signal_range_dn))] * n
         out += [PlannedFrame("dark", t, BASE_TEMPERATURE_C, 0.0)] * n
     for temp in EXTRA_TEMPERATURES_C:
         for t in dark_exposures:
@@ -103,9 +108,9 @@ def simulate_ptc(out: str | Path, profile: str | Path | CameraProfile, effects: 
     bits = int(prof.bit_depth or 8)
     effects = list(effects)
     model = _profile_model(prof, effects)
-    steps = plan(frames)
-    rng = np.random.default_rng(seed)
     offset = black_level_dn(model, prof, bits)
+    steps = plan(frames, 255.0 - offset)
+    rng = np.random.default_rng(seed)
     adc = 2**bits - 1
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
