@@ -9,15 +9,23 @@ largest |relative error| over the seeds per EMVA figure (the truth is the bag's 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import tempfile
 from pathlib import Path
 
 from noise_monitor.bag.simulate import load_truth
-from noise_monitor.cli import main as cli
+from noise_monitor.cli import main as _cli
 
 FIELDS = ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
           "dark_current_e_per_s", "doubling_temperature_k", "dsnu_e", "prnu_pct")
+
+
+def cli(argv: list[str]) -> int:
+    """A noise-monitor command with its report kept off the screen."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        return _cli(argv)
 
 
 def errors(result: dict, truth: dict) -> dict[str, float]:

@@ -59,24 +59,29 @@ class FrameSet:
     temperature_c: float | None
     first_index: int
     images: list[np.ndarray] = field(default_factory=list)
+    first_mean: float = 0.0
+    size: int = 0
     kind: str = ""
     mean: float = 0.0
     temporal_var: float = 0.0
     spatial_var: float = 0.0
     clipped_fraction: float = 0.0
 
-    @property
-    def size(self) -> int:
-        return len(self.images)
+    def add(self, image: np.ndarray) -> None:
+        if not self.images:
+            self.first_mean = float(image.mean())
+        self.images.append(image)
+        self.size = len(self.images)
 
     def compute(self) -> None:
+        """Mean, temporal and spatial variance, clipped fraction; frees the pixels."""
         stack = np.stack(self.images).astype(np.float64)
         self.mean = float(stack.mean())
         pairs = [np.var(stack[i] - stack[i + 1]) / 2.0 for i in range(0, len(stack) - 1, 2)]
         self.temporal_var = float(np.mean(pairs))
         self.spatial_var = float(np.var(stack.mean(axis=0)) - self.temporal_var / len(stack))
         self.clipped_fraction = float(np.mean(stack >= 255.0 - 1e-3))
-        self.images = self.images[:0] + [np.empty(0)] * len(self.images)  # keep the count, free the pixels
+        self.images = []
 
 
 @dataclass
@@ -144,10 +149,10 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
             mean = float(img.mean())
             last = sets[-1] if sets else None
             if (last is None or (last.gain_db, last.exposure_time_s, last.temperature_c) != key
-                    or abs(float(np.mean(last.images[0])) - mean) > SET_SPLIT * 255.0):
+                    or abs(last.first_mean - mean) > SET_SPLIT * 255.0):
                 last = FrameSet(*key, first_index=frame.index)
                 sets.append(last)
-            last.images.append(img)
+            last.add(img)
     if shape is None:
         raise CharacterizeError(f"{path}: no usable image")
     singles = sum(1 for s in sets if s.size < 2)
@@ -277,8 +282,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     dsnu_set = max(darks, key=lambda s: (s.size, s.exposure_time_s))
     s2d = max(dsnu_set.spatial_var, 0.0)
     dsnu = math.sqrt(s2d) / k8
-    n_eff = npix
-    dsnu_se = dsnu * math.hypot(rel_k, 0.5 * math.sqrt(2.0 / n_eff) * (dsnu_set.spatial_var + dsnu_set.temporal_var
+    dsnu_se = dsnu * math.hypot(rel_k, 0.5 * math.sqrt(2.0 / npix) * (dsnu_set.spatial_var + dsnu_set.temporal_var
                                                                         / dsnu_set.size) / max(s2d, 1e-30))
     prnu = _value(None, None, "%")
     if sat_dn:

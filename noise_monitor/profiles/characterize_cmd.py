@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         result["profile"] = {"path": str(profile_file), "round_trip": rows}
     files = plots(result, out, profile)
     report = write_html(result, out, files, args.bag, rows, str(profile_file) if profile_file else None)
-    text = json.dumps({k: v for k, v in result.items()}, indent=2)
+    text = json.dumps(result, indent=2)
     (out / "characterize.json").write_text(text)
     if args.json:
         Path(args.json).write_text(text)

@@ -33,7 +33,9 @@ import numpy as np
 from scipy.optimize import brentq
 
 from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel, build_effects
+from noise_monitor.physics.clipping import DN_MAX
 from noise_monitor.physics.metadata import VALID_RANGES
+from noise_monitor.physics.model import TABLE_STEP_DN
 from noise_monitor.physics.sensor import T_REF_K, dark_electrons, rounded_normal_variance, source_follower_sigma_e
 
 from .datasheet import Datasheet, DatasheetError
@@ -97,10 +99,9 @@ def _meta(profile: CameraProfile, gain_db: float = 0.0, exposure_s: float | None
 
 def model_ptc(model: NoiseModel, meta: CameraMetadata) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(clean signal, mean, temporal variance) of the model's output on its 8-bit scale, clipping included."""
-    from noise_monitor.physics.model import _V_GRID
-
     m1, m2 = model.tables(meta)["total"]
-    return _V_GRID.copy(), _V_GRID + m1, m2 - m1**2
+    v = np.arange(0.0, DN_MAX + 1e-9, TABLE_STEP_DN)  # the model's table grid
+    return v, v + m1, m2 - m1**2
 
 
 def ptc_gain(mean: np.ndarray, var: np.ndarray) -> float:

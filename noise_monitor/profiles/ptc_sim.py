@@ -21,7 +21,7 @@ from typing import Any, Iterable
 import numpy as np
 from scipy.special import roots_hermitenorm
 
-from noise_monitor.physics import CameraProfile, NoiseModel, build_effects, load_profile
+from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
 from noise_monitor.physics.clipping import clipped_normal_moments
 
 from .emva import to_native
