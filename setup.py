@@ -15,6 +15,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
         (f"share/{PACKAGE}/config/cameras", glob("config/cameras/*.yaml")),
+        (f"share/{PACKAGE}/config/datasheets", glob("config/datasheets/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
         (f"share/{PACKAGE}/bags", glob("bags/**/*", recursive=True)),
     ],

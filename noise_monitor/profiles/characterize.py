@@ -109,7 +109,7 @@ def _bit_depth(path: str | Path, override: int | None, topics: dict[str, str | N
             if bd is not None:
                 return int(bd)
             break
-        for _, _, msg in reader.messages([reader.image_topic]):  # no metadata: the container width
+        for _, _, msg in reader.messages([reader.image_topic] if reader.image_topic else []):  # the container width
             return 16 if "16" in str(getattr(msg, "encoding", "")) else 8
     return 8
 
@@ -306,8 +306,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
             p = np.polyfit(t_flat[m], x[m], 1)
             dev = 100.0 * (x[m] - np.polyval(p, t_flat[m])) / np.polyval(p, t_flat[m])
             worst = float(dev[np.argmax(np.abs(dev))])
-            se = float(np.std(dev, ddof=1) / math.sqrt(m.sum()))
-            le = _value(worst, se, "%")
+            le = _value(worst, float(np.std(dev, ddof=1) / math.sqrt(m.sum())), "%")
             lin.update(fit=p.tolist(), range_mask=m.tolist(), deviation_pct=dev.tolist())
     figures = {
         "system_gain_dn_per_e": _value(k8 * adc / 255.0, k8_se * adc / 255.0, f"DN/e- ({rec.bit_depth} bit)"),
@@ -363,7 +362,7 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
     rate = f["dark_current_e_per_s"].get(f"{temp:g}" if temp is not None else "unknown")
     if rate is None:
         missing.append("the dark current")
-    if missing:
+    if missing or pixel_size_um is None:
         return None, ["profile not written: the recording does not determine " + "; ".join(missing)]
     notes = []
     mu = rate["value"]

@@ -10,9 +10,6 @@ from .emva import TOLERANCE, dark_current_e_per_s, profile_from_datasheet, round
 from .profile_cmd import print_round_trip
 from .report import plots, write_html
 
-HELP = ("Characterize a camera from a photon-transfer recording (EMVA 1288): K, dark noise, saturation, dark "
-        "current, DSNU, PRNU, linearity; HTML report, JSON and a profile for the node.")
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="recording: flat fields over an exposure series with dark frames (lens cap) "

@@ -23,9 +23,10 @@ Format (config/datasheets/example_cmos_emva.yaml is a worked example)::
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 
@@ -168,7 +169,10 @@ def datasheet_from_mapping(doc: Mapping[str, Any], source: str = "datasheet") ->
         quantum_efficiency_pct=qe.get("percent"),
         wavelength_nm=qe.get("wavelength_nm"),
         gains=tuple(gains),
-        **opt,
+        dsnu_e=opt.get("dsnu_e"),
+        prnu_pct=opt.get("prnu_pct"),
+        pixel_clock_hz=opt.get("pixel_clock_hz"),
+        sense_node_gain_v_per_e=opt.get("sense_node_gain_v_per_e"),
     )
 
 

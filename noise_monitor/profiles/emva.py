@@ -167,7 +167,7 @@ def predict_datasheet(profile: CameraProfile, ds: Datasheet) -> dict[str, Any]:
 def round_trip(ds: Datasheet, profile: CameraProfile) -> list[dict[str, Any]]:
     """Per figure: datasheet value, the profile's prediction, relative error and whether it is within 2 %."""
     pred = predict_datasheet(profile, ds)
-    rows: list[tuple[str, float | None, float | None]] = [
+    rows: list[tuple[str, float, float | None]] = [
         ("system_gain_dn_per_e", ds.system_gain_dn_per_e, pred["system_gain_dn_per_e"]),
         *((f"system_gain_dn_per_e@{g:g}dB", k, p) for (g, k), p in zip(ds.gains, pred["gains"])),
         ("saturation_capacity_e", ds.saturation_capacity_e, pred["saturation_capacity_e"]),

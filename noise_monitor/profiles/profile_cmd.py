@@ -9,8 +9,6 @@ from typing import Any
 from .datasheet import load_datasheet
 from .emva import TOLERANCE, profile_from_datasheet, round_trip
 
-HELP = "Make camera profiles: from-emva turns an EMVA 1288 datasheet (YAML) into a profile for the node."
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="profile_command", required=True, metavar="SUBCOMMAND")
