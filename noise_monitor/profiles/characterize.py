@@ -14,7 +14,7 @@ also in the camera's native DN:
 - saturation: the dark-subtracted mean of the set with the maximum temporal variance, divided by K
   (its resolution is the spacing of the exposure levels near saturation);
 - temporal dark noise: sqrt(sigma_y.dark^2 - LSB^2/12) / K at the shortest exposure, read noise from
-  the intercept of sigma_y.dark^2 vs exposure;
+  the intercept of sigma_y.dark^2 vs exposure (not determined below 0.24 DN^2: under the ADC step);
 - dark current: slope of mu_y.dark vs exposure / K per temperature; doubling temperature: ln 2 / slope
   of ln(dark current) vs temperature (two temperatures or more);
 - DSNU: sqrt(spatial variance of the dark set) / K; PRNU: sqrt(s_y^2 - s_y.dark^2) / (mu_y - mu_y.dark)
@@ -43,6 +43,8 @@ DARK_TOLERANCE = 0.02
 #: A new set starts where the mean jumps by more than this fraction of the range.
 SET_SPLIT = 0.005
 K_FIT_MAX = 0.70
+#: Below this dark variance (native DN^2) the dark noise is under the ADC step: not determined.
+QUANTIZATION_LIMIT_DN2 = 0.24
 LINEARITY_RANGE = (0.05, 0.95)
 
 
@@ -242,12 +244,20 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     npix = rec.shape[0] * rec.shape[1]
     # dark noise at the shortest exposure, read noise from the intercept
     d0 = darks[0]  # sigma_d at the shortest exposure from the line through all dark variances (less noisy)
-    sd2 = max(float(np.polyval(dark_var_fit, d0.exposure_time_s)) - q, 0.0)
-    sd = math.sqrt(sd2) / k8
-    sd_se = sd * math.hypot(rel_k, 0.5 * math.hypot(dark_var_se[1], dark_var_se[0] * d0.exposure_time_s) / max(sd2, 1e-30))
+    dark_var0 = float(np.polyval(dark_var_fit, d0.exposure_time_s))
+    sd2 = max(dark_var0 - q, 0.0)
+    sd_value = math.sqrt(sd2) / k8
+    sd: float | None = sd_value
+    sd_se: float | None = sd_value * math.hypot(rel_k, 0.5 * math.hypot(dark_var_se[1], dark_var_se[0] * d0.exposure_time_s) / max(sd2, 1e-30))
     rn2 = dark_var_fit[1] - q
-    read = math.sqrt(rn2) / k8 if rn2 > 0 else None
-    read_se = read * math.hypot(rel_k, 0.5 * dark_var_se[1] / rn2) if read else None
+    read: float | None = math.sqrt(rn2) / k8 if rn2 > 0 else None
+    read_se: float | None = read * math.hypot(rel_k, 0.5 * dark_var_se[1] / rn2) if read else None
+    native2 = ((2**rec.bit_depth - 1) / 255.0) ** 2
+    if dark_var0 * native2 < QUANTIZATION_LIMIT_DN2:
+        notes.append(f"temporal dark noise not determined: sigma_y.dark^2 = {dark_var0 * native2:.3g} DN^2 is below the "
+                     f"quantization limit {QUANTIZATION_LIMIT_DN2} DN^2 (dark noise below the ADC step: the LSB^2/12 "
+                     "subtraction fails, and K is biased too); record with more bits or a higher gain")
+        sd = sd_se = read = read_se = None
     # dark current per temperature and its doubling temperature
     currents: dict[str, dict[str, Any]] = {}
     series = []
@@ -330,11 +340,13 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
                        "sets": len(rec.sets), "flat_sets": len(flats), "dark_sets": len(darks),
                        "temporal_dark_noise_exposure_s": d0.exposure_time_s,
                        "dsnu_exposure_s": dsnu_set.exposure_time_s,
-                       "dark_noise_at_dsnu_exposure_e": math.sqrt(max(float(np.polyval(dark_var_fit, dsnu_set.exposure_time_s)) - q, 0.0)) / k8,
+                       "dark_noise_at_dsnu_exposure_e": None if sd is None else math.sqrt(max(float(
+                           np.polyval(dark_var_fit, dsnu_set.exposure_time_s)) - q, 0.0)) / k8,
                        "skipped": rec.skipped},
         "notes": notes,
         "points": {"ptc": {"signal_dn": x.tolist(), "variance_dn2": y.tolist(), "k_fit": sel.tolist(),
                            "unclipped": [s.clipped_fraction < 1e-4 for s in flats],
+                           "total_variance_dn2": [s.temporal_var for s in flats],
                            "saturation_dn": sat_dn},
                    "dark": series, "linearity": lin,
                    "dark_variance": {"exposure_s": dark_t.tolist(), "variance_dn2": [s.temporal_var for s in darks]}},
@@ -354,6 +366,8 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
         missing.append("the sensor type (not in the metadata: give --sensor-type)")
     if pixel_size_um is None:
         missing.append("the pixel size (not in the metadata: give --pixel-size-um)")
+    if cond["dark_noise_at_dsnu_exposure_e"] is None:
+        missing.append("the temporal dark noise (quantization-limited)")
     if f["saturation_capacity_e"]["value"] is None:
         missing.append("the saturation capacity")
     temp = cond["temperature_c"]

@@ -77,11 +77,12 @@ def plots(result: dict[str, Any], out: Path, profile: CameraProfile | None) -> d
     q_e2 = (255.0 / (2**bits - 1)) ** 2 / 12.0 / k8**2
     ok = (x > 0) & np.array(ptc["unclipped"], bool)
     mu_e = x[ok] / k8
-    snr = x[ok] / np.sqrt(np.maximum(y[ok] + (sd * k8) ** 2, 1e-12))
+    snr = x[ok] / np.sqrt(np.maximum(np.array(ptc["total_variance_dn2"])[ok], 1e-12))
     f, ax = plt.subplots(figsize=(6.4, 4.4))
     ax.loglog(mu_e, snr, "o", ms=4, label="measured (flats without clipped pixels)")
     ee = np.logspace(0, math.log10(max(mu_e.max(), 10.0)), 100)
-    ax.loglog(ee, ee / np.sqrt(sd**2 + ee + q_e2), "-", label="EMVA linear model from the fitted figures")
+    if sd is not None:
+        ax.loglog(ee, ee / np.sqrt(sd**2 + ee + q_e2), "-", label="EMVA linear model from the fitted figures")
     ax.loglog(ee, np.sqrt(ee), ":", color="0.5", label="ideal (shot noise only)")
     ax.set_xlabel("signal mu_e [e-]")
     ax.set_ylabel("SNR [1]")

@@ -157,3 +157,15 @@ def test_recording_with_one_temperature_states_what_it_cannot_determine(tmp_path
     assert not (tmp_path / "o" / "profile.yaml").exists()
     # K of this synthetic camera: variance 0.4 * signal -> 0.4 DN/e- at 12 bit
     assert res["figures"]["system_gain_dn_per_e"]["value"] == pytest.approx(0.4, rel=0.05)
+
+
+def test_8_bit_camera_below_its_adc_step_is_quantization_limited(tmp_path, capsys):
+    bag = tmp_path / "icx.mcap"  # ICX285 at 8 bit: read noise 12.5 e- = 0.23 DN, under one ADC step
+    assert main(["simulate-bag", str(bag), "--profile", "icx285", "--scenario", "ptc", "--frames", "60",
+                 "--width", "128", "--height", "96"]) == 0
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "o"), "--json", str(tmp_path / "c.json")]) == 0
+    res = json.loads((tmp_path / "c.json").read_text())
+    assert res["conditions"]["bit_depth"] == 8
+    assert res["figures"]["temporal_dark_noise_e"]["value"] is None
+    assert any("quantization limit" in n for n in res["notes"])
+    assert not (tmp_path / "o" / "profile.yaml").exists()  # no invented read noise
