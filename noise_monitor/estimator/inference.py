@@ -72,6 +72,7 @@ INFO_KEYS = ("step", "elapsed_s", "settings")
 class _Base:
     name: str
     patch_size: int
+    net: Any  # the torch module (None on the ONNX-only fast path)
 
     def __init__(self, ckpt: dict, device: Any) -> None:
         from .networks import network_from_checkpoint
@@ -105,7 +106,7 @@ def export_onnx(net: Any, example: tuple[Any, ...]) -> tuple[bytes, list[str]]:
     buf = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # torch's TorchScript exporter deprecation notices
-        torch.onnx.export(net, example, buf, input_names=names, output_names=["out"],
+        torch.onnx.export(net, example, buf, input_names=names,  # type: ignore[arg-type]  # accepts a file object output_names=["out"],
                           dynamic_axes={**axes, "out": {0: "batch"}}, dynamo=False)
     return buf.getvalue(), names
 

@@ -194,8 +194,8 @@ def build_network(variant: str, patch_size: int, width: int | None = None, depth
         cfg.strides = default_strides(depth) if depth else cfg.strides
         return ImageNoiseNet(cfg)
     if variant in PAPER_VARIANTS:
-        cfg = PaperConfig(variant=variant, patch_size=patch_size, width=width or 16, blocks=depth or 2, convs_per_block=3)
-        return PaperNet(cfg)
+        return PaperNet(PaperConfig(variant=variant, patch_size=patch_size, width=width or 16, blocks=depth or 2,
+                                    convs_per_block=3))
     raise ValueError(f"unknown variant {variant!r}; choose from {VARIANTS}")
 
 

@@ -99,7 +99,7 @@ def parse_effect_arg(text: str) -> tuple[str, dict[str, float]]:
     return text, {}
 
 
-def build_effects(spec: Iterable[str] | Mapping[str, Mapping[str, float]] | None) -> list[Effect]:
+def build_effects(spec: Iterable[str | Effect] | Mapping[str, Mapping[str, float]] | None) -> list[Effect]:
     """Effects from names / 'name=value' strings / a mapping name -> parameters (e.g. a profile's)."""
     if spec is None:
         return []
