@@ -14,6 +14,9 @@ from ..monitor import Frame, MonitorConfig
 from ..monitor.runtime import MonitorRuntime
 from ..physics import NoiseModel
 
+#: The view is the estimator's single-image measurement: frame differences (the monitor's sigma_temporal)
+#: cannot see fixed-pattern effects, which the lab measures itself.
+SINGLE_IMAGE = MonitorConfig(temporal_frames=0)
 #: Per-frame numbers kept from the monitor (DN).
 KEYS = ("xi", "sigma_image", "sigma_model")
 
@@ -30,7 +33,7 @@ def _stats(v: list[float]) -> dict[str, float | None]:
 
 def estimator_views(frames: Iterable[Frame], models: Mapping[str, NoiseModel], estimator: str = "full_meta",
                     weights: str | Path | None = None, device: str = "cpu",
-                    config: MonitorConfig = MonitorConfig()) -> dict[str, dict[str, Any]]:
+                    config: MonitorConfig = SINGLE_IMAGE) -> dict[str, dict[str, Any]]:
     """One pass over ``frames`` through the shared monitor runtime, one per model (the node's skip rules:
     frames the replay would skip are skipped here too).
 
