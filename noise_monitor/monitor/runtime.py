@@ -43,7 +43,10 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "sync_wait_s": (0.1, "an image waits this long for its metadata, then takes the latest older one"),
     "expected_rate_hz": (0.0, "the camera's frame rate, for an exact frames_lost count; 0 = inferred from stamp gaps"),
     "diagnostics_rate_hz": (1.0, "minimum /diagnostics rate, also without images (STALE)"),
+    "physics_tables": ("interpolated", "physics tables per metadata set: interpolated over gain, exposure and "
+                                       "temperature (metadata that changes every frame) or exact (recomputed per set)"),
 }
+PHYSICS_TABLES = ("interpolated", "exact")
 #: Largest accepted diagnostics_rate_hz (a timer faster than this only burns CPU).
 MAX_DIAGNOSTICS_RATE_HZ = 1000.0
 
@@ -81,6 +84,8 @@ def check_parameters(p: Mapping[str, Any]) -> None:
                          f"got {p['diagnostics_rate_hz']}")
     if not p["image_topic"]:
         raise ValueError("parameter image_topic must not be empty")
+    if p["physics_tables"] not in PHYSICS_TABLES:
+        raise ValueError(f"parameter physics_tables must be interpolated or exact, got {p['physics_tables']!r}")
 
 
 def resolve_parameters(values: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -137,7 +142,8 @@ class MonitorRuntime:
         else:
             name = profile or p["profile"]
             self.profile = load_profile(name) if name else None
-        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None)
+        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None,
+                                         interpolate=p["physics_tables"] == "interpolated")
         threads = inference_threads(p["threads"])
         if "torch" in sys.modules or p["device"] != "cpu":  # torch runs (or will run) inference
             set_inference_threads(threads)

@@ -1,0 +1,159 @@
+"""Moment tables interpolated over the dynamic conditions: no recomputation per new metadata set.
+
+Real drivers report a temperature that changes every frame and auto-exposure/auto-gain that change
+continuously; the exact tables of :class:`~noise_monitor.physics.NoiseModel` cost tens of milliseconds per
+metadata set. :class:`TableGrid` computes exact tables only at the nodes of a lattice over the three
+dynamic fields - gain in dB, the logarithm of the exposure time and the temperature - for the camera's
+static fields, lazily and cached (LRU), and interpolates between the 8 nodes around the stated metadata:
+E[n|v] linearly and the variance E[n^2|v] - E[n|v]^2 linearly in its logarithm (every source's variance
+is a power law in gain and exposure and nearly exponential in temperature, so the log is close to
+multilinear in these coordinates). With the default steps (1.5 dB, x1.42 exposure, 5 K) the per-level
+sigma stays within 0.5 % or 0.01 DN of the exact tables over the paper's ranges
+(``test/test_table_grid.py``; the worst cells are next to the clipping at 0 and 255 DN).
+A metadata set whose surrounding nodes would leave the valid metadata ranges gets exact tables.
+"""
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .metadata import CameraMetadata, MetadataError
+
+Tables = dict[str, tuple[np.ndarray, np.ndarray]]
+#: Below this variance (DN^2) a node's variance is interpolated linearly instead of in its logarithm.
+VAR_FLOOR_DN2 = 1e-12
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """Lattice steps of the interpolation: nodes at i * step (gain dB, ln exposure s, temperature degC)."""
+
+    gain_step_db: float = 1.5
+    log_exposure_step: float = 0.35
+    temperature_step_c: float = 5.0
+    #: exact node tables kept (each ~8 KB per table of the model), least recently used dropped first
+    max_nodes: int = 2048
+
+    def __post_init__(self) -> None:
+        for name in ("gain_step_db", "log_exposure_step", "temperature_step_c"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"GridSpec.{name} must be a positive number, got {value!r}")
+        if int(self.max_nodes) < 8:
+            raise ValueError(f"GridSpec.max_nodes must be at least 8, got {self.max_nodes!r}")
+
+    def coordinates(self, meta: CameraMetadata) -> np.ndarray:
+        """Lattice coordinates (gain, exposure, temperature) of a metadata set."""
+        return np.array([meta.gain_db / self.gain_step_db, math.log(meta.exposure_time_s) / self.log_exposure_step,
+                         meta.sensor_temperature_c / self.temperature_step_c])
+
+    def node_metadata(self, meta: CameraMetadata, node: tuple[int, int, int]) -> CameraMetadata:
+        """``meta`` moved to a lattice node (raises MetadataError where the node is out of range)."""
+        i, j, k = node
+        return meta.replace(gain_db=i * self.gain_step_db, exposure_time_s=math.exp(j * self.log_exposure_step),
+                            sensor_temperature_c=k * self.temperature_step_c)
+
+
+def static_key(meta: CameraMetadata) -> CameraMetadata:
+    """The metadata with its dynamic fields at fixed values: identifies a camera's lattice."""
+    return meta.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
+
+
+_CORNERS = np.array([(a, b, c) for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+
+
+class TableGrid:
+    """Interpolated moment tables for any metadata, from exact tables at lattice nodes.
+
+    ``exact(meta, mode)`` computes the exact tables (``NoiseModel._exact_tables``); its errors (e.g. a
+    failing plug-in effect) propagate unchanged. ``surrogate(meta, mode)``, optional, computes cheap
+    approximate tables for some of the names (``NoiseModel._surrogate_tables``): for those, the
+    interpolation carries only the exact tables' deviation from the surrogate (E[n|v] as a difference,
+    the variance as a ratio) and the surrogate is evaluated at the stated metadata itself. The clipping at
+    0 and 255 DN - where a moving offset or width makes the exact tables bend sharply with the conditions -
+    is then mostly in the surrogate, and what is interpolated is smooth.
+    """
+
+    def __init__(self, exact: Callable[[CameraMetadata, str], Tables], spec: GridSpec | None = None,
+                 surrogate: Callable[[CameraMetadata, str], Tables] | None = None) -> None:
+        self.exact = exact
+        self.surrogate = surrogate
+        self.spec = spec or GridSpec()
+        self._nodes: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray]] = OrderedDict()
+        self.nodes_computed = 0
+
+    def _moments(self, meta: CameraMetadata, mode: str, names: tuple[str, ...] | None = None
+                 ) -> tuple[tuple[str, ...], np.ndarray]:
+        """(names, float64 (names, 4, G)): E[n|v] and variance, exact then surrogate (the exact ones
+        again for names without a surrogate)."""
+        tables = self.exact(meta, mode) if names is None else None
+        names = tuple(tables) if names is None else names
+        approx = self.surrogate(meta, mode) if self.surrogate else {}
+        rows = []
+        for n in names:
+            rows.append(_mean_var(*tables[n]) if tables is not None else (np.nan, np.nan))
+        out = np.empty((len(names), 4, _grid_len(tables, approx)))
+        for i, n in enumerate(names):
+            if tables is not None:
+                out[i, 0], out[i, 1] = rows[i]
+            out[i, 2], out[i, 3] = _mean_var(*approx[n]) if n in approx else (np.nan, np.nan)
+        return names, out
+
+    def _node(self, key: CameraMetadata, meta: CameraMetadata, mode: str,
+              node: tuple[int, int, int]) -> tuple[tuple[str, ...], np.ndarray]:
+        ck = (key, mode, node)
+        hit = self._nodes.get(ck)
+        if hit is not None:
+            self._nodes.move_to_end(ck)
+            return hit
+        entry = self._moments(self.spec.node_metadata(meta, node), mode)
+        self._nodes[ck] = entry
+        self.nodes_computed += 1
+        while len(self._nodes) > self.spec.max_nodes:
+            self._nodes.popitem(last=False)
+        return entry
+
+    def tables(self, meta: CameraMetadata, mode: str) -> Tables:
+        """Tables for ``meta`` interpolated between the 8 surrounding nodes (exact outside the lattice)."""
+        u = self.spec.coordinates(meta)
+        base = np.floor(u).astype(np.int64)
+        frac = u - base
+        try:  # the lattice cell's extreme corners within the valid ranges (then all corners are)
+            for corner in (base, base + 1):
+                self.spec.node_metadata(meta, tuple(int(x) for x in corner))
+        except MetadataError:  # e.g. an exposure above 600 s / e^0.35
+            return self.exact(meta, mode)
+        key = static_key(meta)
+        corners = [self._node(key, meta, mode, tuple(int(x) for x in base + c)) for c in _CORNERS]
+        weights = np.prod(np.where(_CORNERS == 1, frac, 1.0 - frac), axis=1)
+        names = corners[0][0]
+        stack = np.stack([c[1] for c in corners])  # (8, names, 4, G)
+        m1_n, var_n, a1_n, avar_n = (stack[:, :, r] for r in range(4))
+        here = self._moments(meta, mode, names)[1] if self.surrogate else None
+        has = ~np.isnan(a1_n[0, :, 0])  # names with a surrogate
+        a1 = here[:, 2] if here is not None else np.zeros_like(m1_n[0])
+        avar = here[:, 3] if here is not None else np.ones_like(m1_n[0])
+        a1 = np.where(has[:, None], a1, 0.0)
+        avar = np.where(has[:, None], avar, 1.0)
+        a1_n = np.where(has[None, :, None], a1_n, 0.0)
+        avar_n = np.where(has[None, :, None], avar_n, 1.0)
+        m1 = a1 + np.tensordot(weights, m1_n - a1_n, axes=1)
+        positive = (var_n.min(axis=0) > VAR_FLOOR_DN2) & (avar_n.min(axis=0) > VAR_FLOOR_DN2) & (avar > VAR_FLOOR_DN2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_ratio = np.tensordot(weights, np.log(var_n) - np.log(avar_n), axes=1)
+            var = np.where(positive, avar * np.exp(log_ratio), np.tensordot(weights, var_n, axes=1))
+        m2 = var + m1**2
+        return {n: (m1[i], m2[i]) for i, n in enumerate(names)}
+
+
+def _mean_var(m1: np.ndarray, m2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return m1, np.maximum(m2 - m1**2, 0.0)
+
+
+def _grid_len(tables: Tables | None, approx: Tables) -> int:
+    first = next(iter((tables or approx).values()))
+    return len(first[0])
