@@ -25,7 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image, Temperature
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Temperature
 from std_msgs.msg import Float32
 
 from msg_adapters import (
@@ -127,7 +127,8 @@ class NoiseMonitorNode(Node):
         self._pubs = {DIAGNOSTICS_TOPIC: self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)}
         self._pubs.update({t: self.create_publisher(Float32, t, 10) for t in output_topics(ns) if t != DIAGNOSTICS_TOPIC})
         self.namespace_out = ns
-        self.create_subscription(Image, p["image_topic"], self._on_image, qos_profile_sensor_data)
+        image_type = CompressedImage if p["image_transport"] == "compressed" else Image
+        self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
         if p["metadata_topic"]:
             self.create_subscription(DiagnosticArray, p["metadata_topic"], self._on_metadata, relaxed)

@@ -1,6 +1,8 @@
 """Read camera bags (rosbag2 MCAP or sqlite3 directories, bare .mcap/.db3 files) into monitor frames.
 
-Topics are found by message type unless given: the image topic (sensor_msgs/msg/Image), the metadata
+Topics are found by message type unless given: the image topic (sensor_msgs/msg/Image; a
+sensor_msgs/msg/CompressedImage topic when the bag has no raw one: lossless PNG/zstd frames are decoded,
+lossy ones skipped with the reason), the metadata
 topic (a DiagnosticArray, a known vendor metadata type, or any type with fields named like
 CameraMetadata fields), CameraInfo and Temperature. Message definitions stored in the bag are
 registered (rosbags typesys), so vendor types deserialise without their packages installed.
@@ -33,6 +35,7 @@ from noise_monitor.physics import CameraProfile, load_profile
 from .errors import BagError
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
+COMPRESSED_TYPE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
@@ -108,8 +111,8 @@ class BagReader:
         return sorted(t for t, m in self.topics.items() if m == msgtype)
 
     def _image_candidates(self) -> list[str]:
-        imgs = self._typed(IMAGE_TYPE)
-        raw = [t for t in imgs if t.endswith("image_raw")]
+        imgs = self._typed(IMAGE_TYPE) or self._typed(COMPRESSED_TYPE)
+        raw = [t for t in imgs if t.endswith("image_raw") or t.endswith("image_raw/compressed")]
         return raw if len(raw) == 1 else imgs
 
     def _metadata_candidates(self) -> list[str]:
@@ -139,11 +142,8 @@ class BagReader:
             raise BagError(f"several {role} topics in bag {self.path}: {', '.join(candidates)}; "
                            f"choose one with --{role.replace('_', '-')}-topic")
         if not candidates and required:
-            hint = ""
-            if any(m == "sensor_msgs/msg/CompressedImage" for m in self.topics.values()):
-                hint = (" (sensor_msgs/CompressedImage is not supported: lossy compression changes the noise "
-                        "being measured; record the raw image topic)")
-            raise BagError(f"no {role} topic ({IMAGE_TYPE}) in bag {self.path}{hint}; topics: {self._listing()}")
+            raise BagError(f"no {role} topic ({IMAGE_TYPE} or {COMPRESSED_TYPE}) in bag {self.path}; "
+                           f"topics: {self._listing()}")
         return candidates[0] if candidates else None
 
     def _listing(self) -> str:

@@ -26,6 +26,8 @@ COLORS = ("luma", "green")
 #: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
 RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS)"),
+    "image_transport": ("raw", "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on image_topic: "
+                               "lossless PNG/TIFF/zstd decoded, lossy formats refused as skipped frames)"),
     "metadata_topic": ("metadata", "diagnostic_msgs/DiagnosticArray with CameraMetadata key/values; '' = none"),
     "camera_info_topic": ("camera_info", "sensor_msgs/CameraInfo (image size/binning/ROI check); '' = none"),
     "temperature_topic": ("", "sensor_msgs/Temperature with the sensor temperature in degC; '' = none"),
@@ -84,6 +86,8 @@ def check_parameters(p: Mapping[str, Any]) -> None:
                          f"got {p['diagnostics_rate_hz']}")
     if not p["image_topic"]:
         raise ValueError("parameter image_topic must not be empty")
+    if p["image_transport"] not in ("raw", "compressed"):
+        raise ValueError(f"parameter image_transport must be raw or compressed, got {p['image_transport']!r}")
     if p["physics_tables"] not in PHYSICS_TABLES:
         raise ValueError(f"parameter physics_tables must be interpolated or exact, got {p['physics_tables']!r}")
 

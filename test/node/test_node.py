@@ -63,7 +63,10 @@ class Rig:
         self.node = node_class()(node_name=f"{topic}_monitor", parameter_overrides=overrides,
                                  context=self.context, estimator=estimator)
         self.cam = rclpy.create_node(f"{topic}_camera", context=self.context)
-        self.pub_img = self.cam.create_publisher(Image, base["image_topic"], qos_profile_sensor_data)
+        from sensor_msgs.msg import CompressedImage
+
+        image_type = CompressedImage if base.get("image_transport") == "compressed" else Image
+        self.pub_img = self.cam.create_publisher(image_type, base["image_topic"], qos_profile_sensor_data)
         meta_topic = base["metadata_topic"] or f"/{topic}/unused_metadata"
         self.pub_meta = self.cam.create_publisher(DiagnosticArray, meta_topic, 10)
         self.diagnostics: list[tuple[int, StatusReport]] = []
@@ -291,3 +294,27 @@ def test_temperature_topic_completes_the_metadata(rig_factory):
     assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
     report, _ = rig.step(1, metadata=no_temp)
     assert report.level == OK, report.message
+
+
+def test_compressed_transport_decodes_png_and_skips_jpeg(rig_factory):
+    """image_transport: compressed - a lossless PNG frame is evaluated, a JPEG one skipped with the reason."""
+    import cv2
+    from sensor_msgs.msg import CompressedImage
+
+    rig = rig_factory("pngcam", image_transport="compressed", image_topic="/pngcam/image_raw/compressed")
+    img = np.clip(np.rint(MODEL.simulate(rig.clean, PROFILE.metadata(**DYNAMIC), rig.rng)[0]), 0, 255).astype(np.uint8)
+    for i, (ext, fmt) in enumerate(((".png", "mono8; png compressed "), (".jpg", "mono8; jpeg compressed mono8"))):
+        stamp = Time(sec=10 + i, nanosec=0)
+        meta = DiagnosticArray(status=[DiagnosticStatus(name="camera", values=[
+            KeyValue(key=k, value=repr(v)) for k, v in DYNAMIC.items()])])
+        meta.header.stamp = stamp
+        rig.pub_meta.publish(meta)
+        msg = CompressedImage(format=fmt, data=cv2.imencode(ext, img)[1].tobytes())
+        msg.header.stamp = stamp
+        rig.pub_img.publish(msg)
+        report = rig.status_for((10 + i) * 10**9)
+        if ext == ".png":
+            assert report.level == OK and float(report.values["sigma_rn"]) > 0, report.message
+        else:
+            assert report.level == WARN and "lossy (jpeg)" in report.message
+            assert report.values["frames_skipped"] == "1"
