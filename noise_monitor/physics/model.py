@@ -49,6 +49,7 @@ class NoiseModel:
         self.effects: list[Effect] = sorted(base, key=lambda e: order.get(e.name, len(order)))
         self._cache: dict = {}
         self.interpolate = interpolate
+        self._surrogate_last: tuple | None = None
         spec = interpolate if isinstance(interpolate, GridSpec) else GridSpec()
         self.grid: TableGrid | None = TableGrid(self._exact_tables, spec, self._surrogate_tables) if interpolate else None
 
@@ -110,18 +111,21 @@ class NoiseModel:
     def _surrogate_tables(self, meta: CameraMetadata, mode: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Cheap stand-ins for the tables (Poisson sources as Gaussians of equal variance, each effect in
         one pass on the clean value, no rounding): they carry the clipping's dependence on the conditions,
-        which the interpolation of the exact tables then only corrects (see ``table_grid``)."""
-        cond = self.conditions(meta)
-        adders = [e for e in self.noise_effects if e.distribution != "quantization"]
-        groups = {e.name: [e] for e in adders}
-        if mode == "joint":
-            groups["total"] = adders
-        out = {}
-        for name, effects in groups.items():
-            lam, s2, mixes = self._components(effects, _V_GRID, cond)
-            m1, m2, _ = noise_moments(_V_GRID, 0.0, 1.0, s2 + cond.dn_per_e**2 * lam, mixes)
-            out[name] = (m1, m2)
-        return out
+        which the interpolation of the exact tables then only corrects (see ``table_grid``). The per-effect
+        ones are shared by both modes (cached for the last metadata set)."""
+        if self._surrogate_last is None or self._surrogate_last[0] != meta:
+            cond = self.conditions(meta)
+            adders = [e for e in self.noise_effects if e.distribution != "quantization"]
+            own = {e.name: self._gaussian_moments([e], cond) for e in adders}
+            total = self._gaussian_moments(adders, cond) if len(adders) > 1 else next(iter(own.values()), None)
+            self._surrogate_last = (meta, own, total)
+        _, own, total = self._surrogate_last
+        return {**own, "total": total} if mode == "joint" and total is not None else dict(own)
+
+    def _gaussian_moments(self, effects: list[Effect], cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
+        lam, s2, mixes = self._components(effects, _V_GRID, cond)
+        m1, m2, _ = noise_moments(_V_GRID, 0.0, 1.0, s2 + cond.dn_per_e**2 * lam, mixes)
+        return m1, m2
 
     @staticmethod
     def _components(effects: list[Effect], x: np.ndarray, cond: Conditions):

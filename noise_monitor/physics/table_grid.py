@@ -86,31 +86,37 @@ class TableGrid:
         self._nodes: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray]] = OrderedDict()
         self.nodes_computed = 0
 
-    def _moments(self, meta: CameraMetadata, mode: str, names: tuple[str, ...] | None = None
-                 ) -> tuple[tuple[str, ...], np.ndarray]:
-        """(names, float64 (names, 4, G)): E[n|v] and variance, exact then surrogate (the exact ones
-        again for names without a surrogate)."""
-        tables = self.exact(meta, mode) if names is None else None
-        names = tuple(tables) if names is None else names
+    def _surrogate(self, meta: CameraMetadata, mode: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Surrogate E[n|v] and variance (names, G): 0 and 1 for names without a surrogate."""
         approx = self.surrogate(meta, mode) if self.surrogate else {}
-        rows = []
-        for n in names:
-            rows.append(_mean_var(*tables[n]) if tables is not None else (np.nan, np.nan))
-        out = np.empty((len(names), 4, _grid_len(tables, approx)))
+        first = next(iter(approx.values()), None)
+        g = len(first[0]) if first is not None else 0
+        a1, avar = np.zeros((len(names), g)), np.ones((len(names), g))
         for i, n in enumerate(names):
-            if tables is not None:
-                out[i, 0], out[i, 1] = rows[i]
-            out[i, 2], out[i, 3] = _mean_var(*approx[n]) if n in approx else (np.nan, np.nan)
-        return names, out
+            if n in approx:
+                a1[i], avar[i] = _mean_var(*approx[n])
+        return a1, avar
 
     def _node(self, key: CameraMetadata, meta: CameraMetadata, mode: str,
               node: tuple[int, int, int]) -> tuple[tuple[str, ...], np.ndarray]:
+        """(names, float64 (names, 4, G)) at a node, cached: E[n|v] minus the surrogate's, log variance
+        minus the surrogate's, the variance itself and 1 where both variances are above the floor."""
         ck = (key, mode, node)
         hit = self._nodes.get(ck)
         if hit is not None:
             self._nodes.move_to_end(ck)
             return hit
-        entry = self._moments(self.spec.node_metadata(meta, node), mode)
+        node_meta = self.spec.node_metadata(meta, node)
+        tables = self.exact(node_meta, mode)
+        names = tuple(tables)
+        m1, var = (np.stack(x) for x in zip(*(_mean_var(*tables[n]) for n in names)))
+        a1, avar = self._surrogate(node_meta, mode, names)
+        if a1.shape[-1] == 0:
+            a1, avar = np.zeros_like(m1), np.ones_like(var)
+        ok = (var > VAR_FLOOR_DN2) & (avar > VAR_FLOOR_DN2)
+        with np.errstate(divide="ignore"):
+            log_ratio = np.where(ok, np.log(np.where(ok, var, 1.0)) - np.log(np.where(ok, avar, 1.0)), 0.0)
+        entry = (names, np.stack([m1 - a1, log_ratio, var, ok.astype(float)], axis=1))
         self._nodes[ck] = entry
         self.nodes_computed += 1
         while len(self._nodes) > self.spec.max_nodes:
@@ -128,32 +134,19 @@ class TableGrid:
         except MetadataError:  # e.g. an exposure above 600 s / e^0.35
             return self.exact(meta, mode)
         key = static_key(meta)
-        corners = [self._node(key, meta, mode, tuple(int(x) for x in base + c)) for c in _CORNERS]
+        i, j, k = (int(x) for x in base)
+        corners = [self._node(key, meta, mode, (i + a, j + b, k + c)) for a, b, c in _CORNERS]
         weights = np.prod(np.where(_CORNERS == 1, frac, 1.0 - frac), axis=1)
         names = corners[0][0]
         stack = np.stack([c[1] for c in corners])  # (8, names, 4, G)
-        m1_n, var_n, a1_n, avar_n = (stack[:, :, r] for r in range(4))
-        here = self._moments(meta, mode, names)[1] if self.surrogate else None
-        has = ~np.isnan(a1_n[0, :, 0])  # names with a surrogate
-        a1 = here[:, 2] if here is not None else np.zeros_like(m1_n[0])
-        avar = here[:, 3] if here is not None else np.ones_like(m1_n[0])
-        a1 = np.where(has[:, None], a1, 0.0)
-        avar = np.where(has[:, None], avar, 1.0)
-        a1_n = np.where(has[None, :, None], a1_n, 0.0)
-        avar_n = np.where(has[None, :, None], avar_n, 1.0)
-        m1 = a1 + np.tensordot(weights, m1_n - a1_n, axes=1)
-        positive = (var_n.min(axis=0) > VAR_FLOOR_DN2) & (avar_n.min(axis=0) > VAR_FLOOR_DN2) & (avar > VAR_FLOOR_DN2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_ratio = np.tensordot(weights, np.log(var_n) - np.log(avar_n), axes=1)
-            var = np.where(positive, avar * np.exp(log_ratio), np.tensordot(weights, var_n, axes=1))
+        d_m1, d_log, lin_var, _ = np.tensordot(weights, stack, axes=1).transpose(1, 0, 2)
+        ok = stack[:, :, 3].min(axis=0) > 0.5
+        a1, avar = self._surrogate(meta, mode, names) if self.surrogate else (0.0, 1.0)
+        m1 = a1 + d_m1
+        var = np.where(ok & (avar > VAR_FLOOR_DN2), avar * np.exp(d_log), lin_var)
         m2 = var + m1**2
         return {n: (m1[i], m2[i]) for i, n in enumerate(names)}
 
 
 def _mean_var(m1: np.ndarray, m2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return m1, np.maximum(m2 - m1**2, 0.0)
-
-
-def _grid_len(tables: Tables | None, approx: Tables) -> int:
-    first = next(iter((tables or approx).values()))
-    return len(first[0])
