@@ -28,7 +28,16 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS)"),
     "image_transport": ("raw", "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on image_topic: "
                                "lossless PNG/TIFF/zstd decoded, lossy formats refused as skipped frames)"),
-    "metadata_topic": ("metadata", "diagnostic_msgs/DiagnosticArray with CameraMetadata key/values; '' = none"),
+    "metadata_topic": ("metadata", "per-frame metadata (type per metadata_source); '' = none"),
+    "metadata_source": ("diagnostics", "diagnostics (DiagnosticArray with CameraMetadata key names), keymap "
+                                       "(DiagnosticArray through metadata_keymap), flir, basler, realsense (the driver's "
+                                       "metadata message; its ROS package must be importable) or parameters (the "
+                                       "driver node's /parameter_events)"),
+    "metadata_keymap": ("", "key map 'STATUS|KEY|FIELD|UNIT[|SCALE]; ...' (FIELD: exposure_time_s, gain_db, "
+                            "sensor_temperature_c; UNIT: s ms us 100us ns, dB factor relative, degC K)"),
+    "metadata_driver_node": ("", "metadata_source parameters: the driver node's fully qualified name"),
+    "metadata_driver": ("v4l2_camera", "metadata_source parameters: parameter names of v4l2_camera or usb_cam "
+                                       "(metadata_keymap overrides)"),
     "camera_info_topic": ("camera_info", "sensor_msgs/CameraInfo (image size/binning/ROI check); '' = none"),
     "temperature_topic": ("", "sensor_msgs/Temperature with the sensor temperature in degC; '' = none"),
     "camera_name": ("camera", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'"),
