@@ -32,11 +32,11 @@ from msg_adapters import (
     AdapterError,
     CameraGeometry,
     camera_geometry,
-    metadata_from_diagnostics,
     metadata_from_temperature,
     prepare_frame,
 )
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
+from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
 from noise_monitor.monitor.runtime import MonitorRuntime, coerce, parameter_table
 
@@ -109,11 +109,17 @@ class NoiseMonitorNode(Node):
         for name, (default, description) in parameter_table().items():
             desc = ParameterDescriptor(description=description, dynamic_typing=True)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
+        source_args = [p[k] for k in ("metadata_source", "metadata_topic", "metadata_keymap", "metadata_driver_node",
+                                      "metadata_driver")]
+        resolve_source(*source_args)  # a bad source, key map or missing driver package: fail before loading
         self.runtime = MonitorRuntime(p, estimator=estimator)
         self.params = p = self.runtime.params
         self.profile = self.runtime.profile
         self.monitor = self.runtime.monitor
-        wait = p["sync_wait_s"] if p["metadata_topic"] else 0.0
+        self.metadata_source = resolve_source(*source_args, profile=self.profile)
+        self._held: dict | str = {}  # latest values of a held source (parameter events)
+        paired = self.metadata_source is not None and not self.metadata_source.held
+        wait = p["sync_wait_s"] if paired else 0.0
         self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
         self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
         self._temperature_c: float | None = None
@@ -130,8 +136,10 @@ class NoiseMonitorNode(Node):
         image_type = CompressedImage if p["image_transport"] == "compressed" else Image
         self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
-        if p["metadata_topic"]:
-            self.create_subscription(DiagnosticArray, p["metadata_topic"], self._on_metadata, relaxed)
+        src = self.metadata_source
+        if src is not None:
+            qos = QoSProfile(depth=100) if src.held else relaxed  # parameter events are reliable
+            self.create_subscription(src.msg_type, src.topic, self._on_metadata, qos)
         if p["camera_info_topic"]:
             self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, relaxed)
         if p["temperature_topic"]:
@@ -156,11 +164,18 @@ class NoiseMonitorNode(Node):
             self._enqueue(matched)
 
     def _on_metadata(self, msg: Any) -> None:
+        assert self.metadata_source is not None
         try:
-            values: dict | str = metadata_from_diagnostics(msg)
+            values: dict | str | None = self.metadata_source.convert(msg)
         except AdapterError as exc:
             values = str(exc)  # the frames it belongs to report the problem
-        for matched in self.sync.add_metadata(_stamp_ns(msg), values):
+        if values is None:  # not this camera's (another node's parameter event)
+            return
+        if self.metadata_source.held:
+            self._held = values
+            return
+        stamp = _stamp_ns(msg) if hasattr(msg, "header") else self._now()  # Basler: no header
+        for matched in self.sync.add_metadata(stamp, values):
             self._enqueue(matched)
 
     def _on_camera_info(self, msg: Any) -> None:
@@ -206,7 +221,12 @@ class NoiseMonitorNode(Node):
 
     def _evaluate(self, job: _Job) -> FrameResult:
         m = job.matched
-        frame = prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=m.metadata,
+        held, metadata = self._held, m.metadata
+        if isinstance(held, str) and not isinstance(metadata, str):
+            metadata = held  # the driver's parameters could not be read
+        elif isinstance(held, dict) and held and not isinstance(metadata, (str, Exception)):
+            metadata = {**held, **(metadata or {})}
+        frame = prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=metadata,
                               metadata_stamp_ns=m.metadata_stamp_ns, temperature_c=job.temperature_c,
                               geometry=self._geometry)
         return self.runtime.process(frame, received_ns=m.received_ns)

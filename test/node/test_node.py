@@ -318,3 +318,68 @@ def test_compressed_transport_decodes_png_and_skips_jpeg(rig_factory):
         else:
             assert report.level == WARN and "lossy (jpeg)" in report.message
             assert report.values["frames_skipped"] == "1"
+
+
+def test_keymap_metadata_source_reads_a_drivers_own_keys(rig_factory, tmp_path):
+    """metadata_source keymap: a DiagnosticArray with the driver's key names and units gives the same
+    numbers as this project's key names (the same first image: the rigs' simulators share a seed)."""
+    ref, _ = rig_factory("kref").step(0)
+    rig = rig_factory("kmap", metadata_source="keymap",
+                      metadata_keymap="camera|ExposureMs|exposure_time_s|ms; *|GainX|gain_db|factor; "
+                                      "camera|TempK|sensor_temperature_c|K")
+    own = {"ExposureMs": DYNAMIC["exposure_time_s"] * 1e3, "GainX": 10 ** (DYNAMIC["gain_db"] / 20),
+           "TempK": DYNAMIC["sensor_temperature_c"] + 273.15}
+    report, _ = rig.step(0, metadata=own)
+    assert report.level == OK, report.message
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
+        assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+    bad, _ = rig.step(1, metadata={**own, "GainX": "high"})
+    assert bad.level == WARN and "metadata invalid: metadata GainX = " in bad.message and "is not a number" in bad.message
+
+
+def test_parameter_events_of_a_v4l2_driver_node_give_the_metadata(rig_factory, tmp_path):
+    """metadata_source parameters: the driver node's exposure/gain parameters (v4l2_camera names and
+    units) followed on /parameter_events; the temperature from a sensor_msgs/Temperature topic."""
+    from sensor_msgs.msg import Temperature
+
+    ref, _ = rig_factory("pref").step(0)
+    prof = tmp_path / "icx285_v4l2.yaml"
+    prof.write_text(PROFILE.to_yaml() + "gain_range_db: [0.0, 24.0]\ndriver_gain_range: [0, 240]\n")
+    rig = rig_factory("pcam", metadata_source="parameters", metadata_topic="", profile=str(prof),
+                      metadata_driver_node="/pcam/v4l2_camera", temperature_topic="/pcam/temperature")
+    driver = rclpy.create_node("v4l2_camera", namespace="/pcam", context=rig.context)
+    rig.executor.add_node(driver)
+    driver.declare_parameter("exposure_time_absolute", 50)
+    driver.declare_parameter("gain", 0)
+    temp = rig.cam.create_publisher(Temperature, "/pcam/temperature", 10)
+    assert rig.spin_until(lambda: temp.get_subscription_count() > 0, TIMEOUT_S)
+    temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))
+    # auto-exposure and gain change: 100 x 100 us = 10 ms, gain 180 of 240 -> 18 dB
+    driver.set_parameters([Parameter("exposure_time_absolute", value=100), Parameter("gain", value=180)])
+    assert rig.spin_until(lambda: rig.node._held == {"exposure_time_s": pytest.approx(0.01),
+                                                      "gain_db": pytest.approx(18.0)}, TIMEOUT_S), rig.node._held
+    assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
+    report, _ = rig.step(0, metadata={})
+    rig.executor.remove_node(driver)
+    driver.destroy_node()
+    assert report.level == OK, report.message
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
+        assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+
+
+def test_driver_metadata_source_without_its_package_names_it():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        with pytest.raises(ValueError, match="install the ROS package flir_camera_msgs"):
+            node_class()(node_name="flir_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="flir"), Parameter("profile", value="icx285")], estimator=object())
+        with pytest.raises(ValueError, match="metadata_source must be one of diagnostics, keymap, flir"):
+            node_class()(node_name="bad_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="spinnaker")], estimator=object())
+        with pytest.raises(ValueError, match="unknown field 'gain'"):
+            node_class()(node_name="km_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="keymap"), Parameter("metadata_keymap", value="c|G|gain|dB")],
+                estimator=object())
+    finally:
+        ctx.try_shutdown()
