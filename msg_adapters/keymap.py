@@ -8,8 +8,8 @@ default 1): the value is multiplied by SCALE, then converted from UNIT to the fi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from .errors import AdapterError

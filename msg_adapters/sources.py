@@ -12,8 +12,8 @@ package to install. A sensor_msgs/Temperature (``temperature_topic``) completes 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from .keymap import keymap_entries, metadata_from_keymap, parse_keymap
@@ -71,5 +71,6 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
     from diagnostic_msgs.msg import DiagnosticArray
 
     if source == "keymap":
-        return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_keymap(m, entries, profile))
+        keymap = entries or []
+        return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_keymap(m, keymap, profile))
     return MetadataSource(source, DiagnosticArray, topic, metadata_from_diagnostics)

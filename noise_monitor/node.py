@@ -109,14 +109,14 @@ class NoiseMonitorNode(Node):
         for name, (default, description) in parameter_table().items():
             desc = ParameterDescriptor(description=description, dynamic_typing=True)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
-        source_args = [p[k] for k in ("metadata_source", "metadata_topic", "metadata_keymap", "metadata_driver_node",
-                                      "metadata_driver")]
-        resolve_source(*source_args)  # a bad source, key map or missing driver package: fail before loading
+        source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],
+                       "driver_node": p["metadata_driver_node"], "driver": p["metadata_driver"]}
+        resolve_source(**source_args)  # a bad source, key map or missing driver package: fail before loading
         self.runtime = MonitorRuntime(p, estimator=estimator)
         self.params = p = self.runtime.params
         self.profile = self.runtime.profile
         self.monitor = self.runtime.monitor
-        self.metadata_source = resolve_source(*source_args, profile=self.profile)
+        self.metadata_source = resolve_source(**source_args, profile=self.profile)
         self._held: dict | str = {}  # latest values of a held source (parameter events)
         paired = self.metadata_source is not None and not self.metadata_source.held
         wait = p["sync_wait_s"] if paired else 0.0

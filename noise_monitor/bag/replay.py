@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from msg_adapters.keymap import keymap_entries
 from msg_adapters.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
 from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
-from msg_adapters.keymap import keymap_entries
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
 from noise_monitor.physics import CameraProfile

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -128,13 +128,13 @@ class TableGrid:
         u = self.spec.coordinates(meta)
         base = np.floor(u).astype(np.int64)
         frac = u - base
+        i, j, k = (int(x) for x in base)
         try:  # the lattice cell's extreme corners within the valid ranges (then all corners are)
-            for corner in (base, base + 1):
-                self.spec.node_metadata(meta, tuple(int(x) for x in corner))
+            self.spec.node_metadata(meta, (i, j, k))
+            self.spec.node_metadata(meta, (i + 1, j + 1, k + 1))
         except MetadataError:  # e.g. an exposure above 600 s / e^0.35
             return self.exact(meta, mode)
         key = static_key(meta)
-        i, j, k = (int(x) for x in base)
         corners = [self._node(key, meta, mode, (i + a, j + b, k + c)) for a, b, c in _CORNERS]
         weights = np.prod(np.where(_CORNERS == 1, frac, 1.0 - frac), axis=1)
         names = corners[0][0]

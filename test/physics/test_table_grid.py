@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
+from noise_monitor.monitor.model_patches import predict_patches
 from noise_monitor.physics import CameraMetadata, NoiseModel, load_profile, sample_static
 from noise_monitor.physics.model import _V_GRID
 from noise_monitor.physics.table_grid import GridSpec
-from noise_monitor.monitor.model_patches import predict_patches
 
 SPEC = GridSpec()
 
