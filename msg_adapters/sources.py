@@ -71,6 +71,6 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
     from diagnostic_msgs.msg import DiagnosticArray
 
     if source == "keymap":
-        keymap = entries or []
-        return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_keymap(m, keymap, profile))
+        mapped = entries or []
+        return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_keymap(m, mapped, profile))
     return MetadataSource(source, DiagnosticArray, topic, metadata_from_diagnostics)
