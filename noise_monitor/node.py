@@ -22,8 +22,9 @@ from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Temperature
 from std_msgs.msg import Float32
@@ -144,6 +145,7 @@ class NoiseMonitorNode(Node):
             self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, relaxed)
         if p["temperature_topic"]:
             self.create_subscription(Temperature, p["temperature_topic"], self._on_temperature, relaxed)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diag_period_ns = self.runtime.diagnostics_period_ns
         self.create_timer(min(self._diag_period_ns / 1e9, 0.05), self._on_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
@@ -152,6 +154,20 @@ class NoiseMonitorNode(Node):
             f"monitoring {p['image_topic']} with {est.name} (patch {self.monitor.patch_size}, "
             f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics and {ns}/<sigma_*|xi*>"
         )
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """``ros2 param set``: thresholds and alarm settings change at run time (validated, the alarm keeps
+        its state); every other parameter is read-only while the node runs. Rejections carry the reason."""
+        table = parameter_table()  # others (use_sim_time) are rclpy's own
+        try:
+            changes = {p.name: coerce(p.name, p.value, table[p.name][0]) for p in params if p.name in table}
+            cfg = self.monitor.reconfigure(**changes)
+        except ValueError as exc:
+            self.get_logger().warning(f"parameter change rejected: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.params.update(changes)
+        self.get_logger().info(f"parameters changed: {', '.join(f'{k}={getattr(cfg, k)}' for k in changes)}")
+        return SetParametersResult(successful=True)
 
     # --- inputs (executor thread) --------------------------------------------------------
     def _now(self) -> int:

@@ -5,6 +5,7 @@ exponential filter -> xi alarm state machine -> StatusReport / numeric outputs.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -24,6 +25,10 @@ from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
 from .temporal import TemporalMeasurement, TemporalNoise
+
+#: MonitorConfig fields that may change while the monitor runs (thresholds, alarm and filter settings).
+RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "clear_min_frames", "filter_alpha",
+                    "alarm_level")
 
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
 
@@ -137,6 +142,20 @@ class Monitor:
                          "frames_lost": 0}
         self.last_received_ns: int | None = None
         self.last_result: FrameResult | None = None
+
+    def reconfigure(self, **changes: Any) -> MonitorConfig:
+        """Change settings of :data:`RUNTIME_SETTABLE` at run time, validated as a whole by MonitorConfig
+        (ValueError with the reason); the alarm and the filter keep their state."""
+        fixed = sorted(set(changes) - set(RUNTIME_SETTABLE))
+        if fixed:
+            raise ValueError(f"{', '.join(fixed)} cannot change at run time (settable: {', '.join(RUNTIME_SETTABLE)})")
+        cfg = dataclasses.replace(self.config, **changes)
+        self.config = cfg
+        self.filter.alpha = cfg.filter_alpha
+        self.alarm.threshold = cfg.xi_threshold_dn
+        self.alarm.clear_level = cfg.xi_threshold_dn - cfg.xi_hysteresis_dn
+        self.alarm.min_frames, self.alarm.clear_frames = cfg.alarm_min_frames, cfg.clear_min_frames
+        return cfg
 
     # --- bookkeeping -----------------------------------------------------------------------
     def count_dropped(self, n: int = 1) -> None:

@@ -383,3 +383,36 @@ def test_driver_metadata_source_without_its_package_names_it():
                 estimator=object())
     finally:
         ctx.try_shutdown()
+
+
+def test_run_time_parameter_changes_are_validated(rig_factory):
+    """``ros2 param set`` through the parameter service: thresholds change and act, bad values and
+    read-only parameters are rejected with the reason."""
+    from rclpy.parameter_client import AsyncParameterClient
+
+    rig = rig_factory("pset", alarm_min_frames=1)
+    client = AsyncParameterClient(rig.cam, rig.node.get_fully_qualified_name())
+    assert client.wait_for_services(TIMEOUT_S)
+
+    def set_(**values):
+        fut = client.set_parameters([Parameter(k, value=v) for k, v in values.items()])
+        assert rig.spin_until(fut.done, TIMEOUT_S)
+        return fut.result().results
+
+    ok = set_(xi_threshold_dn=2.5, xi_hysteresis_dn=0.5)
+    assert all(r.successful for r in ok)
+    assert rig.node.monitor.alarm.threshold == 2.5 and rig.node.monitor.alarm.clear_level == 2.0
+    bad = set_(xi_hysteresis_dn=3.0)[0]
+    assert not bad.successful and "xi_hysteresis_dn must be in [0, xi_threshold_dn)" in bad.reason
+    assert rig.node.monitor.config.xi_hysteresis_dn == 0.5
+    ro = set_(patches_per_frame=2)[0]
+    assert not ro.successful and "patches_per_frame cannot change at run time" in ro.reason
+    typed = set_(alarm_min_frames="three")[0]
+    assert not typed.successful and "alarm_min_frames must be of type int" in typed.reason
+    # the new threshold acts: +N(0, 3 DN) image noise (|xi| ~ 1.5 DN) raises no alarm at 2.5 DN ...
+    report, _ = rig.step(0, extra_sigma=3.0)
+    assert report.level == OK, report.message
+    # ... and raises it at once with 0.5 DN
+    assert all(r.successful for r in set_(xi_hysteresis_dn=0.1, xi_threshold_dn=0.5))
+    report, _ = rig.step(1, extra_sigma=3.0)
+    assert report.level == ERROR and "image noisier" in report.message
