@@ -38,6 +38,14 @@ class MetadataSource:
     convert: Callable[[Any], dict[str, Any] | None]
     held: bool = False
 
+    def hardware_id(self, msg: Any) -> str | None:
+        """The driver's device id (its serial) when the message carries one: a DiagnosticArray status's
+        ``hardware_id`` (the first non-empty one)."""
+        for status in getattr(msg, "status", None) or ():
+            if str(getattr(status, "hardware_id", "")).strip():
+                return str(status.hardware_id).strip()
+        return None
+
 
 def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str = "", driver: str = "v4l2_camera",
                    profile: Any = None) -> MetadataSource | None:

@@ -187,6 +187,9 @@ class NoiseMonitorNode(Node):
             values = str(exc)  # the frames it belongs to report the problem
         if values is None:  # not this camera's (another node's parameter event)
             return
+        serial = None if self.params["hardware_id"] else self.metadata_source.hardware_id(msg)
+        if serial and serial != self.monitor.hardware_id:
+            self.monitor.hardware_id = serial  # the driver's device id: two cameras of one model stay apart
         if self.metadata_source.held:
             self._held = values
             return

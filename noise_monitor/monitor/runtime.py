@@ -41,7 +41,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "camera_info_topic": ("camera_info", "sensor_msgs/CameraInfo (image size/binning/ROI check); '' = none"),
     "temperature_topic": ("", "sensor_msgs/Temperature with the sensor temperature in degC; '' = none"),
     "camera_name": ("camera", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'"),
-    "hardware_id": ("", "diagnostic hardware_id; '' = '<profile name>/<camera_name>'"),
+    "hardware_id": ("", "diagnostic hardware_id; '' = the driver's (its metadata status's hardware_id, e.g. the "
+                        "serial), else '<profile name>/<camera_name>'"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
     "color": ("luma", "reduction of colour images to gray: luma or green"),

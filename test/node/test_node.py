@@ -97,9 +97,10 @@ class Rig:
         return False
 
     def publish(self, i: int, extra_sigma: float = 0.0, metadata: dict | None = None,
-                dynamic: dict | None = None) -> tuple[int, dict]:
+                dynamic: dict | None = None, hardware_id: str = "") -> tuple[int, dict]:
         """Publish frame i simulated with ``dynamic`` conditions, and ``metadata`` (default: the same
-        conditions) first with the same header stamp; returns (stamp ns, simulator truth)."""
+        conditions; its status's ``hardware_id``) first with the same header stamp; returns (stamp ns,
+        simulator truth)."""
         dynamic = DYNAMIC if dynamic is None else dynamic
         meta = PROFILE.metadata(**dynamic)
         noisy, truth = MODEL.simulate(self.clean, meta, self.rng)
@@ -110,7 +111,7 @@ class Rig:
         stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
         values = dynamic if metadata is None else metadata
         if values:
-            msg = DiagnosticArray(status=[DiagnosticStatus(name="camera", values=[
+            msg = DiagnosticArray(status=[DiagnosticStatus(name="camera", hardware_id=hardware_id, values=[
                 KeyValue(key=k, value=repr(v)) for k, v in values.items()])])
             msg.header.stamp = stamp
             self.pub_meta.publish(msg)
@@ -416,3 +417,12 @@ def test_run_time_parameter_changes_are_validated(rig_factory):
     assert all(r.successful for r in set_(xi_hysteresis_dn=0.1, xi_threshold_dn=0.5))
     report, _ = rig.step(1, extra_sigma=3.0)
     assert report.level == ERROR and "image noisier" in report.message
+
+
+def test_hardware_id_from_the_drivers_serial(rig_factory):
+    """Two cameras of one model: the driver's device id (its metadata status's hardware_id) names each;
+    an explicit hardware_id parameter wins."""
+    first, _ = rig_factory("ser").step(0, hardware_id="SN-4711")
+    assert first.hardware_id == "SN-4711"
+    fixed, _ = rig_factory("ser_fixed", hardware_id="left-front").step(0, hardware_id="SN-4712")
+    assert fixed.hardware_id == "left-front"
