@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .metadata import CameraMetadata, MetadataError
+from .metadata import STATIC_FIELDS, CameraMetadata, MetadataError
 
 Tables = dict[str, tuple[np.ndarray, np.ndarray]]
 #: Below this variance (DN^2) a node's variance is interpolated linearly instead of in its logarithm.
@@ -58,9 +58,9 @@ class GridSpec:
                             sensor_temperature_c=k * self.temperature_step_c)
 
 
-def static_key(meta: CameraMetadata) -> CameraMetadata:
-    """The metadata with its dynamic fields at fixed values: identifies a camera's lattice."""
-    return meta.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
+def static_key(meta: CameraMetadata) -> tuple:
+    """The static fields of the metadata: identify a camera's lattice."""
+    return tuple(getattr(meta, name) for name in STATIC_FIELDS) + (meta.bit_depth,)
 
 
 _CORNERS = np.array([(a, b, c) for a in (0, 1) for b in (0, 1) for c in (0, 1)])
@@ -84,6 +84,7 @@ class TableGrid:
         self.surrogate = surrogate
         self.spec = spec or GridSpec()
         self._nodes: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray]] = OrderedDict()
+        self._cells: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray] | None] = OrderedDict()
         self.nodes_computed = 0
 
     def _surrogate(self, meta: CameraMetadata, mode: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -97,7 +98,7 @@ class TableGrid:
                 a1[i], avar[i] = _mean_var(*approx[n])
         return a1, avar
 
-    def _node(self, key: CameraMetadata, meta: CameraMetadata, mode: str,
+    def _node(self, key: tuple, meta: CameraMetadata, mode: str,
               node: tuple[int, int, int]) -> tuple[tuple[str, ...], np.ndarray]:
         """(names, float64 (names, 4, G)) at a node, cached: E[n|v] minus the surrogate's, log variance
         minus the surrogate's, the variance itself and 1 where both variances are above the floor."""
@@ -123,22 +124,39 @@ class TableGrid:
             self._nodes.popitem(last=False)
         return entry
 
+    def _cell(self, meta: CameraMetadata, mode: str, base: tuple[int, int, int]
+              ) -> tuple[tuple[str, ...], np.ndarray] | None:
+        """(names, the 8 corner nodes stacked) of a lattice cell, None where a corner is out of range;
+        the last cells are kept (the conditions drift slowly: most frames stay in their cell)."""
+        key = static_key(meta)
+        ck = (key, mode, base)
+        if ck in self._cells:
+            self._cells.move_to_end(ck)
+            return self._cells[ck]
+        i, j, k = base
+        try:  # the extreme corners within the valid ranges (then all corners are)
+            self.spec.node_metadata(meta, (i, j, k))
+            self.spec.node_metadata(meta, (i + 1, j + 1, k + 1))
+        except MetadataError:
+            cell = None
+        else:
+            corners = [self._node(key, meta, mode, (i + a, j + b, k + c)) for a, b, c in _CORNERS]
+            cell = (corners[0][0], np.stack([c[1] for c in corners]))
+        self._cells[ck] = cell
+        while len(self._cells) > 16:
+            self._cells.popitem(last=False)
+        return cell
+
     def tables(self, meta: CameraMetadata, mode: str) -> Tables:
         """Tables for ``meta`` interpolated between the 8 surrounding nodes (exact outside the lattice)."""
         u = self.spec.coordinates(meta)
         base = np.floor(u).astype(np.int64)
         frac = u - base
-        i, j, k = (int(x) for x in base)
-        try:  # the lattice cell's extreme corners within the valid ranges (then all corners are)
-            self.spec.node_metadata(meta, (i, j, k))
-            self.spec.node_metadata(meta, (i + 1, j + 1, k + 1))
-        except MetadataError:  # e.g. an exposure above 600 s / e^0.35
+        cell = self._cell(meta, mode, (int(base[0]), int(base[1]), int(base[2])))
+        if cell is None:  # a corner beyond the valid ranges (e.g. an exposure above 600 s / e^0.35)
             return self.exact(meta, mode)
-        key = static_key(meta)
-        corners = [self._node(key, meta, mode, (i + a, j + b, k + c)) for a, b, c in _CORNERS]
+        names, stack = cell  # stack: (8, names, 4, G)
         weights = np.prod(np.where(_CORNERS == 1, frac, 1.0 - frac), axis=1)
-        names = corners[0][0]
-        stack = np.stack([c[1] for c in corners])  # (8, names, 4, G)
         d_m1, d_log, lin_var, _ = np.tensordot(weights, stack, axes=1).transpose(1, 0, 2)
         ok = stack[:, :, 3].min(axis=0) > 0.5
         a1, avar = self._surrogate(meta, mode, names) if self.surrogate else (0.0, 1.0)
