@@ -36,6 +36,7 @@ from msg_adapters import (
     metadata_from_temperature,
     prepare_frame,
 )
+from msg_adapters.debug_image import debug_view
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
 from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
@@ -146,6 +147,8 @@ class NoiseMonitorNode(Node):
         if p["temperature_topic"]:
             self.create_subscription(Temperature, p["temperature_topic"], self._on_temperature, relaxed)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._debug_pub = self.create_publisher(Image, f"{ns}/debug_image", 2)
+        self._last_debug_ns = -(1 << 62)
         self._diag_period_ns = self.runtime.diagnostics_period_ns
         self.create_timer(min(self._diag_period_ns / 1e9, 0.05), self._on_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
@@ -248,7 +251,23 @@ class NoiseMonitorNode(Node):
         frame = prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=metadata,
                               metadata_stamp_ns=m.metadata_stamp_ns, temperature_c=job.temperature_c,
                               geometry=self._geometry)
-        return self.runtime.process(frame, received_ns=m.received_ns)
+        result = self.runtime.process(frame, received_ns=m.received_ns)
+        self._publish_debug_image(frame.image_dn, result, m.image.header)
+        return result
+
+    def _publish_debug_image(self, image_dn: Any, result: FrameResult, header: Any) -> None:
+        """``~/debug_image`` at most at debug_image_rate_hz: the frame with its patches coloured by xi."""
+        rate = self.params["debug_image_rate_hz"]
+        now = self._now()
+        if rate <= 0 or not result.processed or result.patches is None or now - self._last_debug_ns < 1e9 / rate:
+            return
+        self._last_debug_ns = now
+        rgb = debug_view(image_dn, result.patches.corners, result.patches.size, result.patch_xi,
+                         self.monitor.config.xi_threshold_dn)
+        msg = Image(height=rgb.shape[0], width=rgb.shape[1], encoding="rgb8", step=rgb.shape[1] * 3,
+                    data=rgb.tobytes())
+        msg.header = header  # stamped with the image it shows
+        self._debug_pub.publish(msg)
 
     def _publish(self, messages: dict[str, Any], now_ns: int) -> None:
         for topic, msg in messages.items():

@@ -55,6 +55,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "sync_wait_s": (0.1, "an image waits this long for its metadata, then takes the latest older one"),
     "expected_rate_hz": (0.0, "the camera's frame rate, for an exact frames_lost count; 0 = inferred from stamp gaps"),
     "diagnostics_rate_hz": (1.0, "minimum /diagnostics rate, also without images (STALE)"),
+    "debug_image_rate_hz": (1.0, "~/debug_image (the frame with its patches outlined, coloured by their xi) at most "
+                                 "this often; 0 = off"),
     "physics_tables": ("interpolated", "physics tables per metadata set: interpolated over gain, exposure and "
                                        "temperature (metadata that changes every frame) or exact (recomputed per set)"),
 }
@@ -86,7 +88,8 @@ def check_parameters(p: Mapping[str, Any]) -> None:
     """Range checks of the runtime parameters (MonitorConfig checks its own)."""
     if p["color"] not in COLORS:
         raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
-    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth"):
+    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth",
+                 "debug_image_rate_hz"):
         if not p[name] >= 0 or not math.isfinite(p[name]):
             raise ValueError(f"parameter {name} must be a finite number >= 0, got {p[name]}")
     if p["bit_depth"] > 16:

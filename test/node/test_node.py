@@ -426,3 +426,22 @@ def test_hardware_id_from_the_drivers_serial(rig_factory):
     assert first.hardware_id == "SN-4711"
     fixed, _ = rig_factory("ser_fixed", hardware_id="left-front").step(0, hardware_id="SN-4712")
     assert fixed.hardware_id == "left-front"
+
+
+def test_debug_image_outlines_patches_coloured_by_xi(rig_factory):
+    from msg_adapters.debug_image import GREEN, RED
+
+    rig = rig_factory("dbg", debug_image_rate_hz=100.0)
+    got: list = []
+    rig.cam.create_subscription(Image, f"{rig.node.get_fully_qualified_name()}/debug_image", got.append, 10)
+    for i, extra in enumerate((0.0, 6.0)):
+        stamp, _ = rig.publish(i, extra_sigma=extra)
+        assert rig.spin_until(lambda: any(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == stamp for m in got),
+                              TIMEOUT_S), "no debug image for the frame"
+        msg = next(m for m in got if m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == stamp)
+        assert (msg.encoding, msg.height, msg.width) == ("rgb8", SIZE, SIZE)
+        rgb = np.frombuffer(bytes(msg.data), np.uint8).reshape(SIZE, SIZE, 3)
+        result = rig.node.monitor.last_result
+        colours = {tuple(rgb[y, x]) for y, x in result.patches.corners}
+        expected = GREEN if extra == 0.0 else RED  # clean: |xi| small; +N(0, 6 DN): xi << -1 DN
+        assert expected in colours, (colours, result.patch_xi)
