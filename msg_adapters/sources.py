@@ -29,7 +29,8 @@ PARAMETER_EVENTS_TOPIC = "/parameter_events"
 class MetadataSource:
     """A resolved metadata source. ``convert(msg)`` returns CameraMetadata fields (AdapterError on bad
     fields) or None for a message that does not concern this camera (another node's parameter event).
-    ``held``: values persist until changed (parameter events) instead of being paired with images by stamp.
+    ``held``: values persist until changed (parameter events, Basler's header-less CurrentParams) instead
+    of being paired with images by stamp.
     """
 
     name: str
@@ -75,7 +76,9 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
     if not topic:
         return None
     if source in SOURCE_TYPES:
-        return MetadataSource(source, message_class(source), topic, lambda m: metadata_from_vendor(m, profile))
+        # Basler's CurrentParams has no header: its values are held until the next one, not paired by stamp
+        return MetadataSource(source, message_class(source), topic, lambda m: metadata_from_vendor(m, profile),
+                              held=source == "basler")
     from diagnostic_msgs.msg import DiagnosticArray
 
     if source == "keymap":

@@ -120,7 +120,9 @@ class NoiseModel:
             total = self._gaussian_moments(adders, cond) if len(adders) > 1 else next(iter(own.values()), None)
             self._surrogate_last = (meta, own, total)
         _, own, total = self._surrogate_last
-        return {**own, "total": total} if mode == "joint" and total is not None else dict(own)
+        if mode == "sequential":
+            return _carried(own)
+        return {**own, "total": total} if total is not None else dict(own)
 
     def _gaussian_moments(self, effects: list[Effect], cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
         lam, s2, mixes = self._components(effects, _V_GRID, cond)
@@ -329,6 +331,27 @@ class NoiseModel:
         if noise is not None:
             out += noise
         return out
+
+
+#: Gauss-Hermite nodes and weights (probabilists') carrying the intermediate image of the sequential surrogate.
+_GH_Z, _GH_W = np.polynomial.hermite_e.hermegauss(9)
+_GH_W = _GH_W / _GH_W.sum()
+
+
+def _carried(own: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Sequential surrogates: each effect beyond the paper's chain gets its one-pass moments averaged over
+    the image the effects before it left (a clipped normal around the clean value with their summed
+    variance); the paper's sources keep their one-pass moments (measured closer for them)."""
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    prev_var = np.zeros_like(_V_GRID)
+    for name, (m1, m2) in own.items():
+        if name in PAPER_EFFECTS or not prev_var.any():
+            out[name] = (m1, m2)
+        else:
+            y = np.clip(_V_GRID[None, :] + np.sqrt(prev_var)[None, :] * _GH_Z[:, None], 0.0, DN_MAX)
+            out[name] = (_GH_W @ np.interp(y, _V_GRID, m1), _GH_W @ np.interp(y, _V_GRID, m2))
+        prev_var = prev_var + np.maximum(m2 - m1**2, 0.0)
+    return out
 
 
 def _compact(a) -> float | np.ndarray:
