@@ -6,7 +6,10 @@ Phase 2 (30 Hz camera): a publisher process sends frames + metadata at 30 Hz -> 
 frames dropped by the node (busy worker), latency p50/p95.
 
 Usage: .venv/bin/python bench/bench_node.py [--frames 40] [--seconds 15] [--rate 30] [--shm-segment-mb 16]
-                                           [--json out.json]
+                                           [--drift] [--json out.json]
+``--drift``: new metadata every frame, as a live driver reports it: the temperature rises by 0.013 degC
+per frame, auto-exposure moves the exposure +-20 % and auto-gain the gain +-1 dB (the physics tables are
+then interpolated, never recomputed per metadata set).
 Prints figures; asserts nothing. Fast DDS's default shared-memory segment (512 KiB) is smaller than a
 1280x1024 image, so such samples go over UDP fragments that a best-effort (sensor-data) subscription
 loses under CPU load; ``--shm-segment-mb`` writes a Fast DDS profile with a larger segment and uses it
@@ -41,7 +44,15 @@ def make_frames(n: int, seed: int = 0) -> list[np.ndarray]:
     return [np.clip(np.rint(model.simulate(clean, meta, rng)[0]), 0, 255).astype(np.uint8) for _ in range(n)]
 
 
-def messages(img: np.ndarray, stamp_ns: int):
+def dynamic(i: int, drift: bool) -> dict[str, float]:
+    """Metadata of frame i: fixed, or drifting every frame (temperature ramp, auto-exposure, auto-gain)."""
+    if not drift:
+        return DYNAMIC
+    return {"gain_db": DYNAMIC["gain_db"] + np.sin(i / 40.0), "sensor_temperature_c": DYNAMIC["sensor_temperature_c"] + 0.013 * i,
+            "exposure_time_s": DYNAMIC["exposure_time_s"] * (1.0 + 0.2 * np.sin(i / 15.0))}
+
+
+def messages(img: np.ndarray, stamp_ns: int, values: dict[str, float] = DYNAMIC):
     from builtin_interfaces.msg import Time
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from sensor_msgs.msg import Image
@@ -49,13 +60,14 @@ def messages(img: np.ndarray, stamp_ns: int):
     stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
     meta = DiagnosticArray()
     meta.header.stamp = stamp
-    meta.status = [DiagnosticStatus(name="bench camera", values=[KeyValue(key=k, value=repr(v)) for k, v in DYNAMIC.items()])]
+    meta.status = [DiagnosticStatus(name="bench camera", values=[KeyValue(key=k, value=repr(float(v))) for k, v in values.items()])]
     image = Image(height=img.shape[0], width=img.shape[1], encoding="mono8", step=img.shape[1], data=img.tobytes())
     image.header.stamp = stamp
     return image, meta
 
 
-def publisher_process(rate_hz: float, seconds: float, ready: mp.Event, go: mp.Event, sent: mp.Value) -> None:
+def publisher_process(rate_hz: float, seconds: float, ready: mp.Event, go: mp.Event, sent: mp.Value,
+                      drift: bool = False) -> None:
     """A separate process playing a camera at rate_hz (own GIL, like a real driver)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -73,7 +85,7 @@ def publisher_process(rate_hz: float, seconds: float, ready: mp.Event, go: mp.Ev
     start = time.monotonic()
     i = 0
     while time.monotonic() - start < seconds:
-        image, meta = messages(frames[i % len(frames)], time.time_ns())
+        image, meta = messages(frames[i % len(frames)], time.time_ns(), dynamic(i, drift))
         pub_meta.publish(meta)
         pub_img.publish(image)
         i += 1
@@ -119,6 +131,7 @@ def main() -> None:
     ap.add_argument("--weights", help="estimator checkpoint to benchmark instead of the bundled full_meta")
     ap.add_argument("--shm-segment-mb", type=int, default=None,
                     help="Fast DDS shared-memory segment size (0 = Fast DDS default); default: run both 0 and 16")
+    ap.add_argument("--drift", action="store_true", help="new metadata every frame (temperature, exposure, gain)")
     ap.add_argument("--json", help="write the figures to this JSON file")
     args = ap.parse_args()
     if args.shm_segment_mb is None:
@@ -140,6 +153,8 @@ def compare_transports(args: argparse.Namespace) -> None:
                    "--rate", str(args.rate), "--shm-segment-mb", str(mb), "--json", out.name]
             if args.weights:
                 cmd += ["--weights", args.weights]
+            if args.drift:
+                cmd.append("--drift")
             print(f"--- transport: {'Fast DDS default' if mb == 0 else f'shared memory, {mb} MiB segments'}", flush=True)
             subprocess.run(cmd, check=True)
             both["fastdds_default" if mb == 0 else f"shm_{mb}mb"] = json.loads(Path(out.name).read_text())
@@ -214,7 +229,7 @@ def run_once(args: argparse.Namespace) -> None:
         if i == 3:  # warm-up: first inference and table building
             lat, t_start = [], time.perf_counter()
         n0 = len(received)
-        image, meta = messages(frames[i % len(frames)], time.time_ns())
+        image, meta = messages(frames[i % len(frames)], time.time_ns(), dynamic(i, args.drift))
         pub_meta.publish(meta)
         pub_img.publish(image)
         if not spin_until(lambda: len(received) > n0, 30.0):
@@ -227,7 +242,7 @@ def run_once(args: argparse.Namespace) -> None:
     received.clear()
     spawn = mp.get_context("spawn")
     ready, go, sent = spawn.Event(), spawn.Event(), spawn.Value("i", 0)
-    proc = spawn.Process(target=publisher_process, args=(args.rate, args.seconds, ready, go, sent))
+    proc = spawn.Process(target=publisher_process, args=(args.rate, args.seconds, ready, go, sent, args.drift))
     proc.start()
     ready.wait(60)
     spin_until(lambda: False, 2.0)  # discovery
@@ -251,6 +266,7 @@ def run_once(args: argparse.Namespace) -> None:
         "frames_lost_before_node": node.monitor.counters["frames_lost"] - c0["frames_lost"],
         "frames_evaluated": len(received), "frames_dropped": node.monitor.counters["frames_dropped"] - c0["frames_dropped"],
         "live_latency_ms_p50": round(pct(live_lat, 50), 1), "live_latency_ms_p95": round(pct(live_lat, 95), 1),
+        "metadata": "new every frame (drift)" if args.drift else "fixed",
         "cpu_cores": os.cpu_count(), "shm_segment_mb": args.shm_segment_mb or "Fast DDS default",
     }
     width = max(map(len, figures))

@@ -9,6 +9,7 @@ from noise_monitor.monitor.runtime import FrameOptions
 from noise_monitor.physics import MetadataError
 
 from .camera_info import CameraGeometry
+from .compressed import decompress, is_compressed
 from .errors import AdapterError
 from .image import image_to_gray_dn
 from .metadata import resolve_metadata
@@ -33,6 +34,8 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
     try:
         if image_error:
             raise AdapterError(image_error)
+        if is_compressed(image_msg):  # lossless formats decoded, lossy ones refused with the reason
+            image_msg = decompress(image_msg)
         frame.image_dn = image_to_gray_dn(image_msg, bit_depth=options.bit_depth, color=options.color)
         if geometry is not None:
             geometry.check_image(int(image_msg.height), int(image_msg.width))

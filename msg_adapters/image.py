@@ -11,7 +11,9 @@ Reductions to one channel (the noise estimator works on gray images):
 - ``bayer_*8``/``bayer_*16``: one green site per 2x2 cell, giving a (H/2, W/2) image. No averaging of the
   two green sites (that would halve the noise variance and bias every estimate).
 
-``step`` row padding and ``is_bigendian`` (16-bit data) are honoured.
+``step`` row padding and ``is_bigendian`` (16-bit data) are honoured. A sensor_msgs/CompressedImage in a
+lossless format (PNG, TIFF, 16-bit compressedDepth PNG, zstd) is decoded first; lossy formats are refused
+(:mod:`msg_adapters.compressed`).
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from .compressed import decompress, is_compressed
 from .errors import AdapterError
 
 #: encoding -> (bytes per channel value, channels, layout)
@@ -70,8 +73,10 @@ def image_to_gray_dn(msg: Any, bit_depth: int | None = None, color: str = "luma"
     """Convert a sensor_msgs/Image (rclpy or rosbags) to float32 (H, W) gray DN in [0, 255].
 
     Raises :class:`AdapterError` with the reason for unsupported encodings, inconsistent sizes or
-    values beyond ``bit_depth``.
+    values beyond ``bit_depth``; a CompressedImage is decoded when lossless, else refused with the reason.
     """
+    if is_compressed(msg):
+        msg = decompress(msg)
     encoding = str(_field(msg, "encoding")).strip().lower()
     height, width, step = int(_field(msg, "height")), int(_field(msg, "width")), int(_field(msg, "step"))
     if encoding not in _ENCODINGS:

@@ -1,18 +1,31 @@
-"""Vendor per-frame metadata messages (camera drivers that publish exposure/gain on their own topic).
+"""Camera drivers' per-frame metadata messages -> CameraMetadata fields in SI units.
 
-``VENDOR_TYPES`` holds the message definitions so that rosbags can deserialise bags recorded with these
-drivers without their packages installed (:func:`register_vendor_types`); :func:`metadata_from_vendor`
-converts such a message (rclpy or rosbags) to CameraMetadata fields in SI units.
+``VENDOR_TYPES`` holds the drivers' message definitions (copied read-only from the drivers' .msg files) so
+that rosbags can deserialise bags recorded with these drivers without their packages installed
+(:func:`register_vendor_types`); :func:`metadata_from_vendor` converts such a message (rclpy or rosbags).
+
+- FLIR ``spinnaker_camera_driver`` (ros-drivers/flir_camera_driver): ``flir_camera_msgs/msg/ImageMetaData``,
+  exposure_time in microseconds, gain in dB.
+- Basler ``pylon_ros2_camera`` (basler/pylon-ros-camera): ``pylon_ros2_camera_interfaces/msg/CurrentParams``,
+  no header (stamped by arrival / bag log time), exposure in microseconds, gain normalised 0..1 over the
+  camera's gain range (mapped to dB through the profile's ``gain_range_db``), temperature in degC
+  (0.0 = not available); -10000/-20000 mean "not available"/"error".
+- Intel RealSense (IntelRealSense/realsense-ros): ``realsense2_camera_msgs/msg/Metadata``, a JSON object
+  with librealsense's frame metadata: ``actual_exposure`` in microseconds, ``gain_level`` in the sensor's
+  relative gain units (mapped to dB through the profile's ``gain_range_db`` over ``driver_gain_range``).
+
+A field a driver does not report comes from the camera profile; a reported field that is missing,
+non-numeric or out of range raises :class:`AdapterError` naming the field and value.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+import json
+import math
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from .errors import AdapterError
-from .metadata import metadata_from_mapping
 
-#: FLIR Spinnaker driver (ros-drivers/flir_camera_driver): exposure_time in microseconds, gain in dB.
 FLIR_IMAGE_METADATA = """\
 std_msgs/Header header
 uint64 camera_time
@@ -22,16 +35,155 @@ uint32 max_exposure_time
 float32 gain
 """
 
-VENDOR_TYPES: dict[str, str] = {"flir_camera_msgs/msg/ImageMetaData": FLIR_IMAGE_METADATA}
+BASLER_CURRENT_PARAMS = """\
+uint32 offset_x
+uint32 offset_y
+bool reverse_x
+bool reverse_y
+int32 black_level
+int32 pgi_mode
+int32 demosaicing_mode
+float32 noise_reduction
+float32 sharpness_enhancement
+int32 light_source_preset
+int32 balance_white_auto
+int32 sensor_readout_mode
+int32 acquisition_frame_count
+int32 trigger_selector
+int32 trigger_mode
+int32 trigger_source
+int32 trigger_activation
+float32 trigger_delay
+int32 user_set_selector
+int32 user_set_default_selector
+bool is_sleeping
+float32 brightness
+float32 exposure
+float32 gain
+float32 gamma
+uint32 binning_x
+uint32 binning_y
+float32 temperature
+int32 max_num_buffer
+sensor_msgs/RegionOfInterest roi
+string[] available_image_encoding
+string current_image_encoding
+string current_image_ros_encoding
+string ptp_status
+string ptp_servo_status
+int64 ptp_offset
+float32 depth_min
+float32 depth_max
+int32 operating_mode
+int32 hdr_mode
+int32 fast_mode
+int32 spatial_filter
+int32 temporal_filter
+int32 outlier_removal
+int32 ambiguity_filter
+float32 confidence_threshold
+int32 projector_enable
+int32 projector_level
+int32 depth_preset
+int32 illumination_mode
+int32 depth_quality
+int32 static_scene
+bool success
+string message
+"""
+
+REALSENSE_METADATA = """\
+std_msgs/Header header
+string json_data
+"""
+
+FLIR = "flir_camera_msgs/msg/ImageMetaData"
+BASLER = "pylon_ros2_camera_interfaces/msg/CurrentParams"
+REALSENSE = "realsense2_camera_msgs/msg/Metadata"
+VENDOR_TYPES: dict[str, str] = {FLIR: FLIR_IMAGE_METADATA, BASLER: BASLER_CURRENT_PARAMS, REALSENSE: REALSENSE_METADATA}
+#: metadata_source name -> message type (the ROS package must be importable for a live subscription)
+SOURCE_TYPES: dict[str, str] = {"flir": FLIR, "basler": BASLER, "realsense": REALSENSE}
+_BASLER_UNAVAILABLE = (-10000.0, -20000.0)
 
 
-def _flir(msg: Any) -> dict[str, float | str]:
-    return metadata_from_mapping({"exposure_time_us": msg.exposure_time, "gain_db": msg.gain})
+def _num(field: str, value: Any, unit: str) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise AdapterError(f"driver metadata {field} = {value!r} is not a number ({unit})") from None
+    if not math.isfinite(out):
+        raise AdapterError(f"driver metadata {field} = {value!r} is not finite ({unit})")
+    return out
 
 
-_CONVERTERS: dict[str, Callable[[Any], dict[str, float | str]]] = {
-    "flir_camera_msgs/msg/ImageMetaData": _flir,
-}
+def _exposure_us(field: str, value: Any) -> float:
+    us = _num(field, value, "us")
+    if us <= 0:
+        raise AdapterError(f"driver metadata {field} = {us:g} us is not a valid exposure time (must be > 0)")
+    return us * 1e-6
+
+
+def map_gain(field: str, value: Any, gain_range_db: Sequence[float] | None,
+             driver_range: Sequence[float] = (0.0, 1.0)) -> float:
+    """A driver's relative gain (``driver_range``, default normalised 0..1) -> dB over the profile's gain range."""
+    x = _num(field, value, f"relative gain {driver_range[0]:g}..{driver_range[1]:g}")
+    if gain_range_db is None:
+        raise AdapterError(f"driver metadata {field} = {x:g} is a relative gain: the camera profile needs "
+                           "gain_range_db: [min_db, max_db] to convert it to dB")
+    lo, hi = driver_range
+    if not lo <= x <= hi:
+        raise AdapterError(f"driver metadata {field} = {x:g} is outside the driver's gain range [{lo:g}, {hi:g}]")
+    return gain_range_db[0] + (x - lo) / (hi - lo) * (gain_range_db[1] - gain_range_db[0])
+
+
+def _flir(msg: Any, profile: Any) -> dict[str, float | str]:
+    return {"exposure_time_s": _exposure_us("exposure_time", msg.exposure_time),
+            "gain_db": _num("gain", msg.gain, "dB")}
+
+
+def _basler(msg: Any, profile: Any) -> dict[str, float | str]:
+    if not bool(getattr(msg, "success", True)):
+        raise AdapterError(f"driver metadata success = false ({str(getattr(msg, 'message', '')) or 'no message'})")
+    out: dict[str, float | str] = {}
+    for field in ("exposure", "gain", "temperature"):
+        value = _num(field, getattr(msg, field), "driver units")
+        if value in _BASLER_UNAVAILABLE:
+            raise AdapterError(f"driver metadata {field} = {value:g} ("
+                               f"{'not available' if value == -10000.0 else 'error'} in the driver)")
+    out["exposure_time_s"] = _exposure_us("exposure", msg.exposure)
+    out["gain_db"] = map_gain("gain", msg.gain, _gain_range(profile))
+    if float(msg.temperature) != 0.0:  # 0.0: the camera does not report it
+        out["sensor_temperature_c"] = _num("temperature", msg.temperature, "degC")
+    return out
+
+
+def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
+    try:
+        data = json.loads(str(msg.json_data))
+    except json.JSONDecodeError as exc:
+        raise AdapterError(f"driver metadata json_data is not JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise AdapterError("driver metadata json_data is not a JSON object")
+    out: dict[str, float | str] = {}
+    if "actual_exposure" in data:
+        out["exposure_time_s"] = _exposure_us("actual_exposure", data["actual_exposure"])
+    if "gain_level" in data:
+        out["gain_db"] = map_gain("gain_level", data["gain_level"], _gain_range(profile), _driver_range(profile))
+    if not out:
+        raise AdapterError("driver metadata json_data has neither actual_exposure nor gain_level "
+                           f"(keys: {', '.join(sorted(data)) or 'none'})")
+    return out
+
+
+def _gain_range(profile: Any) -> Sequence[float] | None:
+    return getattr(profile, "gain_range_db", None)
+
+
+def _driver_range(profile: Any) -> Sequence[float]:
+    return getattr(profile, "driver_gain_range", None) or (0.0, 1.0)
+
+
+_CONVERTERS: dict[str, Callable[[Any, Any], dict[str, float | str]]] = {FLIR: _flir, BASLER: _basler, REALSENSE: _realsense}
 
 
 def message_type_name(msg: Any) -> str:
@@ -43,8 +195,9 @@ def message_type_name(msg: Any) -> str:
     return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 
-def metadata_from_vendor(msg: Any) -> dict[str, float | str]:
-    """CameraMetadata fields from a registered vendor metadata message."""
+def metadata_from_vendor(msg: Any, profile: Any = None) -> dict[str, float | str]:
+    """CameraMetadata fields from a supported driver metadata message (``profile``: a CameraProfile, for
+    drivers that report a relative gain)."""
     name = message_type_name(msg)
     try:
         convert = _CONVERTERS[name]
@@ -52,7 +205,20 @@ def metadata_from_vendor(msg: Any) -> dict[str, float | str]:
         raise AdapterError(
             f"no metadata adapter for {name}; supported vendor types: {', '.join(sorted(_CONVERTERS))}"
         ) from None
-    return convert(msg)
+    return convert(msg, profile)
+
+
+def message_class(source: str) -> Any:
+    """The rclpy message class of a driver ``metadata_source``; AdapterError naming the ROS package to
+    install when it is not importable."""
+    import importlib
+
+    pkg, _, cls = SOURCE_TYPES[source].split("/")
+    try:
+        return getattr(importlib.import_module(f"{pkg}.msg"), cls)
+    except (ImportError, AttributeError) as exc:
+        raise AdapterError(f"metadata_source {source} subscribes to {SOURCE_TYPES[source]}: install the ROS "
+                           f"package {pkg} (not importable: {exc})") from None
 
 
 def register_vendor_types(typestore: Any) -> None:

@@ -22,21 +22,23 @@ from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image, Temperature
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Temperature
 from std_msgs.msg import Float32
 
 from msg_adapters import (
     AdapterError,
     CameraGeometry,
     camera_geometry,
-    metadata_from_diagnostics,
     metadata_from_temperature,
     prepare_frame,
 )
+from msg_adapters.debug_image import debug_view
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
+from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
 from noise_monitor.monitor.runtime import MonitorRuntime, coerce, parameter_table
 
@@ -109,11 +111,17 @@ class NoiseMonitorNode(Node):
         for name, (default, description) in parameter_table().items():
             desc = ParameterDescriptor(description=description, dynamic_typing=True)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
+        source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],
+                       "driver_node": p["metadata_driver_node"], "driver": p["metadata_driver"]}
+        resolve_source(**source_args)  # a bad source, key map or missing driver package: fail before loading
         self.runtime = MonitorRuntime(p, estimator=estimator)
         self.params = p = self.runtime.params
         self.profile = self.runtime.profile
         self.monitor = self.runtime.monitor
-        wait = p["sync_wait_s"] if p["metadata_topic"] else 0.0
+        self.metadata_source = resolve_source(**source_args, profile=self.profile)
+        self._held: dict | str = {}  # latest values of a held source (parameter events)
+        paired = self.metadata_source is not None and not self.metadata_source.held
+        wait = p["sync_wait_s"] if paired else 0.0
         self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
         self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
         self._temperature_c: float | None = None
@@ -127,14 +135,20 @@ class NoiseMonitorNode(Node):
         self._pubs = {DIAGNOSTICS_TOPIC: self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)}
         self._pubs.update({t: self.create_publisher(Float32, t, 10) for t in output_topics(ns) if t != DIAGNOSTICS_TOPIC})
         self.namespace_out = ns
-        self.create_subscription(Image, p["image_topic"], self._on_image, qos_profile_sensor_data)
+        image_type = CompressedImage if p["image_transport"] == "compressed" else Image
+        self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
-        if p["metadata_topic"]:
-            self.create_subscription(DiagnosticArray, p["metadata_topic"], self._on_metadata, relaxed)
+        src = self.metadata_source
+        if src is not None:
+            qos = QoSProfile(depth=100) if src.held else relaxed  # parameter events are reliable
+            self.create_subscription(src.msg_type, src.topic, self._on_metadata, qos)
         if p["camera_info_topic"]:
             self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, relaxed)
         if p["temperature_topic"]:
             self.create_subscription(Temperature, p["temperature_topic"], self._on_temperature, relaxed)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._debug_pub = self.create_publisher(Image, f"{ns}/debug_image", 2)
+        self._last_debug_ns = -(1 << 62)
         self._diag_period_ns = self.runtime.diagnostics_period_ns
         self.create_timer(min(self._diag_period_ns / 1e9, 0.05), self._on_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
@@ -143,6 +157,20 @@ class NoiseMonitorNode(Node):
             f"monitoring {p['image_topic']} with {est.name} (patch {self.monitor.patch_size}, "
             f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics and {ns}/<sigma_*|xi*>"
         )
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """``ros2 param set``: thresholds and alarm settings change at run time (validated, the alarm keeps
+        its state); every other parameter is read-only while the node runs. Rejections carry the reason."""
+        table = parameter_table()  # others (use_sim_time) are rclpy's own
+        try:
+            changes = {p.name: coerce(p.name, p.value, table[p.name][0]) for p in params if p.name in table}
+            cfg = self.monitor.reconfigure(**changes)
+        except ValueError as exc:
+            self.get_logger().warning(f"parameter change rejected: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.params.update(changes)
+        self.get_logger().info(f"parameters changed: {', '.join(f'{k}={getattr(cfg, k)}' for k in changes)}")
+        return SetParametersResult(successful=True)
 
     # --- inputs (executor thread) --------------------------------------------------------
     def _now(self) -> int:
@@ -155,11 +183,21 @@ class NoiseMonitorNode(Node):
             self._enqueue(matched)
 
     def _on_metadata(self, msg: Any) -> None:
+        assert self.metadata_source is not None
         try:
-            values: dict | str = metadata_from_diagnostics(msg)
+            values: dict | str | None = self.metadata_source.convert(msg)
         except AdapterError as exc:
             values = str(exc)  # the frames it belongs to report the problem
-        for matched in self.sync.add_metadata(_stamp_ns(msg), values):
+        if values is None:  # not this camera's (another node's parameter event)
+            return
+        serial = None if self.params["hardware_id"] else self.metadata_source.hardware_id(msg)
+        if serial and serial != self.monitor.hardware_id:
+            self.monitor.hardware_id = serial  # the driver's device id: two cameras of one model stay apart
+        if self.metadata_source.held:
+            self._held = values
+            return
+        stamp = _stamp_ns(msg) if hasattr(msg, "header") else self._now()  # Basler: no header
+        for matched in self.sync.add_metadata(stamp, values):
             self._enqueue(matched)
 
     def _on_camera_info(self, msg: Any) -> None:
@@ -205,10 +243,31 @@ class NoiseMonitorNode(Node):
 
     def _evaluate(self, job: _Job) -> FrameResult:
         m = job.matched
-        frame = prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=m.metadata,
+        held, metadata = self._held, m.metadata
+        if isinstance(held, str) and not isinstance(metadata, str):
+            metadata = held  # the driver's parameters could not be read
+        elif isinstance(held, dict) and held and not isinstance(metadata, (str, Exception)):
+            metadata = {**held, **(metadata or {})}
+        frame = prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=metadata,
                               metadata_stamp_ns=m.metadata_stamp_ns, temperature_c=job.temperature_c,
                               geometry=self._geometry)
-        return self.runtime.process(frame, received_ns=m.received_ns)
+        result = self.runtime.process(frame, received_ns=m.received_ns)
+        self._publish_debug_image(frame.image_dn, result, m.image.header)
+        return result
+
+    def _publish_debug_image(self, image_dn: Any, result: FrameResult, header: Any) -> None:
+        """``~/debug_image`` at most at debug_image_rate_hz: the frame with its patches coloured by xi."""
+        rate = self.params["debug_image_rate_hz"]
+        now = self._now()
+        if rate <= 0 or not result.processed or result.patches is None or now - self._last_debug_ns < 1e9 / rate:
+            return
+        self._last_debug_ns = now
+        rgb = debug_view(image_dn, result.patches.corners, result.patches.size, result.patch_xi,
+                         self.monitor.config.xi_threshold_dn)
+        msg = Image(height=rgb.shape[0], width=rgb.shape[1], encoding="rgb8", step=rgb.shape[1] * 3,
+                    data=rgb.tobytes())
+        msg.header = header  # stamped with the image it shows
+        self._debug_pub.publish(msg)
 
     def _publish(self, messages: dict[str, Any], now_ns: int) -> None:
         for topic, msg in messages.items():

@@ -1,13 +1,15 @@
 """Read camera bags (rosbag2 MCAP or sqlite3 directories, bare .mcap/.db3 files) into monitor frames.
 
-Topics are found by message type unless given: the image topic (sensor_msgs/msg/Image), the metadata
+Topics are found by message type unless given: the image topic (sensor_msgs/msg/Image; a
+sensor_msgs/msg/CompressedImage topic when the bag has no raw one: lossless PNG/zstd frames are decoded,
+lossy ones skipped with the reason), the metadata
 topic (a DiagnosticArray, a known vendor metadata type, or any type with fields named like
 CameraMetadata fields), CameraInfo and Temperature. Message definitions stored in the bag are
 registered (rosbags typesys), so vendor types deserialise without their packages installed.
 """
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,6 +19,7 @@ from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, get_typestore
 
 from msg_adapters import AdapterError, camera_geometry, prepare_frame
+from msg_adapters.keymap import KeyMapEntry, metadata_from_keymap, parse_keymap
 from msg_adapters.metadata import (
     ALIASES,
     KNOWN_FIELDS,
@@ -33,6 +36,7 @@ from noise_monitor.physics import CameraProfile, load_profile
 from .errors import BagError
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
+COMPRESSED_TYPE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
@@ -108,8 +112,8 @@ class BagReader:
         return sorted(t for t, m in self.topics.items() if m == msgtype)
 
     def _image_candidates(self) -> list[str]:
-        imgs = self._typed(IMAGE_TYPE)
-        raw = [t for t in imgs if t.endswith("image_raw")]
+        imgs = self._typed(IMAGE_TYPE) or self._typed(COMPRESSED_TYPE)
+        raw = [t for t in imgs if t.endswith("image_raw") or t.endswith("image_raw/compressed")]
         return raw if len(raw) == 1 else imgs
 
     def _metadata_candidates(self) -> list[str]:
@@ -139,11 +143,8 @@ class BagReader:
             raise BagError(f"several {role} topics in bag {self.path}: {', '.join(candidates)}; "
                            f"choose one with --{role.replace('_', '-')}-topic")
         if not candidates and required:
-            hint = ""
-            if any(m == "sensor_msgs/msg/CompressedImage" for m in self.topics.values()):
-                hint = (" (sensor_msgs/CompressedImage is not supported: lossy compression changes the noise "
-                        "being measured; record the raw image topic)")
-            raise BagError(f"no {role} topic ({IMAGE_TYPE}) in bag {self.path}{hint}; topics: {self._listing()}")
+            raise BagError(f"no {role} topic ({IMAGE_TYPE} or {COMPRESSED_TYPE}) in bag {self.path}; "
+                           f"topics: {self._listing()}")
         return candidates[0] if candidates else None
 
     def _listing(self) -> str:
@@ -214,12 +215,13 @@ class BagReader:
     def message_count(self) -> int:
         return int(self._reader.message_count)
 
-    def _metadata_of(self, msg: Any) -> dict[str, Any]:
+    def _metadata_of(self, msg: Any, profile: CameraProfile | None = None,
+                     keymap: Sequence[KeyMapEntry] | None = None) -> dict[str, Any]:
         mtype = getattr(msg, "__msgtype__", "")
         if mtype == DIAGNOSTIC_TYPE:
-            return metadata_from_diagnostics(msg)
+            return metadata_from_keymap(msg, keymap, profile) if keymap else metadata_from_diagnostics(msg)
         if mtype in VENDOR_TYPES:
-            return metadata_from_vendor(msg)
+            return metadata_from_vendor(msg, profile)
         return metadata_from_mapping({k: getattr(msg, k) for k in _METADATA_NAMES if hasattr(msg, k)})
 
     def _timeline(self, topic: str | None, convert) -> tuple[list[int], list[Any]]:
@@ -240,7 +242,8 @@ class BagReader:
 
     # --- frames ----------------------------------------------------------------------------------
     def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None,
-               sync_tolerance_s: float = 0.01, color: str = "luma") -> Iterator[Frame]:
+               sync_tolerance_s: float = 0.01, color: str = "luma",
+               metadata_keymap: Sequence[str] | None = None) -> Iterator[Frame]:
         """Yield every image as a :class:`Frame` in log-time order, prepared as the node prepares it
         (``msg_adapters.prepare_frame``).
 
@@ -248,11 +251,15 @@ class BagReader:
         message nearest the image stamp within ``sync_tolerance_s``, else the latest older one); it is merged
         over ``profile`` (dynamic values win) and the Temperature matched the same way. Unusable
         CameraInfo/Temperature messages are ignored. ``Frame.skip_reason`` says why a frame cannot be
-        evaluated (``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``).
+        evaluated (``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``). Driver
+        metadata messages (:mod:`msg_adapters.vendor`) are converted with the profile (relative gains);
+        ``metadata_keymap`` (``STATUS|KEY|FIELD|UNIT[|SCALE]`` entries) reads a DiagnosticArray of a
+        driver's own key names (:mod:`msg_adapters.keymap`; a bad entry is a ValueError).
         """
         prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
         options = FrameOptions(prof, bit_depth or (prof.bit_depth if prof else None), color)
-        meta_t, meta_v = self._timeline(self.metadata_topic, self._metadata_of)
+        keymap = parse_keymap(metadata_keymap) if metadata_keymap else None
+        meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap))
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
         info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
         tol = int(sync_tolerance_s * 1e9)

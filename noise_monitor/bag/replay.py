@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from msg_adapters.keymap import keymap_entries
 from msg_adapters.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
 from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
 from noise_monitor.monitor.runtime import MonitorRuntime
@@ -90,6 +91,7 @@ def replay(
     threads: int | None = None,
     progress: bool = True,
     plot: bool = True,
+    physics_tables: str | None = None,
 ) -> dict[str, Any]:
     """Run the monitor over every image of ``bag``; returns the JSON summary (and writes outputs).
 
@@ -99,9 +101,12 @@ def replay(
     other parameters then take their defaults). ``estimator``: an object honouring the estimator contract
     (default: ``noise_monitor.estimator.load(model_name, device)``). ``threads``: torch CPU threads as the
     node sets them (0 = all cores but one; more threads than free cores slow inference down several-fold).
+    ``physics_tables``: ``interpolated`` (default) or ``exact`` tables per metadata set (for comparisons).
+    The params' ``metadata_keymap`` reads a DiagnosticArray with a driver's own key names.
     """
     overrides = {"model": model_name, "weights": str(weights) if weights else None, "device": device,
-                 "camera_name": camera_name, "hardware_id": hardware_id, "bit_depth": bit_depth, "threads": threads}
+                 "camera_name": camera_name, "hardware_id": hardware_id, "bit_depth": bit_depth, "threads": threads,
+                 "physics_tables": physics_tables}
     out = Path(out_dir) if out_dir is not None else None
     mcap_path = out / OUTPUT_FILES["mcap"] if out is not None else None
     table = FrameTable()
@@ -128,7 +133,7 @@ def replay(
                   "camera_info": reader.camera_info_topic, "temperature": reader.temperature_topic}
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
-                               color=opts.color)
+                               color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
         last_pub: int | None = None
         last_log = 0
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):

@@ -5,6 +5,7 @@ exponential filter -> xi alarm state machine -> StatusReport / numeric outputs.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -24,6 +25,10 @@ from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
 from .temporal import TemporalMeasurement, TemporalNoise
+
+#: MonitorConfig fields that may change while the monitor runs (thresholds, alarm and filter settings).
+RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "clear_min_frames", "filter_alpha",
+                    "alarm_level")
 
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
 
@@ -66,6 +71,7 @@ class FrameResult:
     alarm_state: str = "ok"
     cause: str | None = None
     patches: PatchSelection | None = None
+    patch_xi: list[float] = field(default_factory=list)  # this frame's xi per patch (same source as ``xi``)
     processing_ms: float = 0.0
     counters: dict[str, int] = field(default_factory=dict)
 
@@ -130,13 +136,27 @@ class Monitor:
         self.temporal = TemporalNoise(config.temporal_frames, config.temporal_min_frames)
         # frame differences hold the temporal noise only: compare them with the model's temporal effects
         fixed = [e for e in model.effects if not e.temporal]
-        self.temporal_model = NoiseModel([e for e in model.effects if e.temporal]) if fixed else model
+        self.temporal_model = NoiseModel([e for e in model.effects if e.temporal], interpolate=model.interpolate) if fixed else model
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames)
         self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
                          "frames_lost": 0}
         self.last_received_ns: int | None = None
         self.last_result: FrameResult | None = None
+
+    def reconfigure(self, **changes: Any) -> MonitorConfig:
+        """Change settings of :data:`RUNTIME_SETTABLE` at run time, validated as a whole by MonitorConfig
+        (ValueError with the reason); the alarm and the filter keep their state."""
+        fixed = sorted(set(changes) - set(RUNTIME_SETTABLE))
+        if fixed:
+            raise ValueError(f"{', '.join(fixed)} cannot change at run time (settable: {', '.join(RUNTIME_SETTABLE)})")
+        cfg = dataclasses.replace(self.config, **changes)
+        self.config = cfg
+        self.filter.alpha = cfg.filter_alpha
+        self.alarm.threshold = cfg.xi_threshold_dn
+        self.alarm.clear_level = cfg.xi_threshold_dn - cfg.xi_hysteresis_dn
+        self.alarm.min_frames, self.alarm.clear_frames = cfg.alarm_min_frames, cfg.clear_min_frames
+        return cfg
 
     # --- bookkeeping -----------------------------------------------------------------------
     def count_dropped(self, n: int = 1) -> None:
@@ -221,6 +241,7 @@ class Monitor:
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
+        patch_xi = per_patch["xi"] if self.xi_source == "estimator" else model_pp["total"] - image_pp
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")
         state = self.alarm.update(xi_f)
@@ -230,7 +251,8 @@ class Monitor:
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
-            cause=state.cause, patches=selection, processing_ms=(time.perf_counter() - t0) * 1e3,
+            cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],
+            processing_ms=(time.perf_counter() - t0) * 1e3,
         )
 
     def _xi_temporal(self, tm: TemporalMeasurement, meta: CameraMetadata,

@@ -26,11 +26,23 @@ COLORS = ("luma", "green")
 #: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
 RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS)"),
-    "metadata_topic": ("metadata", "diagnostic_msgs/DiagnosticArray with CameraMetadata key/values; '' = none"),
+    "image_transport": ("raw", "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on image_topic: "
+                               "lossless PNG/TIFF/zstd decoded, lossy formats refused as skipped frames)"),
+    "metadata_topic": ("metadata", "per-frame metadata (type per metadata_source); '' = none"),
+    "metadata_source": ("diagnostics", "diagnostics (DiagnosticArray with CameraMetadata key names), keymap "
+                                       "(DiagnosticArray through metadata_keymap), flir, basler, realsense (the driver's "
+                                       "metadata message; its ROS package must be importable) or parameters (the "
+                                       "driver node's /parameter_events)"),
+    "metadata_keymap": ("", "key map 'STATUS|KEY|FIELD|UNIT[|SCALE]; ...' (FIELD: exposure_time_s, gain_db, "
+                            "sensor_temperature_c; UNIT: s ms us 100us ns, dB factor relative, degC K)"),
+    "metadata_driver_node": ("", "metadata_source parameters: the driver node's fully qualified name"),
+    "metadata_driver": ("v4l2_camera", "metadata_source parameters: parameter names of v4l2_camera or usb_cam "
+                                       "(metadata_keymap overrides)"),
     "camera_info_topic": ("camera_info", "sensor_msgs/CameraInfo (image size/binning/ROI check); '' = none"),
     "temperature_topic": ("", "sensor_msgs/Temperature with the sensor temperature in degC; '' = none"),
     "camera_name": ("camera", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'"),
-    "hardware_id": ("", "diagnostic hardware_id; '' = '<profile name>/<camera_name>'"),
+    "hardware_id": ("", "diagnostic hardware_id; '' = the driver's (its metadata status's hardware_id, e.g. the "
+                        "serial), else '<profile name>/<camera_name>'"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
     "color": ("luma", "reduction of colour images to gray: luma or green"),
@@ -43,7 +55,12 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "sync_wait_s": (0.1, "an image waits this long for its metadata, then takes the latest older one"),
     "expected_rate_hz": (0.0, "the camera's frame rate, for an exact frames_lost count; 0 = inferred from stamp gaps"),
     "diagnostics_rate_hz": (1.0, "minimum /diagnostics rate, also without images (STALE)"),
+    "debug_image_rate_hz": (1.0, "~/debug_image (the frame with its patches outlined, coloured by their xi) at most "
+                                 "this often; 0 = off"),
+    "physics_tables": ("interpolated", "physics tables per metadata set: interpolated over gain, exposure and "
+                                       "temperature (metadata that changes every frame) or exact (recomputed per set)"),
 }
+PHYSICS_TABLES = ("interpolated", "exact")
 #: Largest accepted diagnostics_rate_hz (a timer faster than this only burns CPU).
 MAX_DIAGNOSTICS_RATE_HZ = 1000.0
 
@@ -71,7 +88,8 @@ def check_parameters(p: Mapping[str, Any]) -> None:
     """Range checks of the runtime parameters (MonitorConfig checks its own)."""
     if p["color"] not in COLORS:
         raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
-    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth"):
+    for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth",
+                 "debug_image_rate_hz"):
         if not p[name] >= 0 or not math.isfinite(p[name]):
             raise ValueError(f"parameter {name} must be a finite number >= 0, got {p[name]}")
     if p["bit_depth"] > 16:
@@ -81,6 +99,10 @@ def check_parameters(p: Mapping[str, Any]) -> None:
                          f"got {p['diagnostics_rate_hz']}")
     if not p["image_topic"]:
         raise ValueError("parameter image_topic must not be empty")
+    if p["image_transport"] not in ("raw", "compressed"):
+        raise ValueError(f"parameter image_transport must be raw or compressed, got {p['image_transport']!r}")
+    if p["physics_tables"] not in PHYSICS_TABLES:
+        raise ValueError(f"parameter physics_tables must be interpolated or exact, got {p['physics_tables']!r}")
 
 
 def resolve_parameters(values: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -137,7 +159,8 @@ class MonitorRuntime:
         else:
             name = profile or p["profile"]
             self.profile = load_profile(name) if name else None
-        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None)
+        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None,
+                                         interpolate=p["physics_tables"] == "interpolated")
         threads = inference_threads(p["threads"])
         if "torch" in sys.modules or p["device"] != "cpu":  # torch runs (or will run) inference
             set_inference_threads(threads)

@@ -216,6 +216,10 @@ class CameraProfile:
     name: str
     values: Mapping[str, Any]
     effects: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    #: the camera's gain range in dB, for drivers that report a relative gain (Basler: 0..1)
+    gain_range_db: tuple[float, float] | None = None
+    #: the range of such a driver's relative gain number (default 0..1), mapped linearly onto gain_range_db
+    driver_gain_range: tuple[float, float] | None = None
 
     def metadata(self, **dynamic: Any) -> CameraMetadata:
         """CameraMetadata from the profile, with dynamic (or any) fields overridden by ``dynamic``."""
@@ -230,6 +234,9 @@ class CameraProfile:
         doc: dict[str, Any] = {"name": self.name, **dict(self.values)}
         if self.effects:
             doc["effects"] = {k: dict(v) for k, v in self.effects.items()}
+        for key in ("gain_range_db", "driver_gain_range"):
+            if getattr(self, key) is not None:
+                doc[key] = list(getattr(self, key))
         return yaml.safe_dump(doc, sort_keys=False)
 
 
@@ -252,10 +259,12 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
     doc = dict(doc)
     name = str(doc.pop("name", Path(source).stem))
     effects_spec = doc.pop("effects", None) or {}
+    ranges = {key: _range(source, key, doc.pop(key)) for key in ("gain_range_db", "driver_gain_range") if key in doc}
     known = set(NUMERIC_FIELDS) | {"sensor_type", "bit_depth"}
     unknown = sorted(set(doc) - known)
     if unknown:
-        raise MetadataError(f"{source}: unknown key(s) {', '.join(unknown)}; allowed: name, effects, {', '.join(sorted(known))}")
+        raise MetadataError(f"{source}: unknown key(s) {', '.join(unknown)}; allowed: name, effects, gain_range_db, "
+                            f"driver_gain_range, {', '.join(sorted(known))}")
     # validate present values by building a metadata object with placeholder values for missing fields
     placeholder: dict[str, Any] = {n: PAPER_RANGES[n][0] if n != "pixel_clock_hz" else 1e7 for n in NUMERIC_FIELDS}
     placeholder["sensor_type"] = "ccd"
@@ -271,7 +280,18 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
         effects = {str(k): dict(v or {}) for k, v in effects_spec.items()}
     else:
         raise MetadataError(f"{source}: 'effects' must be a list of names or a mapping name -> parameters")
-    return CameraProfile(name=name, values=doc, effects=effects)
+    return CameraProfile(name=name, values=doc, effects=effects, **ranges)
+
+
+def _range(source: str, key: str, value: Any) -> tuple[float, float]:
+    """A [low, high] pair of finite numbers with low < high."""
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise MetadataError(f"{source}: {key} must be a list [low, high] of two numbers, got {value!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise MetadataError(f"{source}: {key} must be [low, high] with finite low < high, got {value!r}")
+    return lo, hi
 
 
 # --- samplers -----------------------------------------------------------------------------------

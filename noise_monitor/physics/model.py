@@ -11,6 +11,7 @@ from .effects import PAPER_EFFECTS, Effect, EffectError, build_effects, make_eff
 from .metadata import CameraMetadata
 from .sampling import standard_normal
 from .sensor import Conditions
+from .table_grid import GridSpec, TableGrid
 
 #: Intensity grid of the analytic tables (DN); predictions interpolate linearly between nodes.
 TABLE_STEP_DN = 0.5
@@ -29,10 +30,15 @@ class NoiseModel:
     image by Monte-Carlo. Modes: ``"joint"`` (all effects in one pass, clipped once: a physical
     camera) and ``"sequential"`` (the paper's training protocol: PN, then RN, then DCSN, then any
     other effect, each on the previous output and clipped; total = sqrt(sum of squares)).
+
+    ``interpolate`` (True or a :class:`~noise_monitor.physics.table_grid.GridSpec`): the tables of a
+    metadata set are interpolated between exact tables on a lattice over gain, exposure and temperature
+    (for metadata that changes every frame: a live camera); False computes them exactly per set.
     """
 
     def __init__(self, effects: Iterable[Effect | str] | Mapping[str, Mapping[str, float]] | None = None,
-                 extra: Iterable[Effect | str] | Mapping[str, Mapping[str, float]] | None = None) -> None:
+                 extra: Iterable[Effect | str] | Mapping[str, Mapping[str, float]] | None = None,
+                 interpolate: bool | GridSpec = False) -> None:
         base = [make_effect(n) for n in PAPER_EFFECTS] if effects is None else build_effects(effects)
         base += build_effects(extra)
         names = [e.name for e in base]
@@ -42,6 +48,10 @@ class NoiseModel:
         order = {n: i for i, n in enumerate(SEQUENTIAL_ORDER)}
         self.effects: list[Effect] = sorted(base, key=lambda e: order.get(e.name, len(order)))
         self._cache: dict = {}
+        self.interpolate = interpolate
+        self._surrogate_last: tuple | None = None
+        spec = interpolate if isinstance(interpolate, GridSpec) else GridSpec()
+        self.grid: TableGrid | None = TableGrid(self._exact_tables, spec, self._surrogate_tables) if interpolate else None
 
     # --- structure ---------------------------------------------------------------------------
     @property
@@ -57,7 +67,7 @@ class NoiseModel:
         """A new model with more effects (an effect of the same name is replaced)."""
         new = build_effects(list(extra))
         names = {e.name for e in new}
-        return NoiseModel([e for e in self.effects if e.name not in names] + new)
+        return NoiseModel([e for e in self.effects if e.name not in names] + new, interpolate=self.interpolate)
 
     def conditions(self, meta: CameraMetadata) -> Conditions:
         """Physical conditions for stated metadata, after the modifier effects."""
@@ -83,16 +93,41 @@ class NoiseModel:
 
     # --- analytic ----------------------------------------------------------------------------
     def tables(self, meta: CameraMetadata, mode: str = "joint") -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """E[n | v] and E[n^2 | v] per effect and for the total on the intensity grid ``_V_GRID``."""
+        """E[n | v] and E[n^2 | v] per effect and for the total on the intensity grid ``_V_GRID``
+        (interpolated over the conditions when the model was built with ``interpolate``)."""
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         key = (meta, mode)
         if key not in self._cache:
             if len(self._cache) > 64:
                 self._cache.clear()
-            cond = self.conditions(meta)
-            self._cache[key] = self._joint_tables(cond) if mode == "joint" else self._sequential_tables(cond)
+            self._cache[key] = self.grid.tables(meta, mode) if self.grid else self._exact_tables(meta, mode)
         return self._cache[key]
+
+    def _exact_tables(self, meta: CameraMetadata, mode: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        cond = self.conditions(meta)
+        return self._joint_tables(cond) if mode == "joint" else self._sequential_tables(cond)
+
+    def _surrogate_tables(self, meta: CameraMetadata, mode: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Cheap stand-ins for the tables (Poisson sources as Gaussians of equal variance, each effect in
+        one pass on the clean value, no rounding): they carry the clipping's dependence on the conditions,
+        which the interpolation of the exact tables then only corrects (see ``table_grid``). The per-effect
+        ones are shared by both modes (cached for the last metadata set)."""
+        if self._surrogate_last is None or self._surrogate_last[0] != meta:
+            cond = self.conditions(meta)
+            adders = [e for e in self.noise_effects if e.distribution != "quantization"]
+            own = {e.name: self._gaussian_moments([e], cond) for e in adders}
+            total = self._gaussian_moments(adders, cond) if len(adders) > 1 else next(iter(own.values()), None)
+            self._surrogate_last = (meta, own, total)
+        _, own, total = self._surrogate_last
+        if mode == "sequential":
+            return _carried(own)
+        return {**own, "total": total} if total is not None else dict(own)
+
+    def _gaussian_moments(self, effects: list[Effect], cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
+        lam, s2, mixes = self._components(effects, _V_GRID, cond)
+        m1, m2, _ = noise_moments(_V_GRID, 0.0, 1.0, s2 + cond.dn_per_e**2 * lam, mixes)
+        return m1, m2
 
     @staticmethod
     def _components(effects: list[Effect], x: np.ndarray, cond: Conditions):
@@ -296,6 +331,27 @@ class NoiseModel:
         if noise is not None:
             out += noise
         return out
+
+
+#: Gauss-Hermite nodes and weights (probabilists') carrying the intermediate image of the sequential surrogate.
+_GH_Z, _GH_W = np.polynomial.hermite_e.hermegauss(9)
+_GH_W = _GH_W / _GH_W.sum()
+
+
+def _carried(own: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Sequential surrogates: each effect beyond the paper's chain gets its one-pass moments averaged over
+    the image the effects before it left (a clipped normal around the clean value with their summed
+    variance); the paper's sources keep their one-pass moments (measured closer for them)."""
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    prev_var = np.zeros_like(_V_GRID)
+    for name, (m1, m2) in own.items():
+        if name in PAPER_EFFECTS or not prev_var.any():
+            out[name] = (m1, m2)
+        else:
+            y = np.clip(_V_GRID[None, :] + np.sqrt(prev_var)[None, :] * _GH_Z[:, None], 0.0, DN_MAX)
+            out[name] = (_GH_W @ np.interp(y, _V_GRID, m1), _GH_W @ np.interp(y, _V_GRID, m2))
+        prev_var = prev_var + np.maximum(m2 - m1**2, 0.0)
+    return out
 
 
 def _compact(a) -> float | np.ndarray:

@@ -223,7 +223,7 @@ def test_bag_without_image_topic_lists_what_it_has(tmp_path, capsys):
     with BagWriter(bag) as w:
         w.write("/camera/camera_info", camera_info_msg(8, 8, T0), T0)
         w.write("/camera/metadata", metadata_msg(META, T0, "t"), T0)
-    with pytest.raises(BagError, match="no image topic \\(sensor_msgs/msg/Image\\).*topics: /camera/camera_info "
+    with pytest.raises(BagError, match="no image topic \\(sensor_msgs/msg/Image or sensor_msgs/msg/CompressedImage\\).*topics: /camera/camera_info "
                                        "\\[sensor_msgs/msg/CameraInfo\\], /camera/metadata"):
         open_bag(bag)
     code, err = replay_cli(bag, capsys)

@@ -63,7 +63,10 @@ class Rig:
         self.node = node_class()(node_name=f"{topic}_monitor", parameter_overrides=overrides,
                                  context=self.context, estimator=estimator)
         self.cam = rclpy.create_node(f"{topic}_camera", context=self.context)
-        self.pub_img = self.cam.create_publisher(Image, base["image_topic"], qos_profile_sensor_data)
+        from sensor_msgs.msg import CompressedImage
+
+        image_type = CompressedImage if base.get("image_transport") == "compressed" else Image
+        self.pub_img = self.cam.create_publisher(image_type, base["image_topic"], qos_profile_sensor_data)
         meta_topic = base["metadata_topic"] or f"/{topic}/unused_metadata"
         self.pub_meta = self.cam.create_publisher(DiagnosticArray, meta_topic, 10)
         self.diagnostics: list[tuple[int, StatusReport]] = []
@@ -94,9 +97,10 @@ class Rig:
         return False
 
     def publish(self, i: int, extra_sigma: float = 0.0, metadata: dict | None = None,
-                dynamic: dict | None = None) -> tuple[int, dict]:
+                dynamic: dict | None = None, hardware_id: str = "") -> tuple[int, dict]:
         """Publish frame i simulated with ``dynamic`` conditions, and ``metadata`` (default: the same
-        conditions) first with the same header stamp; returns (stamp ns, simulator truth)."""
+        conditions; its status's ``hardware_id``) first with the same header stamp; returns (stamp ns,
+        simulator truth)."""
         dynamic = DYNAMIC if dynamic is None else dynamic
         meta = PROFILE.metadata(**dynamic)
         noisy, truth = MODEL.simulate(self.clean, meta, self.rng)
@@ -107,7 +111,7 @@ class Rig:
         stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
         values = dynamic if metadata is None else metadata
         if values:
-            msg = DiagnosticArray(status=[DiagnosticStatus(name="camera", values=[
+            msg = DiagnosticArray(status=[DiagnosticStatus(name="camera", hardware_id=hardware_id, values=[
                 KeyValue(key=k, value=repr(v)) for k, v in values.items()])])
             msg.header.stamp = stamp
             self.pub_meta.publish(msg)
@@ -291,3 +295,153 @@ def test_temperature_topic_completes_the_metadata(rig_factory):
     assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
     report, _ = rig.step(1, metadata=no_temp)
     assert report.level == OK, report.message
+
+
+def test_compressed_transport_decodes_png_and_skips_jpeg(rig_factory):
+    """image_transport: compressed - a lossless PNG frame is evaluated, a JPEG one skipped with the reason."""
+    import cv2
+    from sensor_msgs.msg import CompressedImage
+
+    rig = rig_factory("pngcam", image_transport="compressed", image_topic="/pngcam/image_raw/compressed")
+    img = np.clip(np.rint(MODEL.simulate(rig.clean, PROFILE.metadata(**DYNAMIC), rig.rng)[0]), 0, 255).astype(np.uint8)
+    for i, (ext, fmt) in enumerate(((".png", "mono8; png compressed "), (".jpg", "mono8; jpeg compressed mono8"))):
+        stamp = Time(sec=10 + i, nanosec=0)
+        meta = DiagnosticArray(status=[DiagnosticStatus(name="camera", values=[
+            KeyValue(key=k, value=repr(v)) for k, v in DYNAMIC.items()])])
+        meta.header.stamp = stamp
+        rig.pub_meta.publish(meta)
+        msg = CompressedImage(format=fmt, data=cv2.imencode(ext, img)[1].tobytes())
+        msg.header.stamp = stamp
+        rig.pub_img.publish(msg)
+        report = rig.status_for((10 + i) * 10**9)
+        if ext == ".png":
+            assert report.level == OK and float(report.values["sigma_rn"]) > 0, report.message
+        else:
+            assert report.level == WARN and "lossy (jpeg)" in report.message
+            assert report.values["frames_skipped"] == "1"
+
+
+def test_keymap_metadata_source_reads_a_drivers_own_keys(rig_factory, tmp_path):
+    """metadata_source keymap: a DiagnosticArray with the driver's key names and units gives the same
+    numbers as this project's key names (the same first image: the rigs' simulators share a seed)."""
+    ref, _ = rig_factory("kref").step(0)
+    rig = rig_factory("kmap", metadata_source="keymap",
+                      metadata_keymap="camera|ExposureMs|exposure_time_s|ms; *|GainX|gain_db|factor; "
+                                      "camera|TempK|sensor_temperature_c|K")
+    own = {"ExposureMs": DYNAMIC["exposure_time_s"] * 1e3, "GainX": 10 ** (DYNAMIC["gain_db"] / 20),
+           "TempK": DYNAMIC["sensor_temperature_c"] + 273.15}
+    report, _ = rig.step(0, metadata=own)
+    assert report.level == OK, report.message
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
+        assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+    bad, _ = rig.step(1, metadata={**own, "GainX": "high"})
+    assert bad.level == WARN and "metadata invalid: metadata GainX = " in bad.message and "is not a number" in bad.message
+
+
+def test_parameter_events_of_a_v4l2_driver_node_give_the_metadata(rig_factory, tmp_path):
+    """metadata_source parameters: the driver node's exposure/gain parameters (v4l2_camera names and
+    units) followed on /parameter_events; the temperature from a sensor_msgs/Temperature topic."""
+    from sensor_msgs.msg import Temperature
+
+    ref, _ = rig_factory("pref").step(0)
+    prof = tmp_path / "icx285_v4l2.yaml"
+    prof.write_text(PROFILE.to_yaml() + "gain_range_db: [0.0, 24.0]\ndriver_gain_range: [0, 240]\n")
+    rig = rig_factory("pcam", metadata_source="parameters", metadata_topic="", profile=str(prof),
+                      metadata_driver_node="/pcam/v4l2_camera", temperature_topic="/pcam/temperature")
+    driver = rclpy.create_node("v4l2_camera", namespace="/pcam", context=rig.context)
+    rig.executor.add_node(driver)
+    driver.declare_parameter("exposure_time_absolute", 50)
+    driver.declare_parameter("gain", 0)
+    temp = rig.cam.create_publisher(Temperature, "/pcam/temperature", 10)
+    assert rig.spin_until(lambda: temp.get_subscription_count() > 0, TIMEOUT_S)
+    temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))
+    # auto-exposure and gain change: 100 x 100 us = 10 ms, gain 180 of 240 -> 18 dB
+    driver.set_parameters([Parameter("exposure_time_absolute", value=100), Parameter("gain", value=180)])
+    assert rig.spin_until(lambda: rig.node._held == {"exposure_time_s": pytest.approx(0.01),
+                                                      "gain_db": pytest.approx(18.0)}, TIMEOUT_S), rig.node._held
+    assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
+    report, _ = rig.step(0, metadata={})
+    rig.executor.remove_node(driver)
+    driver.destroy_node()
+    assert report.level == OK, report.message
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
+        assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+
+
+def test_driver_metadata_source_without_its_package_names_it():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        with pytest.raises(ValueError, match="install the ROS package flir_camera_msgs"):
+            node_class()(node_name="flir_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="flir"), Parameter("profile", value="icx285")], estimator=object())
+        with pytest.raises(ValueError, match="metadata_source must be one of diagnostics, keymap, flir"):
+            node_class()(node_name="bad_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="spinnaker")], estimator=object())
+        with pytest.raises(ValueError, match="unknown field 'gain'"):
+            node_class()(node_name="km_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="keymap"), Parameter("metadata_keymap", value="c|G|gain|dB")],
+                estimator=object())
+    finally:
+        ctx.try_shutdown()
+
+
+def test_run_time_parameter_changes_are_validated(rig_factory):
+    """``ros2 param set`` through the parameter service: thresholds change and act, bad values and
+    read-only parameters are rejected with the reason."""
+    from rclpy.parameter_client import AsyncParameterClient
+
+    rig = rig_factory("pset", alarm_min_frames=1)
+    client = AsyncParameterClient(rig.cam, rig.node.get_fully_qualified_name())
+    assert client.wait_for_services(TIMEOUT_S)
+
+    def set_(**values):
+        fut = client.set_parameters([Parameter(k, value=v) for k, v in values.items()])
+        assert rig.spin_until(fut.done, TIMEOUT_S)
+        return fut.result().results
+
+    ok = set_(xi_threshold_dn=2.5, xi_hysteresis_dn=0.5)
+    assert all(r.successful for r in ok)
+    assert rig.node.monitor.alarm.threshold == 2.5 and rig.node.monitor.alarm.clear_level == 2.0
+    bad = set_(xi_hysteresis_dn=3.0)[0]
+    assert not bad.successful and "xi_hysteresis_dn must be in [0, xi_threshold_dn)" in bad.reason
+    assert rig.node.monitor.config.xi_hysteresis_dn == 0.5
+    ro = set_(patches_per_frame=2)[0]
+    assert not ro.successful and "patches_per_frame cannot change at run time" in ro.reason
+    typed = set_(alarm_min_frames="three")[0]
+    assert not typed.successful and "alarm_min_frames must be of type int" in typed.reason
+    # the new threshold acts: +N(0, 3 DN) image noise (|xi| ~ 1.5 DN) raises no alarm at 2.5 DN ...
+    report, _ = rig.step(0, extra_sigma=3.0)
+    assert report.level == OK, report.message
+    # ... and raises it at once with 0.5 DN
+    assert all(r.successful for r in set_(xi_hysteresis_dn=0.1, xi_threshold_dn=0.5))
+    report, _ = rig.step(1, extra_sigma=3.0)
+    assert report.level == ERROR and "image noisier" in report.message
+
+
+def test_hardware_id_from_the_drivers_serial(rig_factory):
+    """Two cameras of one model: the driver's device id (its metadata status's hardware_id) names each;
+    an explicit hardware_id parameter wins."""
+    first, _ = rig_factory("ser").step(0, hardware_id="SN-4711")
+    assert first.hardware_id == "SN-4711"
+    fixed, _ = rig_factory("ser_fixed", hardware_id="left-front").step(0, hardware_id="SN-4712")
+    assert fixed.hardware_id == "left-front"
+
+
+def test_debug_image_outlines_patches_coloured_by_xi(rig_factory):
+    from msg_adapters.debug_image import GREEN, RED
+
+    rig = rig_factory("dbg", debug_image_rate_hz=100.0)
+    got: list = []
+    rig.cam.create_subscription(Image, f"{rig.node.get_fully_qualified_name()}/debug_image", got.append, 10)
+    for i, extra in enumerate((0.0, 6.0)):
+        stamp, _ = rig.publish(i, extra_sigma=extra)
+        assert rig.spin_until(lambda: any(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == stamp for m in got),
+                              TIMEOUT_S), "no debug image for the frame"
+        msg = next(m for m in got if m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == stamp)
+        assert (msg.encoding, msg.height, msg.width) == ("rgb8", SIZE, SIZE)
+        rgb = np.frombuffer(bytes(msg.data), np.uint8).reshape(SIZE, SIZE, 3)
+        result = rig.node.monitor.last_result
+        colours = {tuple(rgb[y, x]) for y, x in result.patches.corners}
+        expected = GREEN if extra == 0.0 else RED  # clean: |xi| small; +N(0, 6 DN): xi << -1 DN
+        assert expected in colours, (colours, result.patch_xi)

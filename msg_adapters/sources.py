@@ -1,0 +1,87 @@
+"""The node's ``metadata_source`` parameter -> what to subscribe to and how to convert it.
+
+| metadata_source | message | topic |
+|---|---|---|
+| ``diagnostics`` (default) | diagnostic_msgs/DiagnosticArray with CameraMetadata key names | metadata_topic |
+| ``keymap`` | diagnostic_msgs/DiagnosticArray read through ``metadata_keymap`` | metadata_topic |
+| ``flir`` / ``basler`` / ``realsense`` | the driver's metadata message (:mod:`msg_adapters.vendor`) | metadata_topic |
+| ``parameters`` | rcl_interfaces/ParameterEvent of ``metadata_driver_node`` (v4l2_camera, usb_cam) | /parameter_events |
+
+Driver message packages are imported only for their source; a missing one is a ValueError naming the ROS
+package to install. A sensor_msgs/Temperature (``temperature_topic``) completes any source.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from .keymap import keymap_entries, metadata_from_keymap, parse_keymap
+from .metadata import metadata_from_diagnostics
+from .parameter_events import metadata_from_parameters, parameter_values, preset_keymap
+from .vendor import SOURCE_TYPES, message_class, metadata_from_vendor
+
+METADATA_SOURCES = ("diagnostics", "keymap", *SOURCE_TYPES, "parameters")
+PARAMETER_EVENTS_TOPIC = "/parameter_events"
+
+
+@dataclass
+class MetadataSource:
+    """A resolved metadata source. ``convert(msg)`` returns CameraMetadata fields (AdapterError on bad
+    fields) or None for a message that does not concern this camera (another node's parameter event).
+    ``held``: values persist until changed (parameter events, Basler's header-less CurrentParams) instead
+    of being paired with images by stamp.
+    """
+
+    name: str
+    msg_type: Any
+    topic: str
+    convert: Callable[[Any], dict[str, Any] | None]
+    held: bool = False
+
+    def hardware_id(self, msg: Any) -> str | None:
+        """The driver's device id (its serial) when the message carries one: a DiagnosticArray status's
+        ``hardware_id`` (the first non-empty one)."""
+        for status in getattr(msg, "status", None) or ():
+            if str(getattr(status, "hardware_id", "")).strip():
+                return str(status.hardware_id).strip()
+        return None
+
+
+def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str = "", driver: str = "v4l2_camera",
+                   profile: Any = None) -> MetadataSource | None:
+    """The source for the node's parameters (None without a metadata topic); ValueError naming what is wrong."""
+    if source not in METADATA_SOURCES:
+        raise ValueError(f"parameter metadata_source must be one of {', '.join(METADATA_SOURCES)}, got {source!r}")
+    entries = parse_keymap(keymap_entries(keymap)) if keymap else None
+    if source == "keymap" and not entries:
+        raise ValueError("metadata_source keymap needs metadata_keymap entries 'STATUS|KEY|FIELD|UNIT[|SCALE]'")
+    if source == "parameters":
+        if not driver_node.startswith("/"):
+            raise ValueError("metadata_source parameters needs metadata_driver_node, the driver node's fully "
+                             f"qualified name (e.g. /camera/v4l2_camera), got {driver_node!r}")
+        from rcl_interfaces.msg import ParameterEvent
+
+        km = entries or preset_keymap(driver)
+        state: dict[str, Any] = {}
+
+        def from_event(msg: Any) -> dict[str, Any] | None:
+            values = parameter_values(msg, driver_node)
+            if values is None:
+                return None
+            state.update(values)
+            return metadata_from_parameters(state, km, profile)
+
+        return MetadataSource(source, ParameterEvent, PARAMETER_EVENTS_TOPIC, from_event, held=True)
+    if not topic:
+        return None
+    if source in SOURCE_TYPES:
+        # Basler's CurrentParams has no header: its values are held until the next one, not paired by stamp
+        return MetadataSource(source, message_class(source), topic, lambda m: metadata_from_vendor(m, profile),
+                              held=source == "basler")
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    if source == "keymap":
+        mapped = entries or []
+        return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_keymap(m, mapped, profile))
+    return MetadataSource(source, DiagnosticArray, topic, metadata_from_diagnostics)
