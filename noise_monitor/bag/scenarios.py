@@ -44,6 +44,9 @@ class Scenario:
     name: str
     description: str
     step: Callable[[float], Step]
+    #: a field-like campaign variant (see :mod:`.campaign`): photo world, holds and pans, auto-exposure,
+    #: per-frame temperature and vignetting replace ``step`` and the tiled world
+    campaign: str | None = None
 
 
 _SPAN = f"{EPISODE[0]:.0%}-{EPISODE[1]:.0%}"
@@ -105,6 +108,12 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
              lambda u: Step(sensor_temperature_c=_lerp(35.0, 39.0, u),
                             exposure_time_s=BASE["exposure_time_s"] * (1.0 + 0.2 * math.sin(8 * math.pi * u)),
                             gain_db=BASE["gain_db"] + math.sin(3 * math.pi * u))),
+    Scenario("campaign", "field-like: scikit-image photos and textures, small flat patches, static holds of "
+             "5-14 frames and sub-pixel pans, auto-exposure per hold, temperature drifting every frame, "
+             "vignetting", lambda u: Step(), campaign="tuned"),
+    Scenario("campaign_heldout", "field-like held-out variant: matplotlib/PyWavelets photos, other textures, "
+             "holds of 4-18 frames, other pans, exposure and temperature laws", lambda u: Step(),
+             campaign="heldout"),
 )}
 
 

@@ -19,6 +19,7 @@ from tqdm import tqdm
 from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
+from . import campaign
 from .messages import camera_info_msg, image_msg, metadata_msg
 from .scenarios import SCENARIOS, Step, get_scenario
 from .scenes import camera_path, make_world, view
@@ -73,6 +74,8 @@ def simulate_bag(
     added to the profile's own effects and the paper's PN, DCSN, RN in the simulation. Gain, exposure,
     temperature and the stated-metadata corruptions are updated every ``hold_s`` seconds (a camera's
     auto-exposure / temperature read-out rate; 0 = every frame); image noise and motion change per frame.
+    A campaign scenario (``scenario.campaign``, see :mod:`.campaign`) sets its own per-frame plan: a photo
+    world, static holds and sub-pixel pans, auto-exposure per hold, temperature every frame (``hold_s`` unused).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -95,11 +98,18 @@ def simulate_bag(
     sim_model = NoiseModel(extra=effect_specs)
     paper_model = NoiseModel()
     rng = np.random.default_rng(seed)
-    world = make_world(rng, height, width)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
-    held = _held(us, frames, fps, hold_s)
-    steps = [_merge(scen.step(float(u)), scen.step(float(h))) for u, h in zip(us, held)]
-    positions = np.stack([camera_path(np.array(u), s.moving) for u, s in zip(us, steps)])
+    if scen.campaign:
+        world = campaign.make_world(rng, height, width, scen.campaign)
+        plans = campaign.plan(rng, frames, scen.campaign)
+        vignette = campaign.vignetting(height, width, campaign.LAWS[scen.campaign].vignetting)
+        steps = [Step(gain_db=p.gain_db, exposure_time_s=p.exposure_time_s, sensor_temperature_c=p.sensor_temperature_c,
+                      brightness=p.brightness, moving=p.moving) for p in plans]
+    else:
+        world = make_world(rng, height, width)
+        held = _held(us, frames, fps, hold_s)
+        steps = [_merge(scen.step(float(u)), scen.step(float(h))) for u, h in zip(us, held)]
+        positions = np.stack([camera_path(np.array(u), s.moving) for u, s in zip(us, steps)])
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
     hw = prof.name
@@ -113,8 +123,11 @@ def simulate_bag(
             true_meta = prof.metadata(gain_db=step.gain_db, exposure_time_s=step.exposure_time_s,
                                       sensor_temperature_c=step.sensor_temperature_c)
             stated = _stated(true_meta, step)
-            window, offset = view(world, positions[i], height, width)
-            clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
+            if scen.campaign:
+                clean, offset = campaign.render(world, plans[i], vignette)
+            else:
+                window, offset = view(world, positions[i], height, width)
+                clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
             noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
             if step.image_noise_dn:
                 noisy = np.clip(noisy + rng.normal(0.0, step.image_noise_dn, noisy.shape).astype(np.float32), 0, 255)
@@ -137,6 +150,7 @@ def simulate_bag(
                 "brightness": round(step.brightness, 5),
                 "offset_px": list(offset),
                 "moving": prev_offset is not None and offset != prev_offset,
+                **({"hold": plans[i].hold} if scen.campaign else {}),
                 "mean_dn": round(float(clean.mean()), 3),
             })
             prev_offset = offset

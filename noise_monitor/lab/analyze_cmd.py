@@ -42,6 +42,11 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"rms error (model vs measured total sigma): {summary['rms_error_dn']:.4f} DN "
           f"over {summary['measurement']['cells']} cells, {summary['measurement']['frames_used']} frames")
+    m = summary["measurement"]
+    for reason, n in m["frames_skipped"].items():
+        print(f"  {n} frame(s) not measured: {reason}")
+    for what, why in m["not_measured"].items():
+        print(f"  not measured ({what}): {why}")
     for c in summary["candidates"][:5]:
         mark = "*" if c["significant"] else " "
         params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())

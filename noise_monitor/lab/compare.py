@@ -70,15 +70,24 @@ def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarra
     return float(frac), off, ndtr((off - thr) / s) + ndtr((-off - thr) / s)
 
 
+#: a partner view of a block set: (its metadata, the blocks' intensities there, their weights)
+Partner = tuple[CameraMetadata, np.ndarray, np.ndarray]
+
+
 def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray,
-                         sigma: np.ndarray, span: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                         sigma: np.ndarray, span: np.ndarray | None = None,
+                         partners: Sequence[Partner] = ()) -> dict[str, np.ndarray]:
     """Unclipped variance (DN^2) per measured component at block intensities ``v``.
 
     A fixed mixture (hot pixels) goes to "outlier" where its offset stands out of the block's noise
     ``sigma`` (robust, DN) and to the white fixed-pattern core elsewhere; its offsets are clipped.
     Quantization acts on the temporal noise at each block's level ``v`` over its range of levels ``span`` (DN).
+    With ``partners`` (cross-view measurement, see :func:`.measure._cross_views`) the fixed, column and
+    row components are the weighted products of each fixed effect's sigma here and in the partner views;
+    the quantization's fixed part, a pattern of the scene's levels, moves with the scene and cancels.
     """
     cond = _conditions(effects, meta)
+    pconds = [_conditions(effects, pm) for pm, _, _ in partners]
     out = {c: np.zeros(v.shape) for c in MEASURED}
     for e in effects:
         comp = component_of(e)
@@ -88,15 +97,32 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
             frac, off, p = _detection(e, cond, v, sigma)
             var = frac * (1.0 - frac) * off**2
             out["outlier"] = out["outlier"] + var * p
-            out[comp] = out[comp] + var * (1.0 - p)
+            if partners:
+                var = var * (1.0 - p)
+                out[comp] = out[comp] + sum(
+                    w * np.sqrt(var * _mixture_var(e, pc, pv)) for (_, pv, w), pc in zip(partners, pconds))
+            else:
+                out[comp] = out[comp] + var * (1.0 - p)
+        elif partners and not e.temporal:
+            here = np.sqrt(np.maximum(np.asarray(e.variance_dn2(v, cond), dtype=float), 0.0))
+            out[comp] = out[comp] + sum(
+                w * here * np.sqrt(np.maximum(np.asarray(e.variance_dn2(pv, pc), dtype=float), 0.0))
+                for (_, pv, w), pc in zip(partners, pconds))
         else:
             out[comp] = out[comp] + np.asarray(e.variance_dn2(v, cond), dtype=float)
     added, fixed, spread = quantization_variance(effects, cond, out["temporal"], v if span is not None else None,
                                                  span)
     out["temporal"] = out["temporal"] + added
-    out["fixed"] = out["fixed"] + fixed
+    if not partners:
+        out["fixed"] = out["fixed"] + fixed
     out[QUANT_SPREAD] = spread
     return out
+
+
+def _mixture_var(effect: Effect, cond: Conditions, v: np.ndarray) -> np.ndarray:
+    frac, off = effect.mixture(v, cond)
+    off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
+    return frac * (1.0 - frac) * off**2
 
 
 #: key of the model's own uncertainty of the temporal variance (quantization phase) in component dicts
@@ -200,6 +226,15 @@ class _SegmentBase:
         self.pooled_values = np.array([cells[0].values[k] for k in self.pooled])
         self.pooled_errors = np.maximum(np.array([cells[0].errors[k] for k in self.pooled]), 1e-9)
         self.pixels_per_block = seg.pixels_checked // max(1, seg.intensity_dn.size)
+        self.partners: list[Partner] = []
+
+    def set_partners(self, metas: Sequence[CameraMetadata]) -> None:
+        """Partner views (cross-view fixed pattern) of the representative blocks; ``metas``: every
+        segment's metadata by index."""
+        seg = self.seg
+        if seg.partner_weight is not None:
+            self.partners = [(metas[p], seg.partner_intensity_dn[self.rep, j], seg.partner_weight[self.rep, j])
+                             for j, p in enumerate(seg.partners)]
 
     def total_errors(self, comps: dict[str, np.ndarray]) -> np.ndarray:
         """Measurement errors with the model's quantization-phase spread added to temporal observables."""
@@ -246,21 +281,31 @@ class Comparison:
         analytic = [e for e in self.effects if e.distribution in ("poisson", "gaussian")]
         rest = [e for e in self.effects if e not in analytic]
         clip_model = NoiseModel(analytic + [e for e in rest if e.distribution == "modifier"])
+        metas = [s.meta for s in meas.segments]
         for seg in meas.segments:
             if seg.index not in by_seg:
                 continue
             sb = _SegmentBase(seg, by_seg[seg.index])
+            sb.set_partners(metas)
             pred = clip_model.predict(sb.v, seg.meta)
             comps = unclipped_components([e for e in rest if e.distribution != "quantization"], seg.meta, sb.v,
-                                         sb.sigma)
+                                         sb.sigma, partners=sb.partners)
+            preds_p = [clip_model.predict(pv, pm) for pm, pv, _ in sb.partners]
             for e in analytic:
-                comps[component_of(e)] = comps[component_of(e)] + np.asarray(pred[e.name], dtype=float) ** 2
+                here = np.asarray(pred[e.name], dtype=float)
+                if sb.partners and not e.temporal:  # cross-view: product of the sigmas in both views
+                    var = sum(w * here * np.asarray(pp[e.name], dtype=float)
+                              for (_, _, w), pp in zip(sb.partners, preds_p))
+                else:
+                    var = here**2
+                comps[component_of(e)] = comps[component_of(e)] + var
             added, fixed, comps[QUANT_SPREAD] = quantization_variance(
                 self.effects, clip_model.conditions(seg.meta), comps["temporal"], sb.v, sb.span)
             comps["temporal"] = comps["temporal"] + added
-            comps["fixed"] = comps["fixed"] + fixed
+            if not sb.partners:
+                comps["fixed"] = comps["fixed"] + fixed
             sb.clip_aware = comps
-            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span)
+            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span, sb.partners)
             self.segments.append(sb)
             if progress is not None:
                 progress.update(1)
@@ -281,7 +326,7 @@ class Comparison:
         names = ", ".join(e.name for e in extra)
         for sb in self.segments:
             try:
-                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span)
+                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span, sb.partners)
             except EffectError:
                 raise
             except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from scipy.special import ndtri
 
+from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, global_shift
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
@@ -42,13 +43,23 @@ TEXTURE_CORRELATION = 0.3
 OUTLIER_BLOCK_FACTOR = 3.0
 #: a pixel of the segment's mean residual beyond this many robust sigmas is an outlier pixel
 OUTLIER_PIXEL_SIGMAS = 6.0
-MIN_BLOCKS_PER_CELL = 3
+MIN_BLOCKS_PER_CELL = 6
 #: a block is near clipping if its mean is within this many noise sigmas of 0 or 255
 CLIP_SIGMAS = 3.0
 #: largest |residuals| of a block left out of its robust sigma (room for a few hot pixels)
 TRIM_PIXELS = 4
 #: smallest per-block standard deviation of a variance estimate (DN^2): 8-bit rounding noise scale
 MIN_VAR_ERR_DN2 = 0.01
+#: skip reason of frames outside static holds when the sequence has static holds
+NOT_HELD = "not in a static hold (camera moving, or metadata changed at this frame)"
+#: smallest camera displacement (px) between two holds for a cross-view fixed-pattern measurement
+MIN_PARTNER_SHIFT_PX = 16.0
+#: most partner views per hold
+MAX_PARTNERS = 8
+#: largest standard error of a block's cross-view fixed variance, relative to its temporal variance
+CROSS_SE_MAX = 0.5
+#: an outlier pixel is confirmed when a partner view shows it beyond this many robust sigmas, same sign
+CONFIRM_SIGMAS = 3.0
 _NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
 
 
@@ -89,6 +100,11 @@ class SegmentMeasurement:
     pixels_checked: int
     blocks_total: int
     excluded: dict[str, int]
+    #: segments whose hold-mean residuals the fixed/column/row components are cross energies with
+    #: (empty: a single-view estimate, the hold mean's residual minus temporal / k)
+    partners: tuple[int, ...] = ()
+    partner_weight: np.ndarray | None = None  # (B, P) weight of each partner per block (0: not used)
+    partner_intensity_dn: np.ndarray | None = None  # (B, P) the block's intensity in each partner view
 
     @property
     def n_frames(self) -> int:
@@ -126,12 +142,15 @@ class Measurements:
     frames_used: int
     skipped: dict[str, int] = field(default_factory=dict)
     shape: tuple[int, int] = (0, 0)
+    #: what could not be measured and why (component -> reason); never a silent zero
+    not_measured: dict[str, str] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         return {
             "frames_total": self.frames_total,
             "frames_used": self.frames_used,
             "frames_skipped": dict(self.skipped),
+            "not_measured": dict(self.not_measured),
             "segments": len(self.segments),
             "cells": len(self.cells),
             "image_shape": list(self.shape),
@@ -235,15 +254,21 @@ class _SegmentAccumulator:
         self.proj, self.slopes = plane
         self.frames: list[int] = []
         self.metas: list[CameraMetadata] = []
+        self.images: list[np.ndarray] = []
+        self.pose = np.zeros(2)
         self.s1 = self.s2 = self.mean = self.slope = None
 
-    def add(self, frame_index: int, blocks: np.ndarray, meta: CameraMetadata) -> None:
+    def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
+        self.images.append(img.astype(np.float32))
+        blocks = _blocks(img, self.b)
         r = blocks @ self.proj
         if self.s1 is None:
             self.s1 = np.zeros_like(r)
             self.s2 = np.zeros(r.shape[0])
             self.mean = np.zeros(r.shape[0])
+            self.pixels = np.zeros_like(r)
             self.slope = np.zeros((r.shape[0], 2))
+        self.pixels += blocks
         self.slope += blocks @ self.slopes
         self.s1 += r
         self.s2 += np.sum(r * r, axis=1)
@@ -251,7 +276,7 @@ class _SegmentAccumulator:
         self.frames.append(frame_index)
         self.metas.append(meta)
 
-    def finish(self, grid: tuple[int, int]) -> SegmentMeasurement:
+    def finish(self, grid: tuple[int, int]) -> "_Full":
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
@@ -260,7 +285,8 @@ class _SegmentAccumulator:
         centred, lines = _delined(rm, b)
         robust = _robust_sigma(centred)
         is_out = np.abs(centred) > OUTLIER_PIXEL_SIGMAS * robust[:, None]
-        core, col, row = _split(*_energies(np.where(is_out, lines, rm) @ self.proj, b), b)  # re-fit the plane
+        clean = np.where(is_out, lines, rm) @ self.proj  # re-fit the plane
+        core, col, row = _split(*_energies(clean, b), b)
         values: dict[str, np.ndarray] = {}
         if k >= 2:
             temporal = (self.s2 - np.sum(self.s1 * self.s1, axis=1) / k) / ((k - 1) * (b * b - 3))
@@ -277,7 +303,11 @@ class _SegmentAccumulator:
         # blocks whose noise reaches the clipping limits are left out (their statistics are distorted)
         white = values["temporal"] + values["fixed"] if k >= 2 else values["single"]
         reach = CLIP_SIGMAS * np.sqrt(np.maximum(white, 0.0))
-        keep = (v >= lo) & (v <= hi) & (v - reach >= 0.0) & (v + reach <= 255.0)
+        # every pixel of the hold mean, not just the block mean: a dark detail in a block clips too
+        # (outlier pixels, e.g. hot pixels, are measured apart and do not exclude their block)
+        px = np.where(is_out, v[:, None], self.pixels / k)
+        darkest, brightest = px.min(axis=1), px.max(axis=1)
+        keep = (v >= lo) & (v <= hi) & (darkest - reach >= 0.0) & (brightest + reach <= 255.0)
         excluded["near_clipping"] = int(np.sum(~keep))
         flat = _without_line_pattern(rm, b, grid)  # real column/row offsets removed: edges stand out
         rho_x, rho_y = _lag1(flat, b)
@@ -289,33 +319,125 @@ class _SegmentAccumulator:
         )
         excluded["texture"] = int(np.sum(tex))
         keep &= ~tex
+        flat_mask = keep.copy()
         if temporal is not None:
-            moving = keep & _bin_outliers(np.maximum(temporal, 0.0), bins, keep, OUTLIER_BLOCK_FACTOR)
-            excluded["motion"] = int(np.sum(moving))
+            # frame differences that do not fit pure noise: residual motion, flicker, a moving object
+            moving = keep & ~block_temporal(np.stack(self.images), b).accepted
+            excluded["not_static"] = int(np.sum(moving))
             keep &= ~moving
-        amp = np.abs(centred[keep][is_out[keep]])
-
+        self.images = []
         gy, gx = grid
         iy, ix = np.divmod(np.arange(n), gx)
         region = (3 * iy // max(gy, 1)) * 3 + (3 * ix // max(gx, 1))
-        mid = len(self.metas) // 2
-        return SegmentMeasurement(
-            index=self.index,
-            meta=self.metas[mid],
-            stamp_ns=self.stamp_ns,
-            frames=list(self.frames),
-            intensity_dn=v[keep],
-            region=region[keep],
-            values={c: a[keep] for c, a in values.items()},
-            robust_sigma_dn=robust[keep],
-            span_dn=(b - 1) * np.abs(self.slope[keep] / k).sum(axis=1),
-            outlier_pixels=int(amp.size),
-            outlier_amplitude_dn=float(amp.mean()) if amp.size else 0.0,
-            outlier_amplitude_err_dn=float(amp.std() / math.sqrt(amp.size)) if amp.size > 1 else 0.0,
-            pixels_checked=int(keep.sum()) * b * b,
-            blocks_total=n,
-            excluded=excluded,
-        )
+        return _Full(self.index, self.metas[len(self.metas) // 2], self.stamp_ns, list(self.frames), self.pose,
+                     v, region, values, robust, (b - 1) * np.abs(self.slope / k).sum(axis=1), is_out, centred,
+                     keep, flat_mask, excluded, clean, np.maximum(white, 0.0))
+
+
+@dataclass
+class _Full:
+    """A segment's measurements for every block, before the final selection (see :func:`_select`)."""
+
+    index: int
+    meta: CameraMetadata
+    stamp_ns: int
+    frames: list[int]
+    pose: np.ndarray  # camera position (px) by accumulated global shifts
+    v: np.ndarray
+    region: np.ndarray
+    values: dict[str, np.ndarray]
+    robust: np.ndarray
+    span: np.ndarray
+    is_out: np.ndarray
+    centred: np.ndarray
+    keep: np.ndarray
+    flat: np.ndarray  # unclipped and flat on the hold mean (before the pure-noise test)
+    excluded: dict[str, int]
+    residual: np.ndarray  # (N, b*b) plane-fit residual of the hold mean, outlier pixels replaced
+    white: np.ndarray  # (N,) white variance of that residual (fixed + temporal / k), single view
+    partners: tuple[int, ...] = ()
+    partner_weight: np.ndarray | None = None  # (N, P)
+    partner_v: np.ndarray | None = None  # (N, P)
+
+
+def _select(f: _Full, b: int) -> SegmentMeasurement:
+    keep = f.keep
+    amp = np.abs(f.centred[keep][f.is_out[keep]])
+    return SegmentMeasurement(
+        index=f.index,
+        meta=f.meta,
+        stamp_ns=f.stamp_ns,
+        frames=f.frames,
+        intensity_dn=f.v[keep],
+        region=f.region[keep],
+        values={c: a[keep] for c, a in f.values.items()},
+        robust_sigma_dn=f.robust[keep],
+        span_dn=f.span[keep],
+        outlier_pixels=int(amp.size),
+        outlier_amplitude_dn=float(amp.mean()) if amp.size else 0.0,
+        outlier_amplitude_err_dn=float(amp.std() / math.sqrt(amp.size)) if amp.size > 1 else 0.0,
+        pixels_checked=int(keep.sum()) * b * b,
+        blocks_total=f.v.size,
+        excluded=f.excluded,
+        partners=f.partners,
+        partner_weight=None if f.partner_weight is None else f.partner_weight[keep],
+        partner_intensity_dn=None if f.partner_v is None else f.partner_v[keep],
+    )
+
+
+def _cross_energies(a: np.ndarray, c: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(total, column-part, row-part) cross energies of two residual sets (N, b*b): the energies of
+    :func:`_energies` with one factor from each set (noise and scene that differ between them cancel)."""
+    a3, c3 = a.reshape(-1, b, b), c.reshape(-1, b, b)
+    col = b * np.sum(a3.mean(axis=1) * c3.mean(axis=1), axis=1)
+    row = b * np.sum(a3.mean(axis=2) * c3.mean(axis=2), axis=1)
+    return np.sum(a * c, axis=1), col, row
+
+
+def _cross_views(fulls: list[_Full], b: int) -> int:
+    """Fixed-pattern, column and row components from what stays in sensor coordinates while the scene
+    moves: per block, the cross energies of the hold-mean residuals of this hold and of up to
+    ``MAX_PARTNERS`` holds (nearest in time) seen from a camera pose at least ``MIN_PARTNER_SHIFT_PX``
+    away, where that block is flat and unclipped too. Temporal noise and scene texture differ between the
+    views and cancel in expectation; a fixed pattern ``a_s * P(x)`` gives ``a_s * a_p`` per pixel.
+    Returns the number of segments measured this way (the others keep the single-view estimate)."""
+    done = 0
+    for f in fulls:
+        if "temporal" not in f.values:
+            continue
+        cands = [g for g in fulls if g is not f and "temporal" in g.values
+                 and float(np.hypot(*(g.pose - f.pose))) >= MIN_PARTNER_SHIFT_PX]
+        if not cands:
+            continue
+        cands = sorted(cands, key=lambda g: abs(g.index - f.index))[:MAX_PARTNERS]
+        valid = np.stack([g.flat for g in cands], axis=1).astype(float)  # (N, P)
+        parts = [_split(*_cross_energies(f.residual, g.residual, b), b) for g in cands]
+        count = valid.sum(axis=1)
+        # inverse-variance weights: a cross energy's noise grows with the partner's white variance
+        inv = valid / np.maximum(np.stack([g.white for g in cands], axis=1), MIN_VAR_ERR_DN2)
+        weight = inv / np.maximum(inv.sum(axis=1), 1e-300)[:, None]
+        for j, comp in enumerate(("fixed", "column", "row")):
+            f.values[comp] = np.sum(np.stack([p[j] for p in parts], axis=1) * weight, axis=1)
+        # an outlier pixel (hot pixel, defect) stays where it is on the sensor; a scene detail moves:
+        # keep the outliers that stand out with the same sign (> CONFIRM_SIGMAS) in a partner view
+        stays = np.zeros_like(f.is_out)
+        for j, g in enumerate(cands):
+            same = (np.sign(g.centred) == np.sign(f.centred)) & (np.abs(g.centred) > CONFIRM_SIGMAS * g.robust[:, None])
+            stays |= same & (valid[:, j] > 0)[:, None]
+        f.is_out = f.is_out & stays
+        f.values["outlier"] = np.sum(np.where(f.is_out, f.centred**2, 0.0), axis=1) / (b * b)
+        # noise of the cross estimate (Gaussian): white_s / (d * sum(1 / white_p)); a block whose scene
+        # texture (white_s) or partners' noise make it large against its own temporal noise is left out
+        se = np.sqrt(f.white * np.sum(weight * np.stack([g.white for g in cands], axis=1) * weight, axis=1)
+                     / (b - 1) ** 2)
+        lost = f.keep & ((count == 0) | (se > CROSS_SE_MAX * np.maximum(f.values["temporal"], MIN_VAR_ERR_DN2)))
+        f.excluded["no_partner_view"] = int(lost.sum())
+        f.keep = f.keep & ~lost
+        f.partners = tuple(g.index for g in cands)
+        f.partner_weight = weight
+        f.partner_v = np.stack([g.v for g in cands], axis=1)
+        done += 1
+    return done
 
 
 #: components that are pooled over the whole segment in every cell: line offsets belong to image lines
@@ -328,10 +450,12 @@ TRIMMED = ("column", "row")
 TRIM_MADS = 8.0
 
 
-def _inliers(x: np.ndarray) -> np.ndarray:
+def _inliers(x: np.ndarray, symmetric: bool = False) -> np.ndarray:
+    """Values not beyond TRIM_MADS robust deviations above the median (an edge only adds energy), or on
+    either side for cross-view estimates (zero-mean noise either way: a one-sided cut would bias them)."""
     med = np.median(x)
-    mad = 1.4826 * np.median(np.abs(x - med))
-    return np.flatnonzero(x <= med + TRIM_MADS * max(mad, 1e-9))
+    mad = TRIM_MADS * max(1.4826 * float(np.median(np.abs(x - med))), 1e-9)
+    return np.flatnonzero(np.abs(x - med) <= mad if symmetric else x <= med + mad)
 
 
 def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
@@ -339,7 +463,7 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
     if seg.intensity_dn.size == 0:
         return out
     bins = np.floor(seg.intensity_dn / BIN_WIDTH_DN).astype(int)
-    pooled = {comp: _inliers(arr) if comp in TRIMMED else np.arange(arr.size)
+    pooled = {comp: _inliers(arr, bool(seg.partners)) if comp in TRIMMED else np.arange(arr.size)
               for comp, arr in seg.values.items() if comp in POOLED}
     for k in np.unique(bins):
         idx = np.flatnonzero(bins == k)
@@ -414,6 +538,8 @@ def measure_frames(
     grid = (0, 0)
     hist_bin = None
     hist = None
+    prev: np.ndarray | None = None
+    pose = np.zeros(2)
     total = used = 0
     for i, fr in enumerate(frames):
         total += 1
@@ -439,16 +565,42 @@ def measure_frames(
         hist += np.bincount(idx.ravel(), minlength=hist.size)
         meta = fr.metadata
         assert meta is not None  # skip_reason checked it
-        if acc is None or len(acc.frames) >= tolerance.max_frames or not tolerance.same(acc.metas[0], meta):
+        # a segment is a static hold: the camera does not move (global shift) and the metadata agree
+        shift = np.asarray(global_shift(prev, img)[:2]) if prev is not None else np.zeros(2)
+        moved = math.hypot(*shift) > STATIC_SHIFT_PX
+        pose = pose + shift
+        prev = img
+        if (acc is None or moved or len(acc.frames) >= tolerance.max_frames
+                or not tolerance.same(acc.metas[0], meta)):
             if acc is not None:
                 segments.append(acc.finish(grid))
             acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, plane)
-        acc.add(i, _blocks(img, block), meta)
+            acc.pose = pose.copy()
+        acc.add(i, img, meta)
     if acc is not None:
         segments.append(acc.finish(grid))
     if not segments:
         reasons = ", ".join(f"{k}: {v}" for k, v in skipped.items()) or "no frames"
         raise ValueError(f"no usable frames to measure ({reasons})")
+    not_measured: dict[str, str] = {}
+    held = [s for s in segments if len(s.frames) >= 2]
+    if held:
+        single = len(segments) - len(held)
+        if single:  # frames of a pan or between metadata changes: no temporal reference
+            skipped[NOT_HELD] = single
+            used -= single
+        for j, s in enumerate(held):
+            s.index = j
+        segments = held
+        if not _cross_views(segments, block):
+            not_measured["fixed_pattern_separation"] = (
+                "one camera pose only: fixed pattern, column and row offsets are the hold mean's residual in "
+                "blocks flat on that mean (scene texture finer than a block cannot be told from fixed pattern)")
+    else:
+        not_measured["temporal"] = ("no static hold of >= 2 frames (the camera moved or the metadata changed "
+                                    "every frame): temporal and fixed-pattern noise are not separated; only "
+                                    "single-frame spatial noise in flat regions is measured (component 'single')")
+    segments = [_select(s, block) for s in segments]
     cells = [c for s in segments for c in _cells(s, block)]
     if not cells:
         raise ValueError("no flat, unclipped image regions to measure noise in (every block is textured or clipped)")
@@ -465,4 +617,5 @@ def measure_frames(
         frames_used=used,
         skipped=skipped,
         shape=tuple(shape),
+        not_measured=not_measured,
     )

@@ -177,6 +177,10 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         f"{summary['measurement']['cells']} cells. <b>rms error {summary['rms_error_dn']:.4f} DN</b> "
         "(model vs measured total sigma per cell).</p>",
     ]
+    gaps = [f"{n} frame(s): {why}" for why, n in summary["measurement"].get("frames_skipped", {}).items()]
+    gaps += [f"{what}: {why}" for what, why in summary["measurement"].get("not_measured", {}).items()]
+    if gaps:
+        parts.append("<p><b>Not measured</b><ul>" + "".join(f"<li>{html.escape(g)}</li>" for g in gaps) + "</ul></p>")
     if "rms_error_after_dn" in summary:
         added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "

@@ -1,0 +1,179 @@
+"""Field-like campaigns: photographs and textures over most of the frame, a few small flat chart patches,
+a camera that holds still for a varying number of frames and pans between holds with sub-pixel
+(bilinear) resampling, auto-exposure-like gain/exposure changes at each new view, a sensor temperature
+that changes every frame, and vignetting in sensor coordinates.
+
+Two variants: ``tuned`` (scikit-image photographs, procedural textures; the lab was developed on it) and
+``heldout`` (matplotlib and PyWavelets photographs, other textures, hold lengths, pans, exposure and
+temperature laws; never used to tune the lab).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: World size relative to the camera view (the camera pans over the extra area).
+WORLD_SCALE = (1.6, 1.8)  # (rows, columns)
+VARIANTS = ("tuned", "heldout")
+
+
+@dataclass(frozen=True)
+class Law:
+    """How a variant's campaign evolves."""
+
+    hold_frames: tuple[int, int]  # static hold length, inclusive range
+    pan_frames: tuple[int, int]  # frames of motion between holds
+    exposure_s: tuple[float, float]  # auto-exposure range
+    max_gain_db: float
+    temperature_c: tuple[float, float]  # start, end of the drift (every frame)
+    temperature_wiggle_c: float  # amplitude of a slow oscillation on the drift
+    vignetting: float  # relative fall-off at the image corners
+    flat_patches: int  # small flat chart patches in the world
+    panels: tuple[int, int]  # photo/texture panels (rows, columns) of the world
+
+
+LAWS = {
+    "tuned": Law((5, 14), (2, 4), (0.002, 0.06), 24.0, (30.0, 55.0), 1.5, 0.30, 10, (2, 3)),
+    "heldout": Law((4, 18), (1, 5), (0.001, 0.1), 24.0, (22.0, 60.0), 2.5, 0.40, 8, (3, 3)),
+}
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """Conditions of one campaign frame: the view's top-left corner in the world (sub-pixel), true
+    metadata, scene brightness and whether the view moved since the previous frame."""
+
+    x: float
+    y: float
+    gain_db: float
+    exposure_time_s: float
+    sensor_temperature_c: float
+    brightness: float
+    moving: bool
+    hold: int  # index of the static hold (-1 while panning)
+
+
+def _photos(variant: str) -> list[np.ndarray]:
+    from noise_monitor.estimator.images import matplotlib_photos, pywavelets_photos, skimage_photos
+
+    if variant == "tuned":
+        return skimage_photos()
+    return matplotlib_photos() + pywavelets_photos()
+
+
+def _procedural(rng: np.random.Generator, h: int, w: int, variant: str) -> np.ndarray:
+    """A texture in [0, 1]: multi-scale noise (tuned) or oriented stripes on noise (held-out)."""
+    out = np.zeros((h, w), np.float32)
+    for s in (1.0, 3.0, 9.0) if variant == "tuned" else (1.5, 5.0, 14.0):
+        n = cv2.GaussianBlur(rng.standard_normal((h, w)).astype(np.float32), (0, 0), s)
+        out += n / max(float(n.std()), 1e-6) * s ** 0.5
+    if variant == "heldout":
+        y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+        a = rng.uniform(0, math.pi)
+        out += 2.0 * np.sin((x * math.cos(a) + y * math.sin(a)) / rng.uniform(2.0, 6.0))
+    return (out - out.min()) / max(float(np.ptp(out)), 1e-6)
+
+
+def make_world(rng: np.random.Generator, height: int, width: int, variant: str = "tuned") -> np.ndarray:
+    """A float32 world in DN larger than the view: panels of photographs (random crops, contrast and
+    gamma) and procedural textures, with a few small flat chart patches (8..247 DN) on top."""
+    if variant not in LAWS:
+        raise ValueError(f"campaign variant must be one of {', '.join(LAWS)}, got {variant!r}")
+    if height < 32 or width < 32:
+        raise ValueError(f"image size must be at least 32x32 pixels for a campaign, got {width}x{height}")
+    law = LAWS[variant]
+    wh, ww = int(round(height * WORLD_SCALE[0])), int(round(width * WORLD_SCALE[1]))
+    photos = _photos(variant)
+    pr, pc = law.panels
+    world = np.empty((wh, ww), np.float32)
+    ys, xs = np.linspace(0, wh, pr + 1).astype(int), np.linspace(0, ww, pc + 1).astype(int)
+    for r in range(pr):
+        for c in range(pc):
+            ph, pw = ys[r + 1] - ys[r], xs[c + 1] - xs[c]
+            if rng.random() < 0.75:
+                img = photos[int(rng.integers(len(photos)))]
+                f = min(img.shape[0] / ph, img.shape[1] / pw) * rng.uniform(0.5, 1.0)
+                ch, cw = max(8, int(ph * f)), max(8, int(pw * f))
+                y0 = int(rng.integers(0, img.shape[0] - ch + 1))
+                x0 = int(rng.integers(0, img.shape[1] - cw + 1))
+                panel = cv2.resize(img[y0:y0 + ch, x0:x0 + cw], (pw, ph), interpolation=cv2.INTER_AREA) / 255.0
+                if rng.random() < 0.5:
+                    panel = panel[:, ::-1]
+            else:
+                panel = _procedural(rng, ph, pw, variant)
+            lo = rng.uniform(5.0, 80.0)
+            hi = rng.uniform(max(lo + 60.0, 150.0), 250.0)
+            gamma = math.exp(rng.uniform(-0.4, 0.4))
+            world[ys[r]:ys[r + 1], xs[c]:xs[c + 1]] = lo + (hi - lo) * np.clip(panel, 0.0, 1.0) ** gamma
+    side = max(12, width // 14)
+    for level in rng.permutation(np.linspace(8.0, 247.0, law.flat_patches)):
+        y0 = int(rng.integers(0, wh - side))
+        x0 = int(rng.integers(0, ww - side))
+        world[y0:y0 + side, x0:x0 + side] = level
+    return np.clip(world, 0.0, 255.0)
+
+
+def _auto_exposure(rng: np.random.Generator, law: Law, luminance: float) -> tuple[float, float]:
+    """(exposure s, gain dB) an auto-exposure picks for a scene luminance in [0, 1] (dark to bright):
+    exposure first, gain once the exposure hits its limit."""
+    lo, hi = law.exposure_s
+    need = math.log(hi / lo) + law.max_gain_db / 20.0 * math.log(10.0)  # total range in nepers
+    want = (1.0 - luminance) * need
+    exp_part = min(want, math.log(hi / lo))
+    gain_db = (want - exp_part) * 20.0 / math.log(10.0)
+    return lo * math.exp(exp_part) * math.exp(rng.uniform(-0.05, 0.05)), round(gain_db * 4.0) / 4.0
+
+
+def plan(rng: np.random.Generator, frames: int, variant: str = "tuned") -> list[FramePlan]:
+    """Per-frame conditions: holds of varying length at sub-pixel poses, pans in between (poses are
+    fractions of the pan range), auto-exposure per hold, temperature drifting every frame."""
+    law = LAWS[variant]
+    out: list[FramePlan] = []
+    lum = rng.permutation(np.linspace(0.0, 1.0, 8))
+    pose = rng.uniform(0.0, 1.0, 2)
+    hold = 0
+    t0, t1 = law.temperature_c
+    phase = rng.uniform(0.0, 2.0 * math.pi)
+
+    def temp(i: int) -> float:
+        u = i / max(frames - 1, 1)
+        return t0 + (t1 - t0) * u + law.temperature_wiggle_c * math.sin(2.0 * math.pi * 1.5 * u + phase)
+
+    while len(out) < frames:
+        exposure, gain = _auto_exposure(rng, law, float(lum[hold % lum.size]))
+        brightness = rng.uniform(0.85, 1.05)
+        for _ in range(int(rng.integers(law.hold_frames[0], law.hold_frames[1] + 1))):
+            if len(out) == frames:
+                break
+            out.append(FramePlan(float(pose[0]), float(pose[1]), gain, exposure, temp(len(out)), brightness,
+                                 False, hold))
+        nxt = rng.uniform(0.0, 1.0, 2)
+        n = int(rng.integers(law.pan_frames[0], law.pan_frames[1] + 1))
+        for j in range(1, n + 1):
+            if len(out) == frames:
+                break
+            p = pose + (nxt - pose) * j / (n + 1)
+            out.append(FramePlan(float(p[0]), float(p[1]), gain, exposure, temp(len(out)), brightness, True, -1))
+        pose = nxt
+        hold += 1
+    return out
+
+
+def vignetting(height: int, width: int, strength: float) -> np.ndarray:
+    """Relative illumination in sensor coordinates: 1 at the centre, 1 - strength at the corners."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    r2 = ((x - (width - 1) / 2) / (width / 2)) ** 2 + ((y - (height - 1) / 2) / (height / 2)) ** 2
+    return (1.0 - strength * r2 / 2.0).astype(np.float32)
+
+
+def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
+    """The clean view (DN, float32) of a frame: bilinear sub-pixel crop of the world, times the
+    brightness and the vignetting, clipped to 0..255; and its top-left corner in world pixels."""
+    h, w = vignette.shape
+    x = fp.x * (world.shape[1] - w - 1)
+    y = fp.y * (world.shape[0] - h - 1)
+    win = cv2.getRectSubPix(world, (w, h), (x + (w - 1) / 2.0, y + (h - 1) / 2.0))
+    return np.clip(win * vignette * np.float32(fp.brightness), 0.0, 255.0), (round(x, 4), round(y, 4))

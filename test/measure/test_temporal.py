@@ -1,0 +1,88 @@
+"""Static-block temporal noise (noise_monitor.measure.temporal): global motion by phase correlation,
+the pure-noise block test and the temporal variance with its standard error, on seeded textures."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from noise_monitor.measure import block_temporal, global_shift, static_runs
+
+H, W = 128, 160
+
+
+def _scene(seed: int = 0) -> np.ndarray:
+    """A textured scene (smoothed noise, 40..210 DN) with a flat square at 120 DN."""
+    rng = np.random.default_rng(seed)
+    tex = cv2.GaussianBlur(rng.standard_normal((H + 40, W + 40)).astype(np.float32), (0, 0), 2.0)
+    scene = 125.0 + 85.0 * tex / np.abs(tex).max()
+    scene[20:60, 20:60] = 120.0
+    return scene
+
+
+def _view(scene: np.ndarray, x: float, y: float) -> np.ndarray:
+    return cv2.getRectSubPix(scene, (W, H), (x + (W - 1) / 2.0, y + (H - 1) / 2.0))
+
+
+def test_global_shift_recovers_sub_pixel_motion() -> None:
+    rng = np.random.default_rng(1)
+    scene = _scene()
+    a = _view(scene, 10.0, 10.0) + rng.normal(0, 2.0, (H, W))
+    for dx, dy in ((0.3, -0.2), (4.6, 2.25), (-7.4, 0.0)):
+        b = _view(scene, 10.0 + dx, 10.0 + dy) + rng.normal(0, 2.0, (H, W))
+        sx, sy, response = global_shift(a, b)
+        # the view moved by (dx, dy) over the scene: the content moves by (-dx, -dy)
+        assert (sx, sy) == pytest.approx((-dx, -dy), abs=0.08)
+        assert response > 0.2
+    assert np.hypot(*global_shift(a, a + rng.normal(0, 2.0, (H, W)))[:2]) < 0.05
+    with pytest.raises(ValueError, match="one size"):
+        global_shift(a, a[:10])
+
+
+def test_static_runs() -> None:
+    shifts = np.array([[0.0, 0.01], [0.02, 0.0], [3.0, 1.0], [0.0, 0.0], [0.5, 0.0], [0.0, 0.0]])
+    assert static_runs(shifts) == [(0, 3), (3, 5), (5, 7)]
+    assert static_runs(np.zeros((0, 2))) == [(0, 1)]
+
+
+def test_temporal_variance_on_a_static_textured_run_is_unbiased_with_honest_errors() -> None:
+    rng = np.random.default_rng(2)
+    clean = _view(_scene(), 5.0, 5.0)
+    sigma = 0.5 + 0.02 * clean  # heteroscedastic like shot noise
+    stack = np.stack([clean + sigma * rng.standard_normal((H, W)) for _ in range(8)])
+    bt = block_temporal(stack)
+    truth = (sigma**2)[:H // 8 * 8, :W // 8 * 8].reshape(H // 8, 8, W // 8, 8).mean(axis=(1, 3)).ravel()
+    z = (bt.variance_dn2 - truth) / bt.variance_err_dn2
+    assert abs(z.mean()) < 0.15 and 0.7 < z.std() < 1.3
+    assert bt.accepted.mean() > 0.99  # pure noise passes the test, texture or not
+    s, err = bt.sigma_dn()
+    assert s == pytest.approx(float(np.sqrt(truth.mean())), abs=4 * err)
+
+
+def test_residual_motion_and_flicker_are_rejected_where_the_scene_has_texture() -> None:
+    rng = np.random.default_rng(3)
+    scene = _scene()
+    frames = [_view(scene, 5.0, 5.0) for _ in range(6)]
+    frames[3] = _view(scene, 5.15, 5.0)  # a 0.15 px jitter, below the global static threshold
+    stack = np.stack(frames) + rng.normal(0.0, 1.0, (6, H, W))
+    bt = block_temporal(stack)
+    grid = bt.grid
+    flat = np.zeros(grid, bool)
+    flat[2:6, 2:6] = True  # blocks inside the flat square (view rows/cols 15..54)
+    flat = flat.ravel()
+    assert bt.accepted[flat].all()
+    assert bt.accepted[~flat].mean() < 0.5  # most textured blocks see the motion
+    # accepted blocks carry the noise alone
+    assert np.median(bt.variance_dn2[bt.accepted]) == pytest.approx(1.0, rel=0.2)
+    # flicker: a 2 % brightness change in one frame is a per-frame offset even where the scene is flat
+    frames = [_view(scene, 5.0, 5.0) for _ in range(6)]
+    frames[2] = frames[2] * 1.02
+    bt = block_temporal(np.stack(frames) + rng.normal(0.0, 1.0, (6, H, W)))
+    assert bt.accepted.mean() < 0.05
+
+
+def test_bad_input() -> None:
+    with pytest.raises(ValueError, match="k >= 2"):
+        block_temporal(np.zeros((1, 16, 16)))
+    with pytest.raises(ValueError, match="smaller than one"):
+        block_temporal(np.zeros((3, 4, 16)))
