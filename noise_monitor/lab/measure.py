@@ -276,7 +276,7 @@ class _SegmentAccumulator:
         self.frames.append(frame_index)
         self.metas.append(meta)
 
-    def finish(self, grid: tuple[int, int]) -> "_Full":
+    def finish(self, grid: tuple[int, int]) -> _Full:
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
