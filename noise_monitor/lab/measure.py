@@ -1,8 +1,10 @@
-"""Model-independent noise measurement from a frame sequence.
+"""Model-independent noise measurement from a frame sequence, separating the scene from the noise.
 
-Frames are grouped into *segments*: consecutive frames whose metadata agree within a tolerance. Every
-frame is cut into B x B blocks and a plane is fitted to each block; the residual ``r`` (texture-free
-for flat or smoothly shaded regions) is split into three orthogonal parts:
+Frames are grouped into *segments*, static holds: consecutive frames with no global shift (phase
+correlation, :mod:`noise_monitor.measure.temporal`) and metadata that agree within a tolerance; frames
+outside holds (pans, metadata changes) have no temporal reference and are counted as skipped. Every
+frame is cut into B x B blocks and a plane is fitted to each block; the residual ``r`` is split into
+three orthogonal parts:
 
 - the column-constant part (dimension B - 2 after the fit): column offsets,
 - the row-constant part (B - 2): row offsets,
@@ -10,11 +12,14 @@ for flat or smoothly shaded regions) is split into three orthogonal parts:
 
 White noise of variance s2 puts ``d * s2`` into a part of dimension d; per-column (per-row) offsets of
 variance c2 put ``B (B - 2) c2`` into the column (row) part. Solving these relations per block gives
-unbiased per-pixel variances. Within a segment the spread of the residuals over frames gives the
-temporal noise, the residual of the segment's mean image the fixed-pattern noise (temporal / K removed).
-Textured blocks (spatially correlated residual, or a robust sigma far above the block's intensity bin),
-blocks disturbed by motion and blocks near the clipping limits are excluded. Every cell (segment x
-intensity bin) carries the standard error of its mean over blocks.
+unbiased per-pixel variances. Within a hold the spread of the residuals over frames gives the temporal
+noise, in blocks whose frame differences fit pure noise (no residual motion or flicker). Blocks are
+chosen flat and unclipped on the hold mean. The fixed-pattern, column and row components are cross
+energies of a block's hold-mean residual with the same sensor block seen from other camera poses
+(:func:`_cross_views`): the scene moves, the fixed pattern does not; with one pose only they are the
+hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so. Outlier
+pixels count when another view confirms them. Every cell (segment x intensity bin) carries the
+standard error of its mean over blocks.
 """
 from __future__ import annotations
 
