@@ -47,7 +47,7 @@ class ReturnsNan(Effect):
     params = (Param("sigma_dn", "DN", 0.5, (0.0, 10.0)),)
 
     def sigma_dn(self, signal_dn, cond):
-        return np.where(np.asarray(signal_dn) > 100.0, np.nan, self.values["sigma_dn"])  # NaN above 100 DN
+        return np.where(np.asarray(signal_dn) > 80.0, np.nan, self.values["sigma_dn"])  # NaN above 80 DN
 ''',
     "bad_modifier.py": '''
 from noise_monitor.physics.effects import Effect, Param
