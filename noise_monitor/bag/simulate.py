@@ -115,7 +115,7 @@ def simulate_bag(
     hw = prof.name
     records: list[dict[str, Any]] = []
     bit_depth = prof.bit_depth
-    prev_offset: tuple[int, int] | None = None
+    prev_offset: tuple[float, float] | None = None
     with BagWriter(out, storage=storage) as writer:
         for i, (u, step) in enumerate(tqdm(list(zip(us, steps)), desc=f"simulate {out.name}", unit="frame",
                                            disable=not progress)):

@@ -536,7 +536,7 @@ def measure_frames(
     if block < 4:
         raise ValueError(f"block size must be >= 4 pixels, got {block}")
     plane = _plane_fit(block)
-    segments: list[SegmentMeasurement] = []
+    segments: list[_Full] = []
     skipped: dict[str, int] = {}
     acc: _SegmentAccumulator | None = None
     shape: tuple[int, int] | None = None
@@ -605,13 +605,13 @@ def measure_frames(
         not_measured["temporal"] = ("no static hold of >= 2 frames (the camera moved or the metadata changed "
                                     "every frame): temporal and fixed-pattern noise are not separated; only "
                                     "single-frame spatial noise in flat regions is measured (component 'single')")
-    segments = [_select(s, block) for s in segments]
-    cells = [c for s in segments for c in _cells(s, block)]
+    measured = [_select(s, block) for s in segments]
+    cells = [c for s in measured for c in _cells(s, block)]
     if not cells:
         raise ValueError("no flat, unclipped image regions to measure noise in (every block is textured or clipped)")
     step, step_err = _quant_step(hist, hist_bin)
     return Measurements(
-        segments=segments,
+        segments=measured,
         cells=cells,
         quant_step_dn=step,
         quant_step_err_dn=step_err,
