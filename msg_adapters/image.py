@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from noise_monitor.text import clip
+
 from .compressed import decompress, is_compressed
 from .errors import AdapterError
 
@@ -81,7 +83,7 @@ def image_to_gray_dn(msg: Any, bit_depth: int | None = None, color: str = "luma"
     height, width, step = int(_field(msg, "height")), int(_field(msg, "width")), int(_field(msg, "step"))
     if encoding not in _ENCODINGS:
         raise AdapterError(
-            f"unsupported image encoding {encoding!r}; supported: {', '.join(SUPPORTED_ENCODINGS)}"
+            f"unsupported image encoding {clip(repr(encoding), 80)}; supported: {', '.join(SUPPORTED_ENCODINGS)}"
         )
     if color not in COLOR_MODES:
         raise AdapterError(f"color must be one of {COLOR_MODES}, got {color!r}")

@@ -12,6 +12,7 @@ from typing import Any
 
 from noise_monitor.physics import CameraMetadata, CameraProfile
 from noise_monitor.physics.metadata import NUMERIC_FIELDS
+from noise_monitor.text import clip
 
 from .errors import AdapterError
 
@@ -33,9 +34,9 @@ def _number(key: str, value: Any) -> float:
     try:
         out = float(value.strip() if isinstance(value, str) else value)
     except (TypeError, ValueError):
-        raise AdapterError(f"metadata value {key}={value!r} is not a number") from None
+        raise AdapterError(f"metadata value {clip(str(key), 80)}={clip(repr(value), 80)} is not a number") from None
     if not math.isfinite(out):
-        raise AdapterError(f"metadata value {key}={value!r} is not finite")
+        raise AdapterError(f"metadata value {clip(str(key), 80)}={clip(repr(value), 80)} is not finite")
     return out
 
 
@@ -55,7 +56,7 @@ def metadata_from_mapping(values: Mapping[str, Any]) -> dict[str, float | str]:
         elif key == "bit_depth":
             bits = _number(key, value)
             if not bits.is_integer():
-                raise AdapterError(f"metadata value {key}={value!r} is not an integer")
+                raise AdapterError(f"metadata value {clip(str(key), 80)}={clip(repr(value), 80)} is not an integer")
             out[key] = int(bits)
         elif key in KNOWN_FIELDS:
             out[key] = _number(key, value)

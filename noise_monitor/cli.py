@@ -8,8 +8,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import pickle
+import signal
 import sys
+import threading
 from types import ModuleType
+
+from .text import clip
 
 #: command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -69,19 +74,51 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM: unwinds the command like Ctrl-C does, so that its temporary files are removed."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+#: Errors that mean unusable input or settings (plus running out of memory on it): exit 2 with one line.
+#: ValueError covers the package's own errors (BagError, MetadataError, EffectError, YamlError, ...);
+#: pickle.UnpicklingError is what torch raises for a damaged or unsafe weights file.
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, MemoryError, OverflowError,
+                                                 pickle.UnpicklingError)
+
+
+def error_line(exc: BaseException) -> str:
+    """An exception as one bounded line (messages of YAML, torch or numpy errors span several lines)."""
+    if isinstance(exc, MemoryError):
+        detail = " ".join(str(exc).split())
+        return "out of memory" + (f" ({clip(detail, 200)})" if detail else "") + "; the input is too large"
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return clip(text)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
     args = build_parser(command if command in COMMANDS else None).parse_args(argv)
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main else None
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:
         print("noise-monitor: interrupted", file=sys.stderr)
         return 130
-    except (ValueError, FileNotFoundError, OSError) as exc:
+    except Terminated:
+        print("noise-monitor: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
+    except USER_ERRORS as exc:
         # user-facing errors (bad input, missing files): one line, non-zero exit
-        print(f"noise-monitor {args.command}: error: {exc}", file=sys.stderr)
+        print(f"noise-monitor {args.command}: error: {error_line(exc)}", file=sys.stderr)
         return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

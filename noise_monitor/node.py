@@ -178,7 +178,9 @@ class NoiseMonitorNode(Node):
 
     def _on_image(self, msg: Any) -> None:
         stamp = _stamp_ns(msg)
-        self.monitor.count_lost(self.gaps.observe(stamp))
+        implausible = self.gaps.implausible
+        lost = self.gaps.observe(stamp)
+        self.monitor.count_lost(lost, self.gaps.implausible - implausible)
         for matched in self.sync.add_image(stamp, msg, self._now()):
             self._enqueue(matched)
 
@@ -390,8 +392,10 @@ def main(argv: list[str] | None = None) -> int:
     """Console script ``noise_monitor_node`` (ROS style: configure with --ros-args)."""
     import sys
 
+    from .cli import USER_ERRORS, error_line
+
     try:
         return spin(list(sys.argv if argv is None else ["noise_monitor_node", *argv]), {})
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"noise_monitor_node: error: {exc}", file=sys.stderr)
+    except USER_ERRORS as exc:  # the same one-line errors as `noise-monitor node`
+        print(f"noise_monitor_node: error: {error_line(exc)}", file=sys.stderr)
         return 2

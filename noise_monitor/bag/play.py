@@ -32,6 +32,10 @@ class PlayStats:
         return dict(self.__dict__)
 
 
+#: Playback speed factors accepted: 1000x slower to 1000x faster (a rate of 1e-300 would sleep for ever).
+RATE_RANGE = (1e-3, 1e3)
+
+
 def rclpy_type(msgtype: str) -> type | None:
     """The rclpy message class of 'pkg/msg/Name', or None when its package is not installed."""
     pkg, _, name = msgtype.partition("/msg/")
@@ -50,8 +54,8 @@ def play(bag: str | Path, rate: float = 1.0, loop: bool = False, topics: list[st
     the detected image and metadata topics) has a subscriber, so a node starting alongside sees frame 0.
     ``node``: an rclpy node to publish from (default: a new ``noise_monitor_player`` node).
     """
-    if not rate > 0:
-        raise ValueError(f"rate must be > 0, got {rate}")
+    if not RATE_RANGE[0] <= rate <= RATE_RANGE[1]:
+        raise ValueError(f"rate must be in [{RATE_RANGE[0]:g}, {RATE_RANGE[1]:g}], got {rate:g}")
     import rclpy
 
     own_context = not rclpy.ok()

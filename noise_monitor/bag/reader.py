@@ -28,11 +28,14 @@ from msg_adapters.metadata import (
     metadata_from_temperature,
 )
 from msg_adapters.vendor import VENDOR_TYPES, metadata_from_vendor, register_vendor_types
+from noise_monitor import safe_yaml
 from noise_monitor.monitor.frame import Frame
 from noise_monitor.monitor.runtime import FrameOptions
 from noise_monitor.monitor.sync import match_stamp
 from noise_monitor.physics import CameraProfile, load_profile
+from noise_monitor.text import clip
 
+from . import bounded
 from .errors import BagError
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
@@ -41,6 +44,12 @@ CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 _METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
+bounded.install()  # MCAP chunks are decompressed within limits (decompression bombs are refused)
+
+
+def _reason(exc: BaseException) -> str:
+    """An exception from rosbags as a bounded one-line reason."""
+    return clip(" ".join(str(exc).split()) or type(exc).__name__)
 
 
 @dataclass(frozen=True)
@@ -64,6 +73,11 @@ def _resolve_bag_path(path: Path) -> Path:
     metadata.yaml (e.g. a copied MCAP folder), or a bare .mcap/.db3 file."""
     if not path.exists():
         raise FileNotFoundError(f"bag {path} does not exist")
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        try:  # rosbags parses it again; this is the bounded check (alias bombs, size) with a clear reason
+            safe_yaml.load(path / "metadata.yaml")
+        except safe_yaml.YamlError as exc:
+            raise BagError(f"cannot read bag {path}: {exc}") from None
     if path.is_dir() and not (path / "metadata.yaml").exists():
         files = sorted([*path.glob("*.mcap"), *path.glob("*.db3")])
         if len(files) != 1:
@@ -89,8 +103,7 @@ class BagReader:
             self._reader = AnyReader([self._bag_path], default_typestore=store)
             self._reader.open()
         except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
-            reason = exc or type(exc).__name__
-            raise BagError(f"cannot read bag {self.path}: {reason} (corrupt or truncated?)") from None
+            raise BagError(f"cannot read bag {self.path}: {_reason(exc)} (corrupt or truncated?)") from None
         self.topics: dict[str, str] = {c.topic: c.msgtype for c in self._reader.connections}
         if not self.topics or self._reader.message_count == 0:
             self.close()
@@ -133,14 +146,14 @@ class BagReader:
     def _pick(self, role: str, override: str | None, candidates: list[str], required: bool = False) -> str | None:
         if override:
             if override not in self.topics:
-                raise BagError(f"{role} topic {override!r} is not in bag {self.path}; topics: {self._listing()}")
+                raise BagError(f"{role} topic {clip(repr(override), 200)} is not in bag {self.path}; topics: {self._listing()}")
             return override
         if len(candidates) > 1 and self.image_topic:  # prefer the image's namespace (e.g. /left/...)
             ns = self.image_topic.rsplit("/", 1)[0] + "/"
             same = [t for t in candidates if t.startswith(ns)]
             candidates = same if len(same) == 1 else candidates
         if len(candidates) > 1:
-            raise BagError(f"several {role} topics in bag {self.path}: {', '.join(candidates)}; "
+            raise BagError(f"several {role} topics in bag {self.path}: {clip(', '.join(candidates))}; "
                            f"choose one with --{role.replace('_', '-')}-topic")
         if not candidates and required:
             raise BagError(f"no {role} topic ({IMAGE_TYPE} or {COMPRESSED_TYPE}) in bag {self.path}; "
@@ -148,7 +161,7 @@ class BagReader:
         return candidates[0] if candidates else None
 
     def _listing(self) -> str:
-        return ", ".join(f"{t} [{m}]" for t, m in sorted(self.topics.items())) or "none"
+        return clip(", ".join(f"{t} [{m}]" for t, m in sorted(self.topics.items())) or "none")
 
     # --- info ------------------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -189,12 +202,15 @@ class BagReader:
                                    f"lists on {', '.join(topics)}") from None
                 return
             except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
-                raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
+                raise BagError(f"bag {self.path} is damaged: {_reason(exc)}") from None
             try:
+                if raw is None:  # a sqlite3 row whose data is NULL
+                    raise ValueError("it has no data (NULL)")
                 msg = self._reader.deserialize(raw, conn.msgtype)
             except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
-                msg = DamagedMessage(f"damaged {conn.msgtype} message ({len(raw)} bytes) on {conn.topic} at log time "
-                                     f"{log_time} ns does not decode: {exc or type(exc).__name__}")
+                size = f"{len(raw)} bytes" if raw is not None else "no data"
+                msg = DamagedMessage(f"damaged {clip(conn.msgtype, 200)} message ({size}) on {clip(conn.topic, 200)} "
+                                     f"at log time {log_time} ns does not decode: {_reason(exc)}")
             seen += 1
             yield conn.topic, log_time, msg
 
@@ -208,7 +224,10 @@ class BagReader:
             except StopIteration:
                 return
             except Exception as exc:  # rosbags: own, struct, zstd, decoding errors
-                raise BagError(f"bag {self.path} is damaged: {exc or type(exc).__name__}") from None
+                raise BagError(f"bag {self.path} is damaged: {_reason(exc)}") from None
+            if raw is None:  # a sqlite3 row whose data is NULL: nothing to publish
+                raise BagError(f"bag {self.path} is damaged: the {clip(conn.msgtype, 200)} message on "
+                               f"{clip(conn.topic, 200)} at log time {log_time} ns has no data (NULL)")
             yield conn.topic, conn.msgtype, log_time, bytes(raw)
 
     @property

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import time
-from contextlib import ExitStack
+from contextlib import ExitStack, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
 from noise_monitor.physics import CameraProfile
+from noise_monitor.text import clip
 
 from .errors import BagError
 from .plot import plot_replay
@@ -40,10 +41,14 @@ from .results import (
     write_csv,
 )
 from .simulate import truth_path
+from .staging import StagedOutputs
 from .writer import BagWriter, typestore
 
 #: Skipped frames listed one by one in the summary (the counts per reason and the CSV cover all).
 MAX_LISTED_SKIPS = 1000
+#: Idle /diagnostics reports written into one gap of the recording at most: a log-time jump (a robot without
+#: a real-time clock going from 1970 to today) must not mean 1.7e9 reports. One hour at 1 Hz.
+MAX_IDLE_REPORTS_PER_GAP = 3600
 OUTPUT_FILES = {"mcap": "replay.mcap", "csv": "replay.csv", "png": "replay.png", "json": "summary.json"}
 
 
@@ -70,10 +75,24 @@ def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:
         return None
 
 
-def replay(
+def replay(bag: str | Path, profile: str | Path | CameraProfile | None = None, out_dir: str | Path | None = None,
+           **kwargs: Any) -> dict[str, Any]:
+    """Run the monitor over every image of ``bag``; returns the JSON summary (and writes outputs to ``out_dir``).
+
+    The outputs are written to new files and published together at the end (see
+    :class:`~noise_monitor.bag.staging.StagedOutputs`): a failed or interrupted replay leaves ``out_dir`` as
+    it was, links in it are replaced and never followed, and an output that is the input bag is refused.
+    Keyword arguments: see :func:`run_replay`.
+    """
+    stage = StagedOutputs(out_dir, list(OUTPUT_FILES.values()), inputs=[Path(bag)]) if out_dir is not None else None
+    with stage if stage is not None else nullcontext():
+        return run_replay(bag, profile, stage, **kwargs)
+
+
+def run_replay(
     bag: str | Path,
     profile: str | Path | CameraProfile | None = None,
-    out_dir: str | Path | None = None,
+    stage: StagedOutputs | None = None,
     *,
     estimator: Any = None,
     model_name: str | None = None,
@@ -93,7 +112,7 @@ def replay(
     plot: bool = True,
     physics_tables: str | None = None,
 ) -> dict[str, Any]:
-    """Run the monitor over every image of ``bag``; returns the JSON summary (and writes outputs).
+    """Run the monitor over every image of ``bag``; returns the JSON summary (outputs written to ``stage``).
 
     The monitor is the node's (:class:`MonitorRuntime`): ``config`` is a node params YAML (default
     config/node.yaml, whose model, weights, device, camera_name, hardware_id, bit_depth, color,
@@ -107,8 +126,7 @@ def replay(
     overrides = {"model": model_name, "weights": str(weights) if weights else None, "device": device,
                  "camera_name": camera_name, "hardware_id": hardware_id, "bit_depth": bit_depth, "threads": threads,
                  "physics_tables": physics_tables}
-    out = Path(out_dir) if out_dir is not None else None
-    mcap_path = out / OUTPUT_FILES["mcap"] if out is not None else None
+    mcap_path = stage.path(OUTPUT_FILES["mcap"]) if stage is not None else None
     table = FrameTable()
     truth = _truth_episodes(bag)  # before the loop: a long simulation's sidecar is parsed while memory is fresh
     with ExitStack() as stack:
@@ -123,25 +141,26 @@ def replay(
             rt = MonitorRuntime.from_params_file(config, overrides, profile=profile, estimator=estimator)
         prof, cfg, monitor, hw = rt.profile, rt.config, rt.monitor, rt.hardware_id
         diag_period_ns = rt.diagnostics_period_ns
-        if out is not None and mcap_path is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            mcap_path.unlink(missing_ok=True)
         writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
         t_wall = time.perf_counter()
         n_images, bag_duration = len(reader), reader.duration_s
-        topics = {"image": reader.image_topic, "metadata": reader.metadata_topic,
-                  "camera_info": reader.camera_info_topic, "temperature": reader.temperature_topic}
+        topics = {role: clip(t, 200) if t else t for role, t in (
+            ("image", reader.image_topic), ("metadata", reader.metadata_topic),
+            ("camera_info", reader.camera_info_topic), ("temperature", reader.temperature_topic))}
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
                                color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
         last_pub: int | None = None
         last_log = 0
+        capped_gaps = 0
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
             if writer is not None and last_pub is not None:  # the node's timer fills gaps (STALE when long)
                 # only while time really passed in the recording: a header stamp jumping by years (out of
                 # order, bogus clock) must not produce years of idle reports
                 end = min(bf.stamp_ns, last_pub + bf.log_time_ns - last_log)
                 t = last_pub + diag_period_ns
+                if (end - t) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
+                    end, capped_gaps = t + MAX_IDLE_REPORTS_PER_GAP * diag_period_ns, capped_gaps + 1
                 while t < end:
                     for topic, msg in rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
                                                        typestore=typestore()).items():
@@ -179,21 +198,23 @@ def replay(
         "frames_per_s": round(len(table) / wall, 3) if wall > 0 else None,
         "realtime_factor": round(bag_duration / wall, 3) if wall > 0 and bag_duration > 0 else None,
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
+        "idle_gaps_capped": capped_gaps,
     }
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)
-    if out is not None:
-        write_csv(table, out / OUTPUT_FILES["csv"])
-        files = {"mcap": str(mcap_path), "csv": str(out / OUTPUT_FILES["csv"])}
+    if stage is not None:
+        write_csv(table, stage.path(OUTPUT_FILES["csv"]))
+        files = {"mcap": str(stage.final(OUTPUT_FILES["mcap"])), "csv": str(stage.final(OUTPUT_FILES["csv"]))}
         if plot and table:
             period = bag_duration / (len(table) - 1) if len(table) > 1 else 0.0
             title = f"{Path(bag).name}: {summary['estimator']} on {prof.name if prof else 'bag metadata'}"
             t0 = int(table.column("stamp_ns")[0])
             spans = [((e["start_ns"] - t0) / 1e9, (e["end_ns"] - t0) / 1e9, "; ".join(e["corrupted"]))
                      for e in truth or []]
-            plot_replay(table, episodes, out / OUTPUT_FILES["png"], title, cfg.xi_threshold_dn, period, spans)
-            files["png"] = str(out / OUTPUT_FILES["png"])
-        files["json"] = str(out / OUTPUT_FILES["json"])
+            plot_replay(table, episodes, stage.path(OUTPUT_FILES["png"]), title, cfg.xi_threshold_dn, period, spans)
+            files["png"] = str(stage.final(OUTPUT_FILES["png"]))
+        files["json"] = str(stage.final(OUTPUT_FILES["json"]))
         summary["outputs"] = files
-        (out / OUTPUT_FILES["json"]).write_text(json.dumps(summary, indent=2))
+        stage.path(OUTPUT_FILES["json"]).write_text(json.dumps(summary, indent=2))
+        stage.commit()
     return summary

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .replay import replay
+from .staging import input_files, refuse_overwriting_inputs, write_text_atomic
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -67,6 +68,8 @@ def print_summary(s: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
+    if args.json:
+        refuse_overwriting_inputs([Path(args.json)], input_files(args.bag))
     summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights, device=args.device,
                      config=args.params, camera_name=args.camera_name, image_topic=args.image_topic,
                      metadata_topic=args.metadata_topic, camera_info_topic=args.camera_info_topic,
@@ -74,6 +77,5 @@ def run(args: argparse.Namespace) -> int:
                      bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot)
     print_summary(summary)
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(summary, indent=2))
+        write_text_atomic(args.json, json.dumps(summary, indent=2))
     return 0

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from noise_monitor.text import clip
+
 #: Per-source summaries of the JSON contract (and a few more), from the per-frame numbers.
 SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigma_model", "sigma_image",
                 "xi_filtered")
@@ -76,6 +78,7 @@ class FrameTable:
             self._fixed[name].set(i, value)
         for name, text in (("alarm_state", alarm_state), ("cause", cause), ("skip_reason", skip_reason)):
             if text is not None:
+                text = clip(text)  # reasons may echo bag contents (a 1 MB encoding string)
                 self._texts[name].set(i, self._codes.setdefault(text, len(self._codes)))
                 if len(self._vocab) < len(self._codes):
                     self._vocab.append(text)

@@ -53,6 +53,13 @@ def _stated(meta, step: Step):
     return meta.replace(**{k: getattr(meta, k) * f for k, f in step.stated_factors.items()})
 
 
+#: Limits of a simulated campaign: image sides (pixels), number of frames, frame rate (Hz). A frame of
+#: 8192 x 8192 is simulated in a few GB of memory; larger ones would exhaust it rather than fail cleanly.
+MIN_SIDE, MAX_SIDE = 8, 8192
+MAX_FRAMES = 1_000_000
+MAX_FPS = 10_000.0
+
+
 def simulate_bag(
     out: str | Path,
     profile: str | Path | CameraProfile,
@@ -80,12 +87,15 @@ def simulate_bag(
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
     scen = get_scenario(scenario)
-    if frames < 1:
-        raise ValueError(f"frames must be >= 1, got {frames}")
-    if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps}")
-    if hold_s < 0:
-        raise ValueError(f"hold_s must be >= 0, got {hold_s}")
+    if not 1 <= frames <= MAX_FRAMES:
+        raise ValueError(f"frames must be in [1, {MAX_FRAMES}], got {frames}")
+    for name, side in (("width", width), ("height", height)):
+        if not MIN_SIDE <= side <= MAX_SIDE:
+            raise ValueError(f"{name} must be in [{MIN_SIDE}, {MAX_SIDE}] pixels, got {side}")
+    if not 0 < fps <= MAX_FPS:
+        raise ValueError(f"fps must be in (0, {MAX_FPS:g}] Hz, got {fps}")
+    if not 0 <= hold_s <= 1e6:
+        raise ValueError(f"hold_s must be in [0, 1e6] s, got {hold_s}")
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
     if scen.name == "ptc":

@@ -19,6 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                         help="switch on a registered effect (repeatable): NAME, NAME=VALUE or NAME:param=v,param=v")
     parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE", help="load effects from FILE")
+    parser.add_argument("--replace-builtin-effects", action="store_true",
+                        help="let --effect-plugin effects replace built-in effects of the same name (else an error)")
     parser.add_argument("--frames", type=int, default=60, help="number of images (default 60)")
     parser.add_argument("--width", type=int, default=320, help="image width in pixels (default 320)")
     parser.add_argument("--height", type=int, default=256, help="image height in pixels (default 256)")
@@ -33,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     for f in args.effect_plugin:
-        load_plugin_file(f)
+        load_plugin_file(f, override=args.replace_builtin_effects)
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True)

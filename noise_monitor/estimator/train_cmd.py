@@ -42,6 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "`noise-monitor analyze --write-profile`, to fine-tune with --init)")
     p.add_argument("--effect-plugin", action="append", default=[], metavar="FILE",
                    help="load effects from FILE (for a profile that uses plug-in effects; repeatable)")
+    p.add_argument("--replace-builtin-effects", action="store_true",
+                   help="let --effect-plugin effects replace built-in effects of the same name (else an error)")
     p.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda")
     p.add_argument("--json", type=Path, default=None, help="write a JSON summary here")
 
@@ -82,7 +84,7 @@ def camera(profile: str | None) -> tuple[dict, dict]:
 def run(args: argparse.Namespace) -> int:
     _check(args)
     for plugin in args.effect_plugin:
-        load_plugin_file(plugin)
+        load_plugin_file(plugin, override=args.replace_builtin_effects)
     effects, sensor = camera(args.profile)
     data_path = args.data or args.out / "train_data.npz"
     t0 = time.time()

@@ -80,6 +80,7 @@ def analyze(
     profile: str | Path | CameraProfile | None = None,
     add_effects: Sequence[str] = (),
     plugins: Sequence[str | Path] = (),
+    replace_builtins: bool = False,
     report_dir: str | Path | None = None,
     write_profile: str | Path | None = None,
     candidates: Sequence[str] | None = None,
@@ -101,7 +102,7 @@ def analyze(
     t0 = time.perf_counter()
     if write_profile and not add_effects:
         raise ValueError("--write-profile needs at least one --add-effect")
-    plugin_names = [n for f in plugins for n in load_plugin_file(f)]
+    plugin_names = [n for f in plugins for n in load_plugin_file(f, override=replace_builtins)]
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
     specs = [parse_add_effect(a) for a in add_effects]
     frames, n, source = _frames(bag_or_frames, prof)

@@ -15,6 +15,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "NAME=VALUE fixes the first one, NAME:p=v,q=fit mixes (repeatable)")
     parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE",
                         help="Python file defining Effect subclasses (candidates and --add-effect names)")
+    parser.add_argument("--replace-builtin-effects", action="store_true",
+                        help="let --effect-plugin effects replace built-in effects of the same name (else an error)")
     parser.add_argument("--report", metavar="DIR", help="write report.html (self-contained) and summary.json here")
     parser.add_argument("--json", metavar="PATH", help="write the JSON summary to PATH")
     parser.add_argument("--write-profile", metavar="OUT.yaml",
@@ -33,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
         profile=args.profile,
         add_effects=args.add_effect,
         plugins=args.effect_plugin,
+        replace_builtins=args.replace_builtin_effects,
         report_dir=args.report,
         write_profile=args.write_profile,
         progress=not args.quiet,

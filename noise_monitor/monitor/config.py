@@ -8,9 +8,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from noise_monitor.physics.constants import MODES
+
+from .. import safe_yaml
+from ..text import clip
 
 XI_SOURCES = ("auto", "estimator", "model")
 MODEL_MODES = MODES
@@ -74,12 +75,13 @@ class MonitorConfig:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if f.type == "int":
-                if isinstance(value, bool) or not isinstance(value, (int, float)) or float(value) != int(value):
-                    raise ValueError(f"{f.name} must be an integer, got {value!r}")
+                if (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
+                        or float(value) != int(value)):
+                    raise ValueError(f"{f.name} must be an integer, got {clip(repr(value), 80)}")
                 object.__setattr__(self, f.name, int(value))
             elif f.type == "float":
                 if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                    raise ValueError(f"{f.name} must be a finite number, got {value!r}")
+                    raise ValueError(f"{f.name} must be a finite number, got {clip(repr(value), 80)}")
                 object.__setattr__(self, f.name, float(value))
         checks = [
             (self.patches_per_frame >= 1, "patches_per_frame must be >= 1"),
@@ -113,9 +115,9 @@ class MonitorConfig:
     def from_mapping(cls, values: Mapping[str, Any], ignore_unknown: bool = False) -> MonitorConfig:
         """Build from a mapping of field names (e.g. node parameters); unknown keys are an error."""
         names = set(cls.field_names())
-        unknown = sorted(set(values) - names)
+        unknown = sorted(map(str, set(values) - names))
         if unknown and not ignore_unknown:
-            raise ValueError(f"unknown monitor setting(s): {', '.join(unknown)}; known: {', '.join(sorted(names))}")
+            raise ValueError(f"unknown monitor setting(s): {clip(', '.join(unknown))}; known: {', '.join(sorted(names))}")
         return cls(**{k: v for k, v in values.items() if k in names})
 
     @classmethod
@@ -140,13 +142,11 @@ def read_ros_params(path: str | Path | None = None) -> dict[str, Any]:
     p = Path(path) if path else default_params_path()
     if not p.exists():
         raise FileNotFoundError(f"parameter file {p} not found")
-    try:
-        doc = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ValueError(f"{p}: not valid YAML ({exc})") from exc
+    doc = safe_yaml.load(p)
     if not isinstance(doc, dict) or not doc:
         raise ValueError(f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'")
     node = next(iter(doc.values()))
     if not isinstance(node, dict) or not isinstance(node.get("ros__parameters"), dict):
         raise ValueError(f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'")
     return dict(node["ros__parameters"])
+

@@ -140,7 +140,7 @@ class Monitor:
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames)
         self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
-                         "frames_lost": 0}
+                         "frames_lost": 0, "stamp_intervals_implausible": 0}
         self.last_received_ns: int | None = None
         self.last_result: FrameResult | None = None
 
@@ -163,9 +163,11 @@ class Monitor:
         """Frames the caller dropped before processing (e.g. the node's worker was busy)."""
         self.counters["frames_dropped"] += n
 
-    def count_lost(self, n: int) -> None:
-        """Frames that never reached the caller (inferred from header-stamp gaps)."""
+    def count_lost(self, n: int, implausible: int = 0) -> None:
+        """Frames that never reached the caller (inferred from header-stamp gaps), and stamp intervals too
+        short to be a camera's frame period (a bogus clock: reported, not counted as losses)."""
         self.counters["frames_lost"] += n
+        self.counters["stamp_intervals_implausible"] += implausible
 
     def _result(self, frame: Frame, level: int, message: str, **kw: Any) -> FrameResult:
         res = FrameResult(frame.stamp_ns, self.name, self.hardware_id, level, message,

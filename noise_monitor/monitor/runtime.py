@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+from noise_monitor.text import clip
 
 from .config import DESCRIPTIONS, MonitorConfig, read_ros_params
 from .frame import Frame
@@ -61,8 +62,9 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
                                        "temperature (metadata that changes every frame) or exact (recomputed per set)"),
 }
 PHYSICS_TABLES = ("interpolated", "exact")
-#: Largest accepted diagnostics_rate_hz (a timer faster than this only burns CPU).
-MAX_DIAGNOSTICS_RATE_HZ = 1000.0
+#: Accepted diagnostics_rate_hz: from one report every 1000 s (slower is no heartbeat, and 1e-320 Hz would
+#: overflow the period) to 1000 per second (a timer faster than this only burns CPU).
+MIN_DIAGNOSTICS_RATE_HZ, MAX_DIAGNOSTICS_RATE_HZ = 1e-3, 1000.0
 
 
 def parameter_table() -> dict[str, tuple[Any, str]]:
@@ -80,23 +82,23 @@ def coerce(name: str, value: Any, default: Any) -> Any:
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if not isinstance(value, kind) or isinstance(value, bool) != isinstance(default, bool):
-        raise ValueError(f"parameter {name} must be of type {kind.__name__}, got {value!r}")
+        raise ValueError(f"parameter {name} must be of type {kind.__name__}, got {clip(repr(value), 80)}")
     return value
 
 
 def check_parameters(p: Mapping[str, Any]) -> None:
     """Range checks of the runtime parameters (MonitorConfig checks its own)."""
     if p["color"] not in COLORS:
-        raise ValueError(f"parameter color must be luma or green, got {p['color']!r}")
+        raise ValueError(f"parameter color must be luma or green, got {clip(repr(p['color']), 80)}")
     for name in ("max_rate_hz", "sync_tolerance_s", "sync_wait_s", "expected_rate_hz", "threads", "bit_depth",
                  "debug_image_rate_hz"):
         if not p[name] >= 0 or not math.isfinite(p[name]):
             raise ValueError(f"parameter {name} must be a finite number >= 0, got {p[name]}")
     if p["bit_depth"] > 16:
         raise ValueError(f"parameter bit_depth must be in 0..16, got {p['bit_depth']}")
-    if not 0 < p["diagnostics_rate_hz"] <= MAX_DIAGNOSTICS_RATE_HZ:
-        raise ValueError(f"parameter diagnostics_rate_hz must be in (0, {MAX_DIAGNOSTICS_RATE_HZ:g}], "
-                         f"got {p['diagnostics_rate_hz']}")
+    if not MIN_DIAGNOSTICS_RATE_HZ <= p["diagnostics_rate_hz"] <= MAX_DIAGNOSTICS_RATE_HZ:
+        raise ValueError(f"parameter diagnostics_rate_hz must be in [{MIN_DIAGNOSTICS_RATE_HZ:g}, "
+                         f"{MAX_DIAGNOSTICS_RATE_HZ:g}] Hz, got {p['diagnostics_rate_hz']}")
     if not p["image_topic"]:
         raise ValueError("parameter image_topic must not be empty")
     if p["image_transport"] not in ("raw", "compressed"):

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..text import clip
+
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES: dict[int, str] = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
 
@@ -23,3 +25,7 @@ class StatusReport:
         bad = [k for k, v in self.values.items() if not isinstance(v, str)]
         if bad:
             raise ValueError(f"diagnostic values must be strings: {', '.join(bad)}")
+        # texts may echo bag or message contents: bounded, with a marker where cut
+        for name in ("name", "message", "hardware_id"):
+            object.__setattr__(self, name, clip(getattr(self, name)))
+        object.__setattr__(self, "values", {clip(k, 200): clip(v) for k, v in self.values.items()})

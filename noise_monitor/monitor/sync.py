@@ -120,17 +120,23 @@ class StampSynchronizer(Generic[T, M]):
         self.pending.clear()
 
 
+#: Shortest frame period believed from header stamps (10 kHz): closer stamps are a bogus clock, not losses.
+MIN_PERIOD_NS = 100_000
+
+
 class GapCounter:
     """Counts images that never arrived (lost in transport or by a full subscriber queue), inferred from
     header-stamp gaps: the frame period is the lower quartile of the recent stamp intervals (robust to
     a few bursts), and an interval of about k periods means k - 1 missing frames. Gaps longer than
     ``pause_s`` are a paused stream, not losses. Inferred, it undercounts regular losses (every other
     frame lost looks like half the rate); ``expected_rate_hz`` (the camera's configured rate) makes the
-    period known and the count exact."""
+    period known and the count exact. An inferred period below :data:`MIN_PERIOD_NS` (stamps 1 ns apart)
+    is implausible: such intervals are counted in ``implausible``, never as losses."""
 
     def __init__(self, window: int = 64, pause_s: float = 1.0, expected_rate_hz: float = 0.0) -> None:
-        if expected_rate_hz < 0:
-            raise ValueError(f"expected_rate_hz must be >= 0, got {expected_rate_hz}")
+        if not 0 <= expected_rate_hz <= 1e9 / MIN_PERIOD_NS:
+            raise ValueError(f"expected_rate_hz must be in [0, {1e9 / MIN_PERIOD_NS:g}] Hz, got {expected_rate_hz}")
+        self.implausible = 0
         self.intervals: deque[int] = deque(maxlen=window)
         self.last_ns: int | None = None
         self.pause_ns = int(pause_s * 1e9)
@@ -150,4 +156,7 @@ class GapCounter:
         if len(self.intervals) < 8:
             return 0
         period = float(np.percentile(self.intervals, 25))
+        if period < MIN_PERIOD_NS:
+            self.implausible += 1
+            return 0
         return max(int(round(dt / period)) - 1, 0)

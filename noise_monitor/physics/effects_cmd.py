@@ -9,12 +9,14 @@ from .effects import available, load_plugin_file
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE", help="load effects from FILE")
+    parser.add_argument("--replace-builtin-effects", action="store_true",
+                        help="let --effect-plugin effects replace built-in effects of the same name (else an error)")
     parser.add_argument("--json", metavar="PATH", help="also write the list as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     for f in args.effect_plugin:
-        load_plugin_file(f)
+        load_plugin_file(f, override=args.replace_builtin_effects)
     listing = {}
     for name, cls in sorted(available().items()):
         kind = "temporal" if cls.temporal else "fixed-pattern"

@@ -11,6 +11,9 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .. import safe_yaml
+from ..text import clip
+
 DYNAMIC_FIELDS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
 STATIC_FIELDS = (
     "full_well_e",
@@ -66,6 +69,9 @@ UNITS = {
     "thermal_white_noise_v_per_sqrt_hz": "V/sqrt(Hz)",
 }
 
+#: Longest camera profile name (it is echoed in statuses and reports).
+MAX_NAME_CHARS = 200
+
 #: Order of the normalised metadata vector fed to the networks (sensor_type: CCD = 1, CMOS = 0).
 NORMALIZED_ORDER = NUMERIC_FIELDS + ("sensor_type",)
 
@@ -117,9 +123,9 @@ class CameraMetadata:
                 try:
                     value = float(value.strip())
                 except ValueError:
-                    raise MetadataError(f"{name} must be a number in {UNITS[name]}, got {value!r}") from None
+                    raise MetadataError(f"{name} must be a number in {UNITS[name]}, got {clip(repr(value), 80)}") from None
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-                raise MetadataError(f"{name} must be a number in {UNITS[name]}, got {value!r}")
+                raise MetadataError(f"{name} must be a number in {UNITS[name]}, got {clip(repr(value), 80)}")
             value = float(value)
             object.__setattr__(self, name, value)
             if not math.isfinite(value):
@@ -131,12 +137,18 @@ class CameraMetadata:
                 )
         st = str(self.sensor_type).strip().lower()
         if st not in SENSOR_TYPES:
-            raise MetadataError(f"sensor_type must be one of {SENSOR_TYPES}, got {self.sensor_type!r}")
+            raise MetadataError(f"sensor_type must be one of {SENSOR_TYPES}, got {clip(repr(self.sensor_type), 80)}")
         object.__setattr__(self, "sensor_type", st)
         if self.bit_depth is not None:
             bd = self.bit_depth
-            if isinstance(bd, bool) or not float(bd).is_integer() or not 1 <= int(bd) <= 16:
-                raise MetadataError(f"bit_depth must be an integer in [1, 16], got {bd!r}")
+            if isinstance(bd, str):
+                try:
+                    bd = float(bd.strip())
+                except ValueError:
+                    raise MetadataError(f"bit_depth must be an integer in [1, 16], got {clip(repr(bd), 80)}") from None
+            if (isinstance(bd, bool) or not isinstance(bd, (int, float, np.integer, np.floating))
+                    or not float(bd).is_integer() or not 1 <= int(bd) <= 16):
+                raise MetadataError(f"bit_depth must be an integer in [1, 16], got {clip(repr(bd), 80)}")
             object.__setattr__(self, "bit_depth", int(bd))
 
     # --- derived quantities -------------------------------------------------------------
@@ -246,9 +258,9 @@ def load_profile(path: str | Path) -> CameraProfile:
 
     p = camera_profile_path(path)
     try:
-        doc = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise MetadataError(f"{p}: not valid YAML ({exc})") from exc
+        doc = safe_yaml.load(p)
+    except safe_yaml.YamlError as exc:
+        raise MetadataError(str(exc)) from None
     if not isinstance(doc, dict):
         raise MetadataError(f"{p}: a camera profile must be a YAML mapping")
     return profile_from_mapping(doc, source=str(p))
@@ -257,7 +269,10 @@ def load_profile(path: str | Path) -> CameraProfile:
 def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> CameraProfile:
     """Validate a profile mapping: known field names only, values in range (partial is fine)."""
     doc = dict(doc)
-    name = str(doc.pop("name", Path(source).stem))
+    name = doc.pop("name", Path(source).stem)
+    if not isinstance(name, str) or not 0 < len(name) <= MAX_NAME_CHARS:
+        raise MetadataError(f"{source}: 'name' must be a text of 1 to {MAX_NAME_CHARS} characters, got "
+                            f"{clip(repr(name), 80)}")
     effects_spec = doc.pop("effects", None) or {}
     ranges = {key: _range(source, key, doc.pop(key)) for key in ("gain_range_db", "driver_gain_range") if key in doc}
     known = set(NUMERIC_FIELDS) | {"sensor_type", "bit_depth"}
@@ -273,14 +288,7 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
     except MetadataError as exc:
         raise MetadataError(f"{source}: {exc}") from exc
     doc = {k: getattr(checked, k) for k in doc}  # typed values (YAML may give '90.0e6' as a string)
-    effects: dict[str, dict[str, Any]]
-    if isinstance(effects_spec, (list, tuple)):
-        effects = {str(e): {} for e in effects_spec}
-    elif isinstance(effects_spec, dict):
-        effects = {str(k): dict(v or {}) for k, v in effects_spec.items()}
-    else:
-        raise MetadataError(f"{source}: 'effects' must be a list of names or a mapping name -> parameters")
-    return CameraProfile(name=name, values=doc, effects=effects, **ranges)
+    return CameraProfile(name=name, values=doc, effects=_effects_spec(effects_spec, source), **ranges)
 
 
 def _range(source: str, key: str, value: Any) -> tuple[float, float]:
@@ -292,6 +300,29 @@ def _range(source: str, key: str, value: Any) -> tuple[float, float]:
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise MetadataError(f"{source}: {key} must be [low, high] with finite low < high, got {value!r}")
     return lo, hi
+
+
+def _effects_spec(spec: Any, source: str) -> dict[str, dict[str, float]]:
+    """A profile's ``effects``: a list of names or a mapping name -> {parameter: number}."""
+    usage = f"{source}: 'effects' must be a list of names or a mapping name -> {{parameter: number}}"
+    if isinstance(spec, (list, tuple)):
+        spec = {e: None for e in spec}
+    if not isinstance(spec, dict):
+        raise MetadataError(usage)
+    effects: dict[str, dict[str, float]] = {}
+    for name, params in spec.items():
+        if not isinstance(name, str):
+            raise MetadataError(f"{usage}; got the name {clip(repr(name), 80)}")
+        params = params or {}
+        if not isinstance(params, dict):
+            raise MetadataError(f"{usage}; effect {clip(name, 80)!r} has {clip(repr(params), 80)}")
+        for key, value in params.items():
+            if (not isinstance(key, str) or isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not math.isfinite(value)):
+                raise MetadataError(f"{source}: effect {clip(name, 80)!r}: parameter {clip(repr(key), 80)} must "
+                                    f"be a finite number, got {clip(repr(value), 80)}")
+        effects[name] = {k: float(v) for k, v in params.items()}
+    return effects
 
 
 # --- samplers -----------------------------------------------------------------------------------

@@ -1,28 +1,66 @@
 """Effect registry: built-ins, plug-ins from Python files and the ``noise_monitor.effects`` entry points."""
 from __future__ import annotations
 
+import functools
 import importlib.util
 import inspect
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from importlib.metadata import entry_points
 from pathlib import Path
+from typing import Any
 
+from ...text import clip
 from .base import DISTRIBUTIONS, Distribution, Effect, EffectError
 from .builtin import BUILTIN_EFFECTS
 
 ENTRY_POINT_GROUP = "noise_monitor.effects"
 _REGISTRY: dict[str, type[Effect]] = {cls.name: cls for cls in BUILTIN_EFFECTS}
+_BUILTIN_NAMES = frozenset(_REGISTRY)
 _entry_points_loaded = False
+#: Command-line flag that lets a plug-in replace a built-in effect (named in the error).
+OVERRIDE_FLAG = "--replace-builtin-effects"
 
 
-def register(cls: type[Effect]) -> type[Effect]:
-    """Register an Effect subclass under its ``name`` (usable as a class decorator)."""
-    if not (inspect.isclass(cls) and issubclass(cls, Effect)) or not cls.name:
-        raise EffectError(f"{cls!r} is not an Effect subclass with a name")
+def _contained(fn: Callable[..., Any], effect: str) -> Callable[..., Any]:
+    """``fn`` with ``sys.exit()`` turned into an EffectError (a plug-in must not end the program)."""
+
+    @functools.wraps(fn)
+    def call(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except SystemExit as exc:
+            raise EffectError(f"effect {effect!r} called sys.exit({clip(repr(exc.code), 80)}) in "
+                              f"{fn.__name__}(); a plug-in must raise an exception instead") from None
+
+    call.__nm_contained__ = True  # type: ignore[attr-defined]
+    return call
+
+
+def _contain_exits(cls: type[Effect]) -> None:
+    """Guard the methods a plug-in class defines itself against ``sys.exit``."""
+    for name, fn in list(vars(cls).items()):
+        if inspect.isfunction(fn) and not getattr(fn, "__nm_contained__", False):
+            setattr(cls, name, _contained(fn, cls.name))
+
+
+def register(cls: type[Effect], override: bool = False) -> type[Effect]:
+    """Register an Effect subclass under its ``name`` (usable as a class decorator).
+
+    A plug-in named like a built-in effect (e.g. ``rn``) is refused unless ``override`` is true (the
+    command-line flag :data:`OVERRIDE_FLAG`); plug-in methods cannot end the program with ``sys.exit``.
+    """
+    if not (inspect.isclass(cls) and issubclass(cls, Effect)) or not isinstance(cls.name, str) or not cls.name:
+        raise EffectError(f"{clip(repr(cls), 200)} is not an Effect subclass with a name")
     if not isinstance(cls.distribution, Distribution):
-        raise EffectError(f"effect {cls.name!r}: unknown distribution {cls.distribution!r}; "
+        raise EffectError(f"effect {clip(cls.name, 200)!r}: unknown distribution {clip(repr(cls.distribution), 80)}; "
                           f"choose from {', '.join(DISTRIBUTIONS)}")
+    builtin = cls in BUILTIN_EFFECTS
+    if cls.name in _BUILTIN_NAMES and not builtin and not override:
+        raise EffectError(f"plug-in effect {cls.name!r} ({cls.__module__}.{cls.__qualname__}) has the name of a "
+                          f"built-in effect; rename it, or pass {OVERRIDE_FLAG} to replace the built-in")
+    if not builtin:
+        _contain_exits(cls)
     _REGISTRY[cls.name] = cls
     return cls
 
@@ -39,8 +77,10 @@ def _load_entry_points() -> None:
             print(f"noise_monitor: ignoring effect entry point {ep.name!r}: {exc}", file=sys.stderr)
 
 
-def load_plugin_file(path: str | Path) -> list[str]:
-    """Import a Python file and register every Effect subclass it defines; returns their names."""
+def load_plugin_file(path: str | Path, override: bool = False) -> list[str]:
+    """Import a Python file and register every Effect subclass it defines; returns their names.
+
+    ``override``: its effects may replace built-in effects of the same name (see :func:`register`)."""
     p = Path(path)
     if not p.is_file():
         raise EffectError(f"effect plug-in file {p} does not exist")
@@ -50,12 +90,14 @@ def load_plugin_file(path: str | Path) -> list[str]:
     module = importlib.util.module_from_spec(spec)
     try:
         spec.loader.exec_module(module)
+    except SystemExit as exc:
+        raise EffectError(f"effect plug-in {p} called sys.exit({clip(repr(exc.code), 80)}) while importing") from None
     except Exception as exc:
-        raise EffectError(f"effect plug-in {p} failed to import: {exc}") from exc
+        raise EffectError(f"effect plug-in {p} failed to import: {clip(str(exc))}") from exc
     names = []
     for obj in vars(module).values():
         if inspect.isclass(obj) and issubclass(obj, Effect) and obj.__module__ == module.__name__ and obj.name:
-            register(obj)
+            register(obj, override=override)
             names.append(obj.name)
     if not names:
         raise EffectError(f"effect plug-in {p} defines no Effect subclass with a name")
