@@ -158,7 +158,7 @@ def run_campaign(
     campaign["interrupted"] = interrupted
     outputs = {"json": str(out / OUTPUTS["json"]), "manifest": str(manifest.path)}
     if not interrupted:
-        parts = [bag_dir(out, b["sha256"]) / "frames.parquet" for b in campaign["bags"]]
+        parts = [(bag_dir(out, b["sha256"]) / "frames.parquet", b["path"]) for b in campaign["bags"]]
         if parts:
             campaign["frames_in_table"] = merge(parts, out / OUTPUTS["parquet"])
             outputs["parquet"] = str(out / OUTPUTS["parquet"])

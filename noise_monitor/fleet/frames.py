@@ -2,6 +2,8 @@
 and the campaign's table merged from the bags' files one bag at a time."""
 from __future__ import annotations
 
+import os
+import socket
 from pathlib import Path
 from typing import Iterable
 
@@ -30,13 +32,14 @@ def require_pyarrow() -> None:
         raise ValueError("campaign tables are Parquet files: install pyarrow (pip install 'noise_monitor[fleet]')")
 
 
-def to_arrow(table: FrameTable, hardware_id: str, bag: str, sha256: str) -> pa.Table:
-    """One row per frame; numeric columns float32, NaN where a frame has no value (as in the FrameTable)."""
+def to_arrow(table: FrameTable, hardware_id: str, sha256: str) -> pa.Table:
+    """One row per frame; numeric columns float32, NaN where a frame has no value (as in the FrameTable).
+
+    No bag path: a bag's file is keyed by its content, which several paths may share (the merge adds it)."""
     n = len(table)
     stamps = table.column("stamp_ns")
     cols: dict[str, pa.Array] = {
         "hardware_id": pa.array([hardware_id] * n, pa.string()),
-        "bag": pa.array([bag] * n, pa.string()),
         "sha256": pa.array([sha256] * n, pa.string()),
         "index": pa.array(table.column("index"), pa.int64()),
         "stamp_ns": pa.array(stamps, pa.int64()),
@@ -52,31 +55,34 @@ def to_arrow(table: FrameTable, hardware_id: str, bag: str, sha256: str) -> pa.T
 
 
 def write_parquet(tab: pa.Table, path: Path) -> None:
-    """Write atomically (a temporary file renamed into place)."""
-    tmp = path.with_name(path.name + ".tmp")
+    """Write atomically (a temporary file of this process renamed into place)."""
+    tmp = path.with_name(f"{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
     pq.write_table(tab, tmp)
     tmp.replace(path)
 
 
-def merge(parts: Iterable[Path], path: Path) -> int:
-    """Concatenate per-bag Parquet files into one (a row group per bag, one bag in memory at a time).
+def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
+    """Concatenate per-bag Parquet files (file, bag path) into one: a row group per bag, one bag in memory.
 
     Columns missing from a bag (e.g. an extra source only some profiles have) are NaN there. Returns rows.
     """
     parts = list(parts)
-    schemas = [pq.read_schema(p) for p in parts]
+    schemas = [pq.read_schema(p) for p, _ in parts]
     names = list(BASE_COLUMNS)
     for s in schemas:
         names += [n for n in s.names if n not in names]
     fields = {f.name: f for s in schemas for f in s}
+    fields["bag"] = pa.field("bag", pa.string())
     schema = pa.schema([fields[n] for n in names])
     tmp = path.with_name(path.name + ".tmp")
     rows = 0
     with pq.ParquetWriter(tmp, schema) as writer:
-        for p in parts:
+        for p, bag in parts:
             tab = pq.read_table(p)
             for i, name in enumerate(schema.names):
-                if name not in tab.column_names:
+                if name == "bag":
+                    tab = tab.add_column(i, schema.field(name), pa.array([bag] * tab.num_rows, pa.string()))
+                elif name not in tab.column_names:
                     tab = tab.add_column(i, schema.field(name), pa.array(np.full(tab.num_rows, np.nan, np.float32)))
             writer.write_table(tab.select(schema.names).cast(schema))
             rows += tab.num_rows

@@ -17,6 +17,8 @@ def _ignore_sigint(signum: int, frame: Any) -> None:
 
 def _worker_main(conn: Connection, settings: CampaignSettings) -> None:
     signal.signal(signal.SIGINT, _ignore_sigint)
+    import noise_monitor.estimator  # noqa: F401  torch and the estimator code before the first bag's clock starts
+
     conn.send("ready")
     while True:
         try:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from noise_monitor.bag.reader import open_bag
-from noise_monitor.bag.replay import replay
+from noise_monitor.bag.replay import replay, set_inference_threads
 from noise_monitor.bag.results import CONDITION_KEYS, FrameTable
 from noise_monitor.physics import CameraProfile, NoiseModel, load_plugin_file, load_profile
 
@@ -188,12 +188,13 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
             out = bag_dir(settings.out_dir, sha)
             out.mkdir(parents=True, exist_ok=True)
             table = FrameTable()
+            set_inference_threads(settings.threads)  # before the estimator's ONNX session takes its thread count
             summary = replay(bag, prof, out if settings.bag_outputs else None, estimator=_estimator(settings, prof),
                              config=settings.params, hardware_id=hw, threads=settings.threads, progress=False,
                              plot=settings.bag_outputs, table=table)
             summary["sha256"] = sha
-            write_parquet(to_arrow(table, summary["hardware_id"], path, sha), out / "frames.parquet")
-            tmp = out / "summary.json.tmp"
+            write_parquet(to_arrow(table, summary["hardware_id"], sha), out / "frames.parquet")
+            tmp = out / f"summary.json.{socket.gethostname()}.{os.getpid()}.tmp"
             tmp.write_text(json.dumps(summary, indent=1))
             tmp.replace(out / "summary.json")
             outcome.update(status="ok", record=_record(summary, table), frames=summary["frames_total"])
