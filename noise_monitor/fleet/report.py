@@ -75,6 +75,11 @@ def _bag_row(e: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def _scaled(xi_dn: float, threshold_dn: float) -> float:
+    """An |xi| symptom on 0..1: nothing below a quarter of the alarm threshold, 1 at the threshold."""
+    return float(np.clip((xi_dn - threshold_dn / 4) / (0.75 * threshold_dn), 0.0, 1.0))
+
+
 def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     total = sum(r["frames_total"] for r in rows)
     processed = sum(r["frames_processed"] for r in rows)
@@ -97,13 +102,13 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     symptoms = {
         "alarm": in_alarm / processed if processed else 0.0,
         "skipped": (total - processed) / total if total else 1.0,
-        "xi_bias": min(1.0, abs(means["xi"]) / thr) if means["xi"] is not None and thr > 0 else 0.0,
+        "xi_bias": _scaled(abs(means["xi"]), thr) if means["xi"] is not None and thr > 0 else 0.0,
         "xi_drift": 0.0, "dcsn_growth": 0.0,
     }
     findings = []
     tx, td = trends["xi"], trends["sigma_dcsn"]
     if tx and tx["significant"]:
-        symptoms["xi_drift"] = min(1.0, abs(tx["change_dn"]) / thr) if thr > 0 else 0.0
+        symptoms["xi_drift"] = _scaled(abs(tx["change_dn"]), thr) if thr > 0 else 0.0
         findings.append(f"xi drifts {tx['slope_dn_per_week']:+.3f} DN/week ({tx['change_dn']:+.2f} DN over "
                         f"{tx['span_weeks']:.1f} weeks" + (f", at equal {', '.join(tx['adjusted_for'])})"
                                                            if tx["adjusted_for"] else ")"))
@@ -246,7 +251,7 @@ def _camera_figure(campaign: dict[str, Any]) -> str | None:
             a.grid(alpha=0.3)
             a.tick_params(axis="x", labelsize=7, rotation=20)
     fig.suptitle("Cameras, least healthy first: xi, per-source sigma and conditions per bag over the campaign")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.98))
     return _png(fig)
 
 
@@ -265,7 +270,8 @@ def _health_figure(campaign: dict[str, Any]) -> str | None:
     ax.set_xlim(0, 1)
     ax.set_xlabel("health index (1 = no symptom; 1 - worst symptom, each scaled to 0..1)")
     handles = [plt.Rectangle((0, 0), 1, 1, color=v) for v in colors.values()]
-    ax.legend(handles, [k or "healthy" for k in colors], fontsize=7, loc="lower right", title="limited by")
+    ax.legend(handles, [k or "healthy" for k in colors], fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1),
+              title="limited by")
     ax.grid(axis="x", alpha=0.3)
     return _png(fig)
 
@@ -316,7 +322,8 @@ def write_html(campaign: dict[str, Any], path: Path) -> None:
         f"{t['frames_skipped']} skipped), {t['alarm_episodes']} alarm episodes. Backend {html.escape(str(run['backend']))}, "
         f"{run['bags_run']} bags run in {run['wall_time_s']} s ({run['bags_resumed']} finished before).</p>",
         "<h2>Cameras ranked by health</h2><p>Health = 1 - the worst symptom: fraction of frames in alarm, "
-        "fraction not evaluated, |mean xi| / threshold, significant xi drift over the campaign / threshold, "
+        "fraction not evaluated, |mean xi| and a significant xi drift over the campaign (0 below a quarter of the "
+        "alarm threshold, 1 at the threshold), "
         "relative growth of the dark-current shot noise. Trends are least-squares slopes per week over the bags, "
         "with the conditions that vary between bags as regressors (equal conditions); * = beyond 3 standard errors.</p>",
         _table(cams, ["rank", "camera", "health", "limited by", "bags", "frames", "processed", "in alarm", "episodes",
