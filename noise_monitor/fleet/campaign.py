@@ -11,9 +11,10 @@ import hashlib
 import json
 import resource
 import time
+from collections.abc import Iterable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from tqdm import tqdm
 
@@ -68,7 +69,7 @@ def _entry(outcome: dict[str, Any]) -> dict[str, Any]:
                                       "wall_s", "task_s", "peak_rss_mb", "worker")}
     if e["size"] is None:
         try:
-            e["size"], e["mtime_ns"] = fingerprint(Path(e["path"]))
+            e["size"], e["mtime_ns"] = fingerprint(Path(outcome["path"]))
         except OSError:
             pass
     return {k: v for k, v in e.items() if v is not None}

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import os
 import socket
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
-
 from typing import TYPE_CHECKING
 
 import numpy as np

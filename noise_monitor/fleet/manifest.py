@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 MANIFEST = "manifest.jsonl"
 
@@ -33,7 +33,7 @@ class Manifest:
                         continue
                     if isinstance(entry, dict) and entry.get("settings") == settings_key and "path" in entry:
                         self.entries[entry["path"]] = entry
-        self._fh = None
+        self._fh: BinaryIO | None = None
 
     def finished(self, path: str, size: int, mtime_ns: int) -> dict[str, Any] | None:
         """The entry of a bag finished with these settings and unchanged since, else None."""
@@ -45,21 +45,22 @@ class Manifest:
     def record(self, entry: dict[str, Any]) -> None:
         """Append one entry durably (flush + fsync): a crash after this call keeps it."""
         entry = {**entry, "settings": self.settings_key}
-        if self._fh is None:
+        fh = self._fh
+        if fh is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = open(self.path, "a+b")
-            self._fh.seek(0, os.SEEK_END)
-            if self._fh.tell():
-                self._fh.seek(-1, os.SEEK_END)
-                torn = self._fh.read(1) != b"\n"
-                self._fh.seek(0, os.SEEK_END)
+            fh = self._fh = open(self.path, "a+b")
+            fh.seek(0, os.SEEK_END)
+            if fh.tell():
+                fh.seek(-1, os.SEEK_END)
+                torn = fh.read(1) != b"\n"
+                fh.seek(0, os.SEEK_END)
             else:
                 torn = False
             if torn:  # a torn last line (a kill mid-write): start ours on a fresh line
-                self._fh.write(b"\n")
-        self._fh.write((json.dumps(entry, separators=(",", ":")) + "\n").encode())
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+                fh.write(b"\n")
+        fh.write((json.dumps(entry, separators=(",", ":")) + "\n").encode())
+        fh.flush()
+        os.fsync(fh.fileno())
         self.entries[entry["path"]] = entry
 
     def close(self) -> None:

@@ -5,8 +5,9 @@ from __future__ import annotations
 import multiprocessing as mp
 import signal
 import time
+from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
-from typing import Any, Iterable, Iterator
+from typing import Any
 
 from .task import MEMORY_EXIT_CODE, CampaignSettings, run_bag
 
@@ -112,7 +113,8 @@ class LocalPool:
                         except (EOFError, OSError):
                             w.proc.join(5.0)
                             if w.path is None:
-                                raise RuntimeError(f"a pool worker died at start-up: {death_reason(w.proc.exitcode)}")
+                                raise RuntimeError("a pool worker died at start-up: "
+                                                   f"{death_reason(w.proc.exitcode)}") from None
                             outcome, restart = self._failed(w, death_reason(w.proc.exitcode)), True
                         else:
                             if msg == "ready":

@@ -37,12 +37,12 @@ class ProfileMap:
     source: str = "--profile"
 
     @classmethod
-    def single(cls, profile: str | None) -> "ProfileMap":
+    def single(cls, profile: str | None) -> ProfileMap:
         """Every camera with one profile (None: all metadata from the bags)."""
         return cls({}, profile, "--profile")
 
     @classmethod
-    def load(cls, path: str | Path) -> "ProfileMap":
+    def load(cls, path: str | Path) -> ProfileMap:
         p = Path(path)
         try:
             doc = yaml.safe_load(p.read_text())

@@ -7,9 +7,10 @@ import html
 import io
 import math
 from collections import defaultdict
-from datetime import datetime, timezone
+from collections.abc import Sequence
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,7 @@ def utc(ns: int | None) -> str | None:
     """ISO 8601 UTC time of a stamp in ns (ms resolution)."""
     if ns is None:
         return None
-    return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return datetime.fromtimestamp(ns / 1e9, tz=UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def trend(t_ns: np.ndarray, y: np.ndarray, conds: dict[str, np.ndarray]) -> dict[str, Any] | None:
@@ -124,7 +125,7 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         findings.append(f"{len(episodes)} alarm episode(s), {100 * symptoms['alarm']:.1f} % of processed frames in alarm")
     if symptoms["skipped"] > 0:
         findings.append(f"{100 * symptoms['skipped']:.1f} % of frames not evaluated")
-    worst = max(symptoms, key=symptoms.get)
+    worst = max(symptoms, key=lambda k: symptoms[k])
     return {
         "hardware_id": hw, "profiles": sorted({str(r["profile"]) for r in rows}), "bags": len(rows),
         "first_utc": utc(min((r["start_ns"] for r in rows if r["start_ns"] is not None), default=None)),
@@ -194,7 +195,7 @@ def _png(fig: Any) -> str:
 
 
 def _times(rows: list[dict[str, Any]]) -> list[datetime]:
-    return [datetime.fromtimestamp((r["start_ns"] + r["end_ns"]) / 2e9, tz=timezone.utc) for r in rows]
+    return [datetime.fromtimestamp((r["start_ns"] + r["end_ns"]) / 2e9, tz=UTC) for r in rows]
 
 
 def _camera_figure(campaign: dict[str, Any]) -> str | None:

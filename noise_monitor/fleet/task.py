@@ -22,9 +22,10 @@ from typing import Any
 import numpy as np
 
 from noise_monitor.bag.reader import open_bag
-from noise_monitor.bag.replay import replay, set_inference_threads
+from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import CONDITION_KEYS, FrameTable
-from noise_monitor.physics import CameraProfile, NoiseModel, load_plugin_file, load_profile
+from noise_monitor.monitor.runtime import MonitorRuntime
+from noise_monitor.physics import CameraProfile, load_plugin_file, load_profile
 
 from .bags import content_hash, fingerprint
 from .frames import to_arrow, write_parquet
@@ -95,7 +96,7 @@ class MemoryLimit:
                 _thread.interrupt_main(signal.SIGUSR1)
                 return
 
-    def __enter__(self) -> "MemoryLimit":
+    def __enter__(self) -> MemoryLimit:
         if self.limit_mb and threading.current_thread() is threading.main_thread():
             self._previous = signal.signal(signal.SIGUSR1, _raise_memory_exceeded)
             self._interruptible = True
@@ -126,22 +127,20 @@ _PLUGINS: set[str] = set()
 
 
 def _estimator(settings: CampaignSettings, prof: CameraProfile | None) -> Any:
-    """The estimator replay would load for this profile, loaded once per worker process."""
-    from noise_monitor.estimator import load
-    from noise_monitor.monitor.config import read_ros_params
-
-    params = read_ros_params(settings.params)
-    name = settings.model or params.get("model", "full_meta")
-    device = settings.device or params.get("device", "cpu")
-    weights = settings.weights or params.get("weights") or None
+    """The estimator replay's runtime loads for this profile (same parameters), once per worker process."""
     effects = tuple(sorted((k, tuple(sorted(v.items()))) for k, v in prof.effects.items())) if prof else ()
-    key = (name, device, weights, effects)
+    key = (settings.params, settings.model, settings.weights, settings.device, settings.threads, effects)
     if key not in _ESTIMATORS:
         if len(_ESTIMATORS) >= 8:  # bounded: a fleet has few distinct effect sets
             _ESTIMATORS.pop(next(iter(_ESTIMATORS)))
-        _ESTIMATORS[key] = load(name, device=device, weights=weights,
-                                model=NoiseModel(extra=prof.effects if prof else None))
+        rt = MonitorRuntime.from_params_file(settings.params, _overrides(settings), profile=prof)
+        _ESTIMATORS[key] = rt.estimator
     return _ESTIMATORS[key]
+
+
+def _overrides(settings: CampaignSettings) -> dict[str, Any]:
+    return {"model": settings.model, "weights": settings.weights, "device": settings.device,
+            "threads": settings.threads}
 
 
 def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
@@ -188,7 +187,6 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
             out = bag_dir(settings.out_dir, sha)
             out.mkdir(parents=True, exist_ok=True)
             table = FrameTable()
-            set_inference_threads(settings.threads)  # before the estimator's ONNX session takes its thread count
             summary = replay(bag, prof, out if settings.bag_outputs else None, estimator=_estimator(settings, prof),
                              config=settings.params, hardware_id=hw, threads=settings.threads, progress=False,
                              plot=settings.bag_outputs, table=table)

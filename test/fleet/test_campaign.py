@@ -3,7 +3,6 @@ name, resume from the manifest, hung / crashing / memory-hungry bags, Ctrl-C, th
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import signal
 import subprocess
