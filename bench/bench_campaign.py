@@ -101,6 +101,43 @@ def exact(bags: list[Path], out: Path) -> dict:
     return {"bags_compared": len(bags), "values_compared": values, "bags_mismatched": mismatched}
 
 
+def driver_at_scale(manifest: Path, n: int) -> dict:
+    """The driver's bookkeeping for n bags: a manifest of n entries (the measured ones, replicated under new
+    paths and hashes) loaded and summarised as a campaign of n bags; resident memory growth and time."""
+    import gc
+
+    from noise_monitor.fleet.manifest import Manifest
+    from noise_monitor.fleet.report import summarize
+    from noise_monitor.fleet.task import rss_mb
+
+    lines = [json.loads(ln) for ln in manifest.read_text().splitlines()]
+    big = manifest.parent / "scale" / "manifest.jsonl"
+    big.parent.mkdir(exist_ok=True)
+    key = lines[0]["settings"]
+    with open(big, "w") as fh:
+        for i in range(n):
+            e = dict(lines[i % len(lines)])
+            e["path"] = f"/fleet/bag{i:06d}.mcap"
+            e["sha256"] = f"{i:064x}"
+            e["record"] = {**e["record"], "hardware_id": f"robot{i % 500:03d}/front"}
+            fh.write(json.dumps(e, separators=(",", ":")) + "\n")
+    gc.collect()
+    rss0, t0 = rss_mb(), time.perf_counter()
+    m = Manifest(big.parent, key)
+    t_load = time.perf_counter() - t0
+    paths = [f"/fleet/bag{i:06d}.mcap" for i in range(n)]
+    c = summarize(paths, [m.entries[p] for p in paths], [], {"backend": "pool"})
+    t_sum = time.perf_counter() - t0 - t_load
+    rss1 = rss_mb()
+    t1 = time.perf_counter()
+    out = json.dumps(c)
+    t_json = time.perf_counter() - t1
+    return {"bags": n, "cameras": len(c["cameras"]), "manifest_mb": round(big.stat().st_size / 2**20, 1),
+            "load_s": round(t_load, 2), "summarize_s": round(t_sum, 2), "json_dump_s": round(t_json, 2),
+            "campaign_json_mb": round(len(out) / 2**20, 1), "driver_rss_growth_mb": round(rss1 - rss0, 1),
+            "load": load()}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bags", type=int, default=200)
@@ -128,6 +165,8 @@ def main() -> int:
         res["ray_overhead_per_bag_s"] = round((res["ray2"]["run_wall_s"] - res["pool2"]["run_wall_s"]) / len(bags), 4)
         print(f"Ray overhead per bag (wall, vs the pool at 2 workers): {res['ray_overhead_per_bag_s'] * 1e3:.1f} ms; "
               f"submit-to-result minus the task's own time: {res['ray2']['task_minus_bag_s'] * 1e3:.1f} ms", flush=True)
+    res["driver_1e5"] = driver_at_scale(root / "pool2" / "manifest.jsonl", 100_000)
+    print("driver bookkeeping for 10^5 bags:", res["driver_1e5"], flush=True)
     if not args.skip_exact:
         res["exact"] = exact(bags, root / "pool2")
         print("bit-exact vs replay():", res["exact"], flush=True)

@@ -162,7 +162,8 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
         c["rank"] = rank
     episodes = sorted(({"hardware_id": b["hardware_id"], "bag": b["path"], **a} for b in bags for a in b["alarms"]),
                       key=lambda a: a["start_ns"])
-    pending = [p for p in paths if p not in {e["path"] for e in entries}]
+    recorded = {e["path"] for e in entries}
+    pending = [p for p in paths if p not in recorded]
     return {
         "totals": {
             "bags_found": len(paths), "bags_evaluated": len(bags), "bags_failed": len(failed),
