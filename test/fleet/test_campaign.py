@@ -274,3 +274,17 @@ def test_cli_unusable_campaign_exits_2(tmp_path: Path, capsys: pytest.CaptureFix
         assert main(["campaign", str(tmp_path), "--out", str(tmp_path / "out"), "--pool", *extra]) == 2
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("noise-monitor campaign: error:") and why in lines[0]
+
+
+def test_simulate_bag_cli_sets_camera_id_and_start(tmp_path: Path) -> None:
+    from noise_monitor.bag.reader import open_bag
+    from noise_monitor.fleet.task import camera_id
+
+    bag = tmp_path / "x.mcap"
+    assert main(["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "static", "--frames", "2",
+                 "--width", "64", "--height", "64", "--hardware-id", "robot5/left", "--start",
+                 "2026-05-01T08:00:00Z"]) == 0
+    assert camera_id(bag) == "robot5/left"
+    with open_bag(bag) as reader:
+        assert reader.start_ns == 1_777_622_400 * 10**9
+    assert main(["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "static", "--start", "May"]) == 2
