@@ -91,7 +91,10 @@ class RayPool:
                         inflight[task.remote(nxt, settings_ref)] = (nxt, time.monotonic())
                 if not inflight:
                     return
-                ready, _ = ray.wait(list(inflight), num_returns=len(inflight), timeout=0.1)
+                refs = list(inflight)
+                ready, rest = ray.wait(refs, num_returns=1, timeout=0.1)  # returns at the first finished task
+                if ready and rest:
+                    ready += ray.wait(rest, num_returns=len(rest), timeout=0)[0]
                 for ref in ready:
                     path, t0 = inflight.pop(ref)
                     if ref in cancelled:
