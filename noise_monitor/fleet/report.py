@@ -20,8 +20,11 @@ from .bags import Problem
 TREND_KEYS = ("xi", "sigma_image", "sigma_model", "sigma_pn", "sigma_dcsn", "sigma_rn")
 CONDITIONS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
 WEEK_NS = 7 * 86400 * 1e9
-#: A trend counts when its slope is this many standard errors from zero (and >= 4 bags).
+#: A trend counts when its slope is this many standard errors from zero (and >= 4 bags) ...
 TREND_T = 3.0
+#: ... and it changes the quantity by at least this much over the campaign (DN): the physics' own
+#: per-source sigma is noiseless, so statistically certain trends of a thousandth of a DN are no finding.
+TREND_MIN_CHANGE_DN = 0.05
 #: Cameras drawn in the report's per-camera figure (the least healthy first).
 PLOT_CAMERAS = 6
 
@@ -59,7 +62,7 @@ def trend(t_ns: np.ndarray, y: np.ndarray, conds: dict[str, np.ndarray]) -> dict
     s2 = float(resid @ resid) / dof if dof > 0 else 0.0
     se = math.sqrt(max(s2 * float(np.linalg.pinv(x.T @ x)[1, 1]), 0.0))
     slope = float(beta[1])
-    significant = n >= 4 and dof > 0 and (abs(slope) > TREND_T * se if se > 0 else abs(slope) > 1e-9)
+    significant = (n >= 4 and dof > 0 and abs(slope) > TREND_T * se and abs(slope * span) >= TREND_MIN_CHANGE_DN)
     return {"slope_dn_per_week": round(slope, 5), "stderr_dn_per_week": round(se, 5),
             "change_dn": round(slope * span, 4), "span_weeks": round(span, 3), "bags": n,
             "adjusted_for": names, "significant": bool(significant)}
@@ -121,6 +124,9 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
                         f"({100 * rel:+.0f} % over {td['span_weeks']:.1f} weeks"
                         + (f" at equal {', '.join(td['adjusted_for'])}" if td["adjusted_for"] else "")
                         + "): an ageing sensor?")
+    if symptoms["xi_bias"] > 0:
+        kind = "image noisier than the model predicts" if means["xi"] < 0 else "model predicts more noise than the image"
+        findings.append(f"mean xi {means['xi']:+.2f} DN (alarm threshold {thr:g} DN): {kind}")
     if symptoms["alarm"] > 0:
         findings.append(f"{len(episodes)} alarm episode(s), {100 * symptoms['alarm']:.1f} % of processed frames in alarm")
     if symptoms["skipped"] > 0:
@@ -236,10 +242,11 @@ def _camera_figure(campaign: dict[str, Any]) -> str | None:
             ax.plot(t, y, "o-" if key != "sigma_image" else "s--", ms=3, lw=1, color=color, label=label)
         td = cam["trends"]["sigma_dcsn"]
         if td and td["significant"]:
-            ax.text(0.01, 0.97, f"DCSN trend {td['slope_dn_per_week']:+.3f} DN/week", transform=ax.transAxes,
-                    va="top", fontsize=8, color="tab:orange")
+            ax.text(0.01, 0.02, f"DCSN trend {td['slope_dn_per_week']:+.3f} DN/week", transform=ax.transAxes,
+                    va="bottom", fontsize=8, color="tab:orange")
         ax.set_ylabel("noise sigma per bag [DN]")
-        ax.legend(fontsize=7, loc="center left", ncol=2)
+        ax.set_ylim(0, ax.get_ylim()[1] * 1.3)
+        ax.legend(fontsize=7, loc="upper center", ncol=3)
         ax = row[2]
         temp = [r["conditions"]["sensor_temperature_c"] for r in rows]
         ax.plot(t, [np.nan if v is None else v for v in temp], "o-", ms=3, color="tab:purple", label="temperature")

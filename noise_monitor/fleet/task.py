@@ -169,7 +169,7 @@ def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
 
 def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
     """Replay one bag; never raises for a bad bag: the outcome's status is ``ok`` or ``failed`` with a reason."""
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     bag = Path(path)
     outcome: dict[str, Any] = {"path": path, "status": "failed", "worker": f"{socket.gethostname()}:{os.getpid()}"}
     guard = MemoryLimit(settings.memory_limit_mb)
@@ -206,5 +206,6 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
         outcome["reason"] = (f"{type(exc).__name__}: {' '.join(str(exc).split())} "
                              f"({Path(where.filename).name}:{where.lineno})")
     outcome["wall_s"] = round(time.perf_counter() - t0, 4)
+    outcome["cpu_s"] = round(time.process_time() - cpu0, 4)  # all threads of the worker
     outcome["peak_rss_mb"] = round(guard.peak_mb, 1)
     return outcome
