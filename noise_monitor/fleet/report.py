@@ -124,9 +124,10 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
                         f"({100 * rel:+.0f} % over {td['span_weeks']:.1f} weeks"
                         + (f" at equal {', '.join(td['adjusted_for'])}" if td["adjusted_for"] else "")
                         + "): an ageing sensor?")
-    if symptoms["xi_bias"] > 0:
-        kind = "image noisier than the model predicts" if means["xi"] < 0 else "model predicts more noise than the image"
-        findings.append(f"mean xi {means['xi']:+.2f} DN (alarm threshold {thr:g} DN): {kind}")
+    xi_mean = means["xi"]
+    if symptoms["xi_bias"] > 0 and xi_mean is not None:
+        kind = "image noisier than the model predicts" if xi_mean < 0 else "model predicts more noise than the image"
+        findings.append(f"mean xi {xi_mean:+.2f} DN (alarm threshold {thr:g} DN): {kind}")
     if symptoms["alarm"] > 0:
         findings.append(f"{len(episodes)} alarm episode(s), {100 * symptoms['alarm']:.1f} % of processed frames in alarm")
     if symptoms["skipped"] > 0:
