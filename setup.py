@@ -31,6 +31,8 @@ setup(
         "ros": ["ros-jazzy-rclpy[fastrtps]>=7.1", "ros-jazzy-common-interfaces>=5.3"],
         # estimator training and evaluation data (scikit-image / PyWavelets sample images)
         "train": ["scikit-image>=0.22", "PyWavelets>=1.5"],
+        # `noise-monitor campaign`: Ray tasks (optional: a local process pool otherwise) and Parquet tables
+        "fleet": ["ray>=2.58", "pyarrow>=25"],
         "dev": ["pytest>=8", "hypothesis>=6", "mcap>=1.1", "ruff>=0.15", "mypy>=1.10", "types-PyYAML", "build>=1.0"],
     },
     zip_safe=True,

@@ -22,6 +22,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
              "run the live ROS 2 noise monitor node (image + metadata in, /diagnostics and sigma/xi topics out)"),
     "replay": ("noise_monitor.bag.replay_cmd",
                "Replay a bag through the monitor pipeline (as the node would run it) and summarise noise and alarms."),
+    "campaign": ("noise_monitor.fleet.campaign_cmd",
+                 "Replay many bags on Ray or a local process pool, resumable; Parquet, campaign.json, HTML report."),
     "play": ("noise_monitor.bag.play_cmd",
              "Publish a bag into live ROS 2 topics (original timing, --rate factor, --loop); no ROS install needed."),
     "simulate-bag": ("noise_monitor.bag.simulate_cmd",

@@ -111,6 +111,7 @@ def run_replay(
     progress: bool = True,
     plot: bool = True,
     physics_tables: str | None = None,
+    table: FrameTable | None = None,
 ) -> dict[str, Any]:
     """Run the monitor over every image of ``bag``; returns the JSON summary (outputs written to ``stage``).
 
@@ -122,12 +123,16 @@ def run_replay(
     node sets them (0 = all cores but one; more threads than free cores slow inference down several-fold).
     ``physics_tables``: ``interpolated`` (default) or ``exact`` tables per metadata set (for comparisons).
     The params' ``metadata_keymap`` reads a DiagnosticArray with a driver's own key names.
+    ``table``: an empty FrameTable to receive the per-frame results (a campaign keeps them).
     """
     overrides = {"model": model_name, "weights": str(weights) if weights else None, "device": device,
                  "camera_name": camera_name, "hardware_id": hardware_id, "bit_depth": bit_depth, "threads": threads,
                  "physics_tables": physics_tables}
     mcap_path = stage.path(OUTPUT_FILES["mcap"]) if stage is not None else None
-    table = FrameTable()
+    if table is None:
+        table = FrameTable()
+    elif len(table):
+        raise ValueError("replay needs an empty FrameTable")
     truth = _truth_episodes(bag)  # before the loop: a long simulation's sidecar is parsed while memory is fresh
     with ExitStack() as stack:
         # the bag first: an unusable bag is reported before the estimator is loaded

@@ -74,6 +74,8 @@ def simulate_bag(
     namespace: str = "/camera",
     hold_s: float = 1.0,
     progress: bool = False,
+    hardware_id: str | None = None,
+    start_ns: int = START_NS,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -83,6 +85,8 @@ def simulate_bag(
     auto-exposure / temperature read-out rate; 0 = every frame); image noise and motion change per frame.
     A campaign scenario (``scenario.campaign``, see :mod:`.campaign`) sets its own per-frame plan: a photo
     world, static holds and sub-pixel pans, auto-exposure per hold, temperature every frame (``hold_s`` unused).
+    ``hardware_id``: the camera's id in the metadata messages (default: the profile name); ``start_ns``: the
+    first frame's stamp (a field campaign's bags are recorded at different times).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -122,14 +126,14 @@ def simulate_bag(
         positions = np.stack([camera_path(np.array(u), s.moving) for u, s in zip(us, steps)])
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
-    hw = prof.name
+    hw = hardware_id or prof.name
     records: list[dict[str, Any]] = []
     bit_depth = prof.bit_depth
     prev_offset: tuple[float, float] | None = None
     with BagWriter(out, storage=storage) as writer:
         for i, (u, step) in enumerate(tqdm(list(zip(us, steps)), desc=f"simulate {out.name}", unit="frame",
                                            disable=not progress)):
-            stamp = START_NS + int(round(i * 1e9 / fps))
+            stamp = start_ns + int(round(i * 1e9 / fps))
             true_meta = prof.metadata(gain_db=step.gain_db, exposure_time_s=step.exposure_time_s,
                                       sensor_temperature_c=step.sensor_temperature_c)
             stated = _stated(true_meta, step)

@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import argparse
 import json
+from datetime import UTC, datetime
 
 from noise_monitor.physics import load_plugin_file
 
 from .scenarios import SCENARIOS
-from .simulate import load_truth, simulate_bag, truth_path
+from .simulate import START_NS, load_truth, simulate_bag, truth_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,7 +31,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (scene, noise); same seed, same bag")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     parser.add_argument("--namespace", default="/camera", help="topic namespace (default /camera)")
+    parser.add_argument("--hardware-id", help="camera id in the metadata messages (default: the profile name)")
+    parser.add_argument("--start", metavar="UTC", help="first frame's time, ISO 8601 (default 2023-11-14T22:13:20Z)")
     parser.add_argument("--json", metavar="PATH", help="write a summary JSON (bag, truth file, episodes)")
+
+
+def _start_ns(text: str | None) -> int:
+    """ISO 8601 time (UTC unless it names a zone) -> ns since the epoch."""
+    if text is None:
+        return START_NS
+    try:
+        t = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"--start must be an ISO 8601 time like 2026-05-01T08:00:00Z, got {text!r}") from None
+    if t.tzinfo is None:
+        t = t.replace(tzinfo=UTC)
+    return int(round(t.timestamp() * 1e9))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
         load_plugin_file(f, override=args.replace_builtin_effects)
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
-                       namespace=args.namespace, hold_s=args.hold, progress=True)
+                       namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,
+                       start_ns=_start_ns(args.start))
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),
                "profile": truth["profile"], "scenario": truth["scenario"], "effects": truth["effects"],

@@ -1,0 +1,88 @@
+"""Find the bags of a campaign, fingerprint them cheaply and hash their content."""
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+BAG_SUFFIXES = (".mcap", ".db3")
+_CHUNK = 1 << 20
+
+
+@dataclass(frozen=True)
+class Problem:
+    """An input that is not evaluated, with the reason."""
+
+    path: str
+    reason: str
+
+
+def _bag_files(bag: Path) -> list[Path]:
+    """The files whose bytes make up a bag (a rosbag2 folder: all its files, sorted)."""
+    if bag.is_dir():
+        return sorted(p for p in bag.rglob("*") if p.is_file())
+    return [bag]
+
+
+def fingerprint(bag: Path) -> tuple[int, int]:
+    """(total size in bytes, newest mtime in ns): unchanged bags keep it, so a re-run need not re-hash them."""
+    files = _bag_files(bag)
+    stats = [f.stat() for f in files]
+    return sum(s.st_size for s in stats), max((s.st_mtime_ns for s in stats), default=0)
+
+
+def content_hash(bag: Path) -> str:
+    """sha256 of a bag's bytes (a folder: its files' relative names and contents, in sorted order)."""
+    h = hashlib.sha256()
+    for f in _bag_files(bag):
+        if bag.is_dir():
+            h.update(str(f.relative_to(bag)).encode() + b"\0")
+        with open(f, "rb") as fh:
+            while chunk := fh.read(_CHUNK):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def _walk(root: Path) -> Iterable[Path]:
+    """Bags below a folder: rosbag2 folders (metadata.yaml; not descended into) and bare .mcap/.db3 files."""
+    for dirpath, dirnames, filenames in os.walk(root):
+        d = Path(dirpath)
+        if "metadata.yaml" in filenames:
+            dirnames[:] = []
+            yield d
+            continue
+        dirnames.sort()
+        for name in sorted(filenames):
+            if name.endswith(BAG_SUFFIXES):
+                yield d / name
+
+
+def find_bags(inputs: Iterable[str | Path]) -> tuple[list[Path], list[Problem]]:
+    """Bags named by ``inputs`` (bag files, rosbag2 folders, folders searched recursively), each once.
+
+    Paths that do not exist, files that are not bags and folders without bags are problems, not errors.
+    """
+    bags: list[Path] = []
+    seen: set[Path] = set()
+    problems: list[Problem] = []
+    for raw in inputs:
+        p = Path(raw)
+        if not p.exists():
+            problems.append(Problem(str(p), "does not exist"))
+            continue
+        if p.is_file():
+            found = [p] if p.suffix in BAG_SUFFIXES else []
+            if not found:
+                problems.append(Problem(str(p), "not a bag (expected a rosbag2 folder, a .mcap or a .db3 file)"))
+        else:
+            found = list(_walk(p))
+            if not found:
+                problems.append(Problem(str(p), "folder holds no bag (.mcap, .db3 or a rosbag2 folder)"))
+        for bag in found:
+            key = bag.resolve()
+            if key not in seen:
+                seen.add(key)
+                bags.append(bag)
+    return bags, problems

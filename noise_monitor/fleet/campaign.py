@@ -1,0 +1,176 @@
+"""The campaign driver: find the bags, skip those finished before, run the rest on Ray or a local pool,
+record each in the manifest as it ends, then write the per-frame Parquet table, campaign.json and the
+HTML report.
+
+The driver keeps O(workers) tasks in flight and a small record per bag (no per-frame data): its memory
+grows with the number of bags (~2 KB each), not with their frames.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import resource
+import time
+from collections.abc import Iterable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from noise_monitor.physics import load_profile
+
+from .bags import Problem, find_bags, fingerprint
+from .frames import merge, require_pyarrow
+from .manifest import Manifest
+from .pool import LocalPool
+from .profiles import ProfileMap
+from .ray_pool import RayPool, RayUnavailable
+from .report import summarize, write_html
+from .task import CampaignSettings, bag_dir
+
+OUTPUTS = {"json": "campaign.json", "parquet": "frames.parquet", "html": "report.html"}
+
+
+def _file_digest(path: str | None) -> str | None:
+    if not path or not Path(path).is_file():
+        return path
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def settings_key(settings: CampaignSettings) -> str:
+    """What makes a bag's results: profiles (and their files' contents), estimator, weights, params, plug-ins."""
+    specs = [*settings.profiles.cameras.values(), settings.profiles.default]
+    doc = {"profiles": {"cameras": settings.profiles.cameras, "default": settings.profiles.default},
+           "profile_files": {s: _file_digest(s) for s in specs if s and s.endswith((".yaml", ".yml"))},
+           "model": settings.model, "weights": _file_digest(settings.weights), "device": settings.device,
+           "params": _file_digest(settings.params), "plugins": [_file_digest(p) for p in settings.plugins],
+           "threads": settings.threads}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _executor(backend: str, ray_address: str | None, workers: int, timeout_s: float | None,
+              problems: list[Problem]) -> LocalPool | RayPool:
+    """Ray (local or the cluster at ray_address) or the local pool; an unusable Ray is reported, the pool runs."""
+    if backend == "pool":
+        return LocalPool(workers, timeout_s)
+    try:
+        return RayPool(ray_address, workers, timeout_s)
+    except RayUnavailable as exc:
+        if backend == "auto" and ray_address is None and "not installed" in str(exc):
+            return LocalPool(workers, timeout_s)  # Ray is optional: the pool gives the same results
+        problems.append(Problem(ray_address or "ray", f"{exc}; ran on the local process pool instead"))
+        return LocalPool(workers, timeout_s)
+
+
+def _entry(outcome: dict[str, Any]) -> dict[str, Any]:
+    """A manifest line from a worker's outcome (fingerprint filled in for failures the driver saw)."""
+    e = {k: outcome.get(k) for k in ("path", "status", "reason", "sha256", "size", "mtime_ns", "frames", "record",
+                                      "wall_s", "cpu_s", "task_s", "peak_rss_mb", "worker")}
+    if e["size"] is None:
+        try:
+            e["size"], e["mtime_ns"] = fingerprint(Path(outcome["path"]))
+        except OSError:
+            pass
+    return {k: v for k, v in e.items() if v is not None}
+
+
+def run_campaign(
+    inputs: Iterable[str | Path],
+    out_dir: str | Path,
+    *,
+    profile: str | None = None,
+    profile_map: str | Path | None = None,
+    model: str | None = None,
+    weights: str | None = None,
+    device: str | None = None,
+    params: str | None = None,
+    plugins: Iterable[str] = (),
+    backend: str = "auto",
+    ray_address: str | None = None,
+    workers: int = 2,
+    timeout_s: float | None = 600.0,
+    memory_limit_mb: float = 0.0,
+    bag_outputs: bool = False,
+    progress: bool = True,
+    report: bool = True,
+) -> dict[str, Any]:
+    """Replay every bag of ``inputs`` into ``out_dir``; returns the campaign summary (campaign.json).
+
+    ``backend``: ``auto`` (Ray when installed, else the pool), ``ray`` or ``pool``. Raises ValueError for an
+    unusable campaign (profile, profile map, workers); bad bags are reported in the summary instead.
+    """
+    if backend not in ("auto", "ray", "pool"):
+        raise ValueError(f"backend must be auto, ray or pool, got {backend!r}")
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if timeout_s is not None and timeout_s <= 0:
+        raise ValueError(f"timeout must be > 0 s, got {timeout_s}")
+    require_pyarrow()
+    if profile and profile_map:
+        raise ValueError("give --profile or --profiles, not both")
+    if profile:
+        load_profile(profile)  # an unusable profile stops the campaign before any work
+    profiles = ProfileMap.load(profile_map) if profile_map else ProfileMap.single(profile)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    plugins = tuple(str(Path(p).resolve()) for p in plugins)
+    settings = CampaignSettings(out_dir=str(out.resolve()), profiles=profiles, model=model, weights=weights,
+                                device=device, params=str(Path(params).resolve()) if params else None,
+                                plugins=plugins, memory_limit_mb=memory_limit_mb, bag_outputs=bag_outputs)
+    t0 = time.perf_counter()
+    bags, problems = find_bags(inputs)
+    paths = [str(b.resolve()) for b in bags]
+    manifest = Manifest(out, settings_key(settings))
+    todo = [p for p in paths if not manifest.finished(p, *fingerprint(Path(p)))]
+    resumed = len(paths) - len(todo)
+    executor = _executor(backend, ray_address, workers, timeout_s, problems) if todo else None
+    run_info: dict[str, Any] = executor.describe() if executor else {"backend": None}
+    finished = frames = 0
+    interrupted = False
+    bar = tqdm(total=len(todo), unit="bag", desc="campaign", disable=not progress, position=0)
+    fbar = tqdm(unit="frame", desc="frames", disable=not progress, position=1)
+    try:
+        for outcome in executor.run(todo, settings) if executor else ():
+            manifest.record(_entry(outcome))
+            finished += 1
+            frames += outcome.get("frames", 0)
+            bar.update(1)
+            fbar.update(outcome.get("frames", 0))
+            if outcome["status"] != "ok":
+                bar.write(f"failed: {outcome['path']}: {outcome['reason']}")
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+        fbar.close()
+        manifest.close()
+        if executor:
+            executor.close()
+    wall = time.perf_counter() - t0
+    run_info.update(bags_run=finished, frames_run=frames, wall_time_s=round(wall, 3),
+                    frames_per_s=round(frames / wall, 2) if wall > 0 else None, bags_resumed=resumed,
+                    driver_peak_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1))
+    entries = [manifest.entries[p] for p in paths if p in manifest.entries]
+    campaign = summarize(paths, entries, problems, run_info)
+    campaign["settings"] = {**{k: v for k, v in asdict(settings).items() if k != "profiles"},
+                            "profiles": {"cameras": profiles.cameras, "default": profiles.default,
+                                         "source": profiles.source}, "key": manifest.settings_key}
+    campaign["interrupted"] = interrupted
+    outputs = {"json": str(out / OUTPUTS["json"]), "manifest": str(manifest.path)}
+    if not interrupted:
+        parts = [(bag_dir(out, b["sha256"]) / "frames.parquet", b["path"]) for b in campaign["bags"]]
+        if parts:
+            campaign["frames_in_table"] = merge(parts, out / OUTPUTS["parquet"])
+            outputs["parquet"] = str(out / OUTPUTS["parquet"])
+        if report:
+            write_html(campaign, out / OUTPUTS["html"])
+            outputs["html"] = str(out / OUTPUTS["html"])
+    campaign["outputs"] = outputs
+    tmp = out / (OUTPUTS["json"] + ".tmp")
+    tmp.write_text(json.dumps(campaign, indent=1))
+    tmp.replace(out / OUTPUTS["json"])
+    if interrupted:
+        raise KeyboardInterrupt(f"campaign interrupted: {len(campaign['bags'])} of {len(paths)} bags finished "
+                                f"and recorded in {manifest.path}; re-run the same command to resume")
+    return campaign

@@ -1,0 +1,290 @@
+"""noise-monitor campaign: bit-exact per-frame results against replay, Ray = pool, bad input reported by
+name, resume from the manifest, hung / crashing / memory-hungry bags, Ctrl-C, the report's trends."""
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pa = pytest.importorskip("pyarrow")
+import pyarrow.compute as pc  # noqa: E402
+import pyarrow.parquet as pq  # noqa: E402
+
+from noise_monitor.bag.replay import replay  # noqa: E402
+from noise_monitor.bag.results import CONDITION_KEYS, FrameTable  # noqa: E402
+from noise_monitor.bag.simulate import START_NS, simulate_bag  # noqa: E402
+from noise_monitor.cli import main  # noqa: E402
+from noise_monitor.fleet import run_campaign  # noqa: E402
+from noise_monitor.fleet.report import trend  # noqa: E402
+from noise_monitor.physics import load_profile  # noqa: E402
+from noise_monitor.physics.metadata import CameraProfile  # noqa: E402
+
+DAY_NS = 86400 * 10**9
+#: Columns that measure time, not results (the processing time of a frame differs run to run).
+TIMING = {"processing_ms"}
+PLUGIN = '''
+import os, signal, time
+import numpy as np
+from noise_monitor.physics.effects import Effect, Param
+
+class Hang(Effect):
+    name = "test_hang"
+    distribution = "gaussian"
+    params = (Param("seconds", "s", 600.0, (0.0, 1e5), fittable=False),)
+    description = "sleeps: a bag that hangs its worker"
+    signature = "hang"
+
+    def sigma_dn(self, signal_dn, cond):
+        time.sleep(self.seconds)
+        return np.zeros(np.shape(signal_dn))
+
+class Crash(Effect):
+    name = "test_crash"
+    distribution = "gaussian"
+    params = ()
+    description = "kills its process: a bag that crashes its worker"
+    signature = "crash"
+
+    def sigma_dn(self, signal_dn, cond):
+        os.kill(os.getpid(), signal.SIGKILL)
+'''
+
+
+def _sim(path: Path, hw: str, day: int, seed: int, profile: str | CameraProfile = "ev76c661",
+         scenario: str = "static", frames: int = 6) -> Path:
+    return simulate_bag(path, profile, scenario, frames=frames, width=128, height=128, seed=seed, hardware_id=hw,
+                        start_ns=START_NS + day * DAY_NS)
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Good bags of two cameras, bad inputs, and the profile map / plug-in for hung and crashing bags."""
+    root = tmp_path_factory.mktemp("fleet")
+    good = root / "good"
+    good.mkdir()
+    for i in range(3):
+        _sim(good / f"a{i}.mcap", "robot1/front", 7 * i, seed=i)
+    _sim(good / "b0.mcap", "robot2/front", 3, seed=10, scenario="image_noise", frames=24)
+    bad = root / "bad"
+    bad.mkdir()
+    (bad / "empty.mcap").write_bytes(b"")
+    data = (good / "a0.mcap").read_bytes()
+    (bad / "damaged.mcap").write_bytes(data[: len(data) // 2])
+    shutil.copy(good / "a1.mcap", bad / "copy_of_a1.mcap")
+    _sim(bad / "stranger.mcap", "robot9/rear", 1, seed=20)  # not in the profile map
+    (bad / "notes.txt").write_text("not a bag")
+    plugin = root / "effects.py"
+    plugin.write_text(PLUGIN)
+    prof = load_profile("ev76c661")
+    for name, effects in (("hang", {"test_hang": {"seconds": 600.0}}), ("crash", {"test_crash": {}})):
+        (root / f"{name}.yaml").write_text(CameraProfile(name, prof.values, effects).to_yaml())
+    trouble = root / "trouble"
+    trouble.mkdir()
+    _sim(trouble / "hang.mcap", "robot7/hang", 2, seed=30)
+    _sim(trouble / "crash.mcap", "robot8/crash", 2, seed=31)
+    (root / "map.yaml").write_text("cameras:\n  robot1/*: ev76c661\n  robot2/front: ev76c661\n"
+                                   "  robot7/hang: hang.yaml\n  robot8/crash: crash.yaml\n")
+    return {"root": root, "good": good, "bad": bad, "trouble": trouble, "map": root / "map.yaml", "plugin": plugin}
+
+
+@pytest.fixture(scope="module")
+def pool_run(fleet: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, Path]:
+    out = tmp_path_factory.mktemp("pool_run")
+    inputs = [fleet["good"], fleet["bad"], fleet["trouble"], fleet["root"] / "missing_bag.mcap",
+              fleet["bad"] / "notes.txt"]
+    c = run_campaign(inputs, out, profile_map=fleet["map"], plugins=[fleet["plugin"]], backend="pool", workers=2,
+                     timeout_s=25.0, progress=False)
+    return c, out
+
+
+def _frames(out: Path, bag: str) -> pa.Table:
+    t = pq.read_table(out / "frames.parquet")
+    return t.filter(pc.equal(t["bag"], bag))
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    return np.array_equal(np.asarray(a, np.float32).view(np.uint32), np.asarray(b, np.float32).view(np.uint32))
+
+
+def test_per_frame_results_bit_exact_with_replay(pool_run: tuple[dict, Path]) -> None:
+    c, out = pool_run
+    assert len(c["bags"]) == 4
+    for b in c["bags"]:
+        table = FrameTable()
+        summary = replay(b["path"], "ev76c661", None, progress=False, table=table)
+        got = _frames(out, b["path"])
+        assert got.num_rows == len(table) == b["frames_total"]
+        assert got["index"].to_pylist() == table.column("index").tolist()
+        assert got["processed"].to_pylist() == table.column("processed").tolist()
+        assert got["skip_reason"].to_pylist() == table.texts("skip_reason")
+        keys = [k for k in (*CONDITION_KEYS, *table.number_keys) if k not in TIMING]
+        assert "xi" in keys and "sigma_dcsn" in keys
+        for k in keys:
+            assert _same_bits(got[k].to_numpy(), table.numbers(k)), k
+        for k in ("xi", "sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_image"):
+            assert b["stats"][k] == summary[k]
+        assert b["alarm_episodes"] == len(summary["alarms"])
+
+
+def test_bad_inputs_reported_by_name_and_rest_completes(pool_run: tuple[dict, Path], fleet: dict[str, Path]) -> None:
+    c, _ = pool_run
+    reasons = {Path(p["path"]).name: p["reason"] for p in (*c["failed"], *c["duplicates"], *c["problems"])}
+    assert "empty" in reasons["empty.mcap"]
+    assert "damaged" in reasons["damaged.mcap"] or "cannot read" in reasons["damaged.mcap"]
+    assert reasons["copy_of_a1.mcap"].startswith(f"duplicate of {(fleet['good'] / 'a1.mcap').resolve()}")
+    assert "robot9/rear" in reasons["stranger.mcap"] and "not in the profile map" in reasons["stranger.mcap"]
+    assert "not a bag" in reasons["notes.txt"]
+    assert "does not exist" in reasons["missing_bag.mcap"]
+    assert "timed out after 25 s" in reasons["hang.mcap"]
+    assert "killed by SIGKILL" in reasons["crash.mcap"]
+    t = c["totals"]
+    assert (t["bags_found"], t["bags_evaluated"], t["bags_failed"], t["bags_duplicate"], t["inputs_rejected"]) == \
+        (10, 4, 5, 1, 2)
+    assert t["frames_total"] == 3 * 6 + 24 and t["cameras"] == 2
+
+
+def test_report_outputs_and_alarm_times(pool_run: tuple[dict, Path]) -> None:
+    c, out = pool_run
+    on_disk = json.loads((out / "campaign.json").read_text())
+    assert on_disk["totals"] == c["totals"]
+    assert pq.read_table(out / "frames.parquet").num_rows == c["totals"]["frames_total"] == c["frames_in_table"]
+    html = (out / "report.html").read_text()
+    assert "data:image/png;base64," in html and "robot1/front" in html and "empty.mcap" in html
+    noisy = next(cam for cam in c["cameras"] if cam["hardware_id"] == "robot2/front")
+    assert noisy["alarm_episodes"] >= 1 and noisy["health_limited_by"] in ("alarm", "xi_bias")
+    assert c["cameras"][0]["hardware_id"] == "robot2/front"  # the camera with unexpected noise ranks worst
+    ep = c["alarm_episodes"][0]
+    assert ep["start_utc"].startswith("2023-11-17T") and ep["start_utc"].endswith("Z")  # START_NS + 3 days, UTC
+
+
+def test_resume_skips_finished_bags_and_survives_a_torn_manifest(pool_run: tuple[dict, Path],
+                                                                  fleet: dict[str, Path]) -> None:
+    c, out = pool_run
+    with open(out / "manifest.jsonl", "a") as fh:
+        fh.write('{"path": "/torn', )  # a driver killed mid-write
+    again = run_campaign([fleet["good"]], out, profile_map=fleet["map"], plugins=[fleet["plugin"]], backend="pool",
+                         workers=2, progress=False)
+    assert again["run"]["bags_run"] == 0 and again["run"]["bags_resumed"] == 4
+    assert [b["stats"] for b in again["bags"]] == [b["stats"] for b in c["bags"] if "/good/" in b["path"]]
+    lines = (out / "manifest.jsonl").read_text().splitlines()
+    assert sum(1 for ln in lines if ln.startswith('{"path": "/torn')) == 1
+
+
+def test_ray_gives_the_pool_results(pool_run: tuple[dict, Path], fleet: dict[str, Path], tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    c = run_campaign([fleet["good"]], tmp_path, profile_map=fleet["map"], backend="ray", workers=2, progress=False)
+    assert c["run"]["backend"] == "ray" and c["totals"]["bags_evaluated"] == 4
+    ref = pq.read_table(pool_run[1] / "frames.parquet").sort_by([("bag", "ascending"), ("index", "ascending")])
+    got = pq.read_table(tmp_path / "frames.parquet").sort_by([("bag", "ascending"), ("index", "ascending")])
+    assert got.num_rows == ref.num_rows == 3 * 6 + 24
+    for k in got.column_names:
+        if k in TIMING:
+            continue
+        if pa.types.is_floating(got.schema.field(k).type):
+            assert _same_bits(got[k].to_numpy(), ref[k].to_numpy()), k
+        else:
+            assert got[k].to_pylist() == ref[k].to_pylist(), k
+
+
+def test_unreachable_ray_and_worker_memory_limit_reported(fleet: dict[str, Path], tmp_path: Path) -> None:
+    c = run_campaign([fleet["good"] / "a0.mcap"], tmp_path, profile="ev76c661", backend="ray",
+                     ray_address="127.0.0.1:9", workers=1, memory_limit_mb=1.0, progress=False)
+    assert c["problems"][0]["path"] == "127.0.0.1:9"
+    assert "unreachable" in c["problems"][0]["reason"] and "local process pool" in c["problems"][0]["reason"]
+    assert c["run"]["backend"] == "pool"
+    assert c["failed"][0]["reason"].startswith("worker memory limit exceeded: resident")
+
+
+def test_trend_at_equal_conditions() -> None:
+    """A slope hidden behind a temperature that varies with time is recovered at equal temperature."""
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0, 8, 30)) * 7 * DAY_NS
+    temp = 30 + 2.0 * t / (7 * DAY_NS) + rng.normal(0, 3, 30)  # warming up over the weeks
+    y = 1.0 + 0.05 * t / (7 * DAY_NS) + 0.04 * (temp - 30) + rng.normal(0, 0.01, 30)
+    tr = trend(t, y, {"sensor_temperature_c": temp, "gain_db": np.full(30, 12.0)})
+    assert tr["adjusted_for"] == ["sensor_temperature_c"] and tr["significant"]
+    assert abs(tr["slope_dn_per_week"] - 0.05) < 4 * tr["stderr_dn_per_week"] + 0.005
+    naive = trend(t, y, {})
+    assert naive["slope_dn_per_week"] > 0.1  # without the temperature the warming reads as drift
+    flat = trend(t, 1.0 + rng.normal(0, 0.01, 30), {"sensor_temperature_c": temp})
+    assert not flat["significant"]
+
+
+def test_ageing_sensor_found_and_ranked(tmp_path: Path) -> None:
+    """Dark current growing over four weeks at equal temperature: the DCSN trend is found, the camera ranks last."""
+    prof = load_profile("ev76c661")
+    for week in range(4):
+        aged = CameraProfile(prof.name, {**prof.values,
+                                         "dark_signal_fom_na_cm2": prof.values["dark_signal_fom_na_cm2"] * (1 + week / 2)})
+        _sim(tmp_path / "bags" / f"old{week}.mcap", "robot3/old", 7 * week, seed=40 + week, profile=aged, frames=4)
+        _sim(tmp_path / "bags" / f"new{week}.mcap", "robot4/new", 7 * week, seed=50 + week, frames=4)
+    c = run_campaign([tmp_path / "bags"], tmp_path / "out", profile="ev76c661", backend="pool", workers=2,
+                     progress=False)
+    old, new = (next(x for x in c["cameras"] if x["hardware_id"] == hw) for hw in ("robot3/old", "robot4/new"))
+    assert old["trends"]["sigma_dcsn"]["significant"] and old["trends"]["sigma_dcsn"]["slope_dn_per_week"] > 0.1
+    assert not new["trends"]["sigma_dcsn"]["significant"]
+    assert old["health_limited_by"] == "dcsn_growth" and old["rank"] < new["rank"]
+    assert any("ageing sensor" in f for f in old["findings"])
+
+
+def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path], tmp_path: Path) -> None:
+    bags = tmp_path / "bags"
+    bags.mkdir()
+    for i in range(8):
+        shutil.copy(fleet["good"] / f"a{i % 3}.mcap", bags / f"c{i}.mcap")  # 3 contents: 5 duplicates
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "noise_monitor.cli", "campaign", str(bags), "--out", str(out), "--profile",
+           "ev76c661", "--pool", "--workers", "1", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,  # Ctrl-C reaches it
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    manifest = out / "manifest.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (manifest.is_file() and manifest.read_text().count("\n") >= 2):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "re-run the same command to resume" in err
+    entries = [json.loads(ln) for ln in manifest.read_text().splitlines()]
+    assert 2 <= len(entries) < 8
+    for e in entries:  # every recorded bag has its complete outputs
+        assert e["status"] == "ok"
+        d = out / "bags" / e["sha256"][:16]
+        assert pq.read_table(d / "frames.parquet").num_rows == e["frames"]
+        assert json.loads((d / "summary.json").read_text())["frames_total"] == e["frames"]
+    assert json.loads((out / "campaign.json").read_text())["interrupted"] is True
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    c = json.loads((out / "campaign.json").read_text())
+    assert c["run"]["bags_resumed"] == len(entries) and c["run"]["bags_run"] == 8 - len(entries)
+    assert c["totals"]["bags_evaluated"] + c["totals"]["bags_duplicate"] == 8
+
+
+def test_cli_unusable_campaign_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "map.yaml").write_text("cameras: [1, 2]\n")
+    for extra, why in ((["--profile", "no_such_camera"], "no_such_camera"),
+                       (["--profiles", str(tmp_path / "map.yaml")], "map.yaml")):
+        assert main(["campaign", str(tmp_path), "--out", str(tmp_path / "out"), "--pool", *extra]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("noise-monitor campaign: error:") and why in lines[0]
+
+
+def test_simulate_bag_cli_sets_camera_id_and_start(tmp_path: Path) -> None:
+    from noise_monitor.bag.reader import open_bag
+    from noise_monitor.fleet.task import camera_id
+
+    bag = tmp_path / "x.mcap"
+    assert main(["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "static", "--frames", "2",
+                 "--width", "64", "--height", "64", "--hardware-id", "robot5/left", "--start",
+                 "2026-05-01T08:00:00Z"]) == 0
+    assert camera_id(bag) == "robot5/left"
+    with open_bag(bag) as reader:
+        assert reader.start_ns == 1_777_622_400 * 10**9
+    assert main(["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "static", "--start", "May"]) == 2
