@@ -261,7 +261,12 @@ class _SegmentAccumulator:
         self.metas: list[CameraMetadata] = []
         self.images: list[np.ndarray] = []
         self.pose = np.zeros(2)
-        self.s1 = self.s2 = self.mean = self.slope = None
+        # accumulators, shaped by the first frame (blocks x components)
+        self.s1: Any = None
+        self.s2: Any = None
+        self.mean: Any = None
+        self.slope: Any = None
+        self.pixels: Any = None
 
     def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
         self.images.append(img.astype(np.float32))
@@ -541,8 +546,8 @@ def measure_frames(
     acc: _SegmentAccumulator | None = None
     shape: tuple[int, int] | None = None
     grid = (0, 0)
-    hist_bin = None
-    hist = None
+    hist = np.zeros(0)  # sized by the first usable frame
+    hist_bin = 1.0
     prev: np.ndarray | None = None
     pose = np.zeros(2)
     total = used = 0
@@ -558,7 +563,7 @@ def measure_frames(
         if shape is None:
             if img.shape[0] < block or img.shape[1] < block:
                 raise ValueError(f"images of {img.shape[1]}x{img.shape[0]} pixels are smaller than one {block}x{block} block")
-            shape = img.shape
+            shape = (img.shape[0], img.shape[1])
             grid = (img.shape[0] // block, img.shape[1] // block)
             hist_bin = 1.0 if np.all(img == np.rint(img)) else 1.0 / 64.0
             hist = np.zeros(int(round(255.0 / hist_bin)) + 1)
@@ -610,6 +615,7 @@ def measure_frames(
     if not cells:
         raise ValueError("no flat, unclipped image regions to measure noise in (every block is textured or clipped)")
     step, step_err = _quant_step(hist, hist_bin)
+    assert shape is not None  # segments exist, so a frame was used
     return Measurements(
         segments=measured,
         cells=cells,
@@ -621,6 +627,6 @@ def measure_frames(
         frames_total=total,
         frames_used=used,
         skipped=skipped,
-        shape=tuple(shape),
+        shape=(shape[0], shape[1]),
         not_measured=not_measured,
     )
