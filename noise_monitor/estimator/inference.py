@@ -106,8 +106,9 @@ def export_onnx(net: Any, example: tuple[Any, ...]) -> tuple[bytes, list[str]]:
     buf = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # torch's TorchScript exporter deprecation notices
-        torch.onnx.export(net, example, buf, input_names=names,  # type: ignore[arg-type]  # accepts a file object output_names=["out"],
-                          dynamic_axes={**axes, "out": {0: "batch"}}, dynamo=False)
+        torch.onnx.export(net, example, buf,  # type: ignore[arg-type]  # a file object is accepted
+                          input_names=names, output_names=["out"], dynamic_axes={**axes, "out": {0: "batch"}},
+                          dynamo=False)
     return buf.getvalue(), names
 
 
