@@ -17,6 +17,7 @@ import numpy as np
 from ..physics import CameraMetadata, NoiseModel
 from ..physics.constants import PAPER_EFFECTS as SOURCES
 from ..physics.constants import SMOOTH_KERNEL
+from ..physics.grid import grid_position, histogram
 from ..physics.model import TABLE_STEP_DN
 
 #: Name of the optional 4th table row: every noise effect of the model beyond the paper's sources.
@@ -80,13 +81,6 @@ class PhysicsPrior:
         return predict_from_tables(smooth, tables, group_of, with_map, debias)
 
 
-def _grid_pos(level: np.ndarray, g: int) -> tuple[np.ndarray, np.ndarray]:
-    """Lower table index and interpolation weight of each level (DN) on a grid of ``g`` points."""
-    pos = level / TABLE_STEP_DN
-    i0 = np.minimum(pos.astype(np.int64), g - 2)
-    return i0, pos - i0
-
-
 def _nearest(table: np.ndarray, level: np.ndarray) -> np.ndarray:
     """``table`` (on the intensity grid) at the grid point nearest each level (float32 gather)."""
     return table.astype(np.float32)[(level * np.float32(1.0 / TABLE_STEP_DN) + np.float32(0.5)).astype(np.intp)]
@@ -134,7 +128,7 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
     ``NoiseModel.predict`` on that map. With ``with_map`` also ``sigma_map`` (N, H, W): the model's
     total sigma at each pixel's level.
     """
-    n, h, w = smooth.shape
+    n = smooth.shape[0]
     names = (SOURCES + (EXTRA,))[: tables.shape[2]]
     sig = np.empty((n, len(names)))
     sigma_map = np.empty(smooth.shape, dtype=np.float32) if with_map else None
@@ -148,11 +142,8 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
             level = clean_level(shrink_noise(level, _nearest(sigma_level, level)), m1)
         else:
             level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float64)
-        i0, frac = _grid_pos(level, g)
-        rows = (np.arange(len(idx)) * g)[:, None, None]
-        hist = np.bincount((i0 + rows).ravel(), (1.0 - frac).ravel(), len(idx) * g)
-        hist += np.bincount((i0 + 1 + rows).ravel(), frac.ravel(), len(idx) * g)
-        hist = hist.reshape(len(idx), g) / (h * w)
+        i0, frac = grid_position(level, g)
+        hist = histogram(i0, frac, g)
         sig[idx] = np.sqrt(np.maximum(hist @ m2.T - (hist @ m1.T) ** 2, 0.0))
         if sigma_map is not None:
             sigma_map[idx] = (sigma_level[i0] * (1.0 - frac) + sigma_level[i0 + 1] * frac).astype(np.float32)

@@ -11,20 +11,13 @@ import numpy as np
 
 from noise_monitor.physics import CameraMetadata, NoiseModel
 from noise_monitor.physics.constants import DN_MAX
-from noise_monitor.physics.model import TABLE_STEP_DN
+from noise_monitor.physics.grid import grid_position, histogram
 
 
 def histogram_weights(maps: np.ndarray) -> np.ndarray:
     """(N, G) linear-interpolation weights of each map's pixels on the grid 0, step, ..., 255 (rows sum to 1)."""
-    n = maps.shape[0]
-    grid_len = int(round(DN_MAX / TABLE_STEP_DN)) + 1
-    pos = np.clip(maps.reshape(n, -1).astype(np.float64), 0.0, DN_MAX) / TABLE_STEP_DN
-    lo = np.minimum(np.floor(pos).astype(np.int64), grid_len - 2)
-    frac = pos - lo
-    offset = (np.arange(n) * grid_len)[:, None]
-    w = np.bincount((lo + offset).ravel(), (1.0 - frac).ravel(), minlength=n * grid_len)
-    w += np.bincount((lo + 1 + offset).ravel(), frac.ravel(), minlength=n * grid_len)
-    return w.reshape(n, grid_len) / pos.shape[1]
+    levels = np.clip(maps.reshape(maps.shape[0], -1).astype(np.float64), 0.0, DN_MAX)
+    return histogram(*grid_position(levels))
 
 
 def predict_patches(model: NoiseModel, maps: np.ndarray, meta: CameraMetadata, mode: str = "joint") -> dict[str, np.ndarray]:

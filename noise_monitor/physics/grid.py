@@ -1,0 +1,29 @@
+"""Intensity maps on the model's table grid (0, TABLE_STEP_DN, ..., 255 DN): linear interpolation weights.
+
+A map's predicted moments are its linear-weight histogram on the grid times the model's tables
+(E[n|v], E[n^2|v]); the monitor and the estimator's physics prior both integrate this way.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .constants import DN_MAX
+from .model import TABLE_STEP_DN
+
+GRID_LEN = int(round(DN_MAX / TABLE_STEP_DN)) + 1
+
+
+def grid_position(levels: np.ndarray, g: int = GRID_LEN) -> tuple[np.ndarray, np.ndarray]:
+    """Lower grid index and interpolation weight of each level (DN, within 0..255) on a grid of ``g`` points."""
+    pos = levels / TABLE_STEP_DN
+    i0 = np.minimum(pos.astype(np.int64), g - 2)
+    return i0, pos - i0
+
+
+def histogram(i0: np.ndarray, frac: np.ndarray, g: int = GRID_LEN) -> np.ndarray:
+    """(N, g) linear-weight histograms of N maps (``i0``, ``frac`` of shape (N, ...)); rows sum to 1."""
+    n = i0.shape[0]
+    rows = (np.arange(n) * g).reshape((n,) + (1,) * (i0.ndim - 1))
+    hist = np.bincount((i0 + rows).ravel(), (1.0 - frac).ravel(), n * g)
+    hist += np.bincount((i0 + 1 + rows).ravel(), frac.ravel(), n * g)
+    return hist.reshape(n, g) / (i0.size // max(n, 1))
