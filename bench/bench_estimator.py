@@ -69,7 +69,7 @@ def main() -> None:
     for b in BATCHES:
         x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
         tables = fm.prior.tables(meta)[None]
-        maps, scalars, _ = compact_inputs(x, tables, np.zeros(b, np.int64), np.repeat(meta.normalized()[None], b, 0))
+        maps, scalars, _ = compact_inputs(x, tables, np.zeros(b, np.int64))
         tm, ts = torch.from_numpy(maps), torch.from_numpy(scalars)
         with torch.inference_mode():
             rows.append(row("full_meta net only (torch eager)", size, b, timeit(lambda: fm.net(tm, ts), args.reps)))
@@ -77,7 +77,7 @@ def main() -> None:
         feed = {names[0]: maps, names[1]: scalars}
         rows.append(row("full_meta net only (onnxruntime)", size, b, timeit(lambda: sess.run(None, feed), args.reps)))
         rows.append(row("full_meta physics+features only", size, b, timeit(
-            lambda: compact_inputs(x, tables, np.zeros(b, np.int64), np.repeat(meta.normalized()[None], b, 0)), args.reps)))
+            lambda: compact_inputs(x, tables, np.zeros(b, np.int64)), args.reps)))
 
     for name in NAMES[1:]:
         if not (WEIGHTS_DIR / f"{name}.pt").is_file():

@@ -6,7 +6,7 @@ Phase 2 (30 Hz camera): a publisher process sends frames + metadata at 30 Hz -> 
 frames dropped by the node (busy worker), latency p50/p95.
 
 Usage: .venv/bin/python bench/bench_node.py [--frames 40] [--seconds 15] [--rate 30] [--shm-segment-mb 16]
-                                           [--drift] [--json out.json]
+                                           [--drift] [--patch-size 64|128] [--json out.json]
 ``--drift``: new metadata every frame, as a live driver reports it: the temperature rises by 0.013 degC
 per frame, auto-exposure moves the exposure +-20 % and auto-gain the gain +-1 dB (the physics tables are
 then interpolated, never recomputed per metadata set).
@@ -129,6 +129,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=15.0, help="duration of the 30 Hz phase")
     ap.add_argument("--rate", type=float, default=30.0, help="publisher rate of phase 2 (Hz)")
     ap.add_argument("--weights", help="estimator checkpoint to benchmark instead of the bundled full_meta")
+    ap.add_argument("--patch-size", type=int, default=None, help="the node's patch_size parameter (default: node.yaml)")
     ap.add_argument("--shm-segment-mb", type=int, default=None,
                     help="Fast DDS shared-memory segment size (0 = Fast DDS default); default: run both 0 and 16")
     ap.add_argument("--drift", action="store_true", help="new metadata every frame (temperature, exposure, gain)")
@@ -155,6 +156,8 @@ def compare_transports(args: argparse.Namespace) -> None:
                 cmd += ["--weights", args.weights]
             if args.drift:
                 cmd.append("--drift")
+            if args.patch_size is not None:
+                cmd += ["--patch-size", str(args.patch_size)]
             print(f"--- transport: {'Fast DDS default' if mb == 0 else f'shared memory, {mb} MiB segments'}", flush=True)
             subprocess.run(cmd, check=True)
             both["fastdds_default" if mb == 0 else f"shm_{mb}mb"] = json.loads(Path(out.name).read_text())
@@ -186,6 +189,8 @@ def run_once(args: argparse.Namespace) -> None:
     overrides = [Parameter("image_topic", value=IMAGE_TOPIC), Parameter("metadata_topic", value=META_TOPIC),
                  Parameter("camera_info_topic", value=""), Parameter("profile", value=PROFILE),
                  Parameter("device", value="cpu")]
+    if args.patch_size is not None:
+        overrides.append(Parameter("patch_size", value=args.patch_size))
     t0 = time.perf_counter()
     estimator = None
     if args.weights:

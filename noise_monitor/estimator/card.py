@@ -29,6 +29,8 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
         lines += [f"- Earlier stage (its weights are this run's `--init`): `{stage.get('command', '?')}` "
                   f"({stage['patches']} patches, data {stage['data_seconds'] / 60:.1f} min, training "
                   f"{stage['train_seconds'] / 60:.1f} min)"]
+    if train.get("init_note"):
+        lines += [f"- Between the earlier stages and this run: {train['init_note']}"]
     if train:
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "

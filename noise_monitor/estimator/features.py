@@ -1,16 +1,41 @@
-"""Inputs of the compact image-noise network, computed identically in training and inference."""
+"""Inputs of the compact image-noise network, computed identically in training and inference.
+
+The stated metadata's *scale* never reaches the measurement: residuals are divided by the model's
+per-pixel sigma normalised to unit RMS over the patch (its shape: how the noise varies with the
+intensity, which a gain error leaves unchanged) times a reference scale measured from the image alone
+(:func:`reference_sigma`), and the network predicts ``log(sigma_image / reference)``. Hence
+sigma_image does not follow the stated gain (test_estimator.py measures the leakage).
+"""
 from __future__ import annotations
+
+from functools import lru_cache
 
 import cv2
 import numpy as np
 
 from .physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
 
-#: Floor of sigma_model in the log-scalar inputs and in the ratio output (DN).
+#: Floor of the reference scale and of sigma_model (DN).
 SIGMA_MODEL_FLOOR = 0.05
 #: Block size and quantiles of the block-wise residual energy (texture-robust noise cues).
 BLOCK = 8
 BLOCK_QUANTILES = (0.1, 0.25, 0.5)
+#: Quantile of the block energies of the Immerkaer residual that sets the reference scale (tuned on
+#: crops of the training photographs: 0.05-0.25 and 4 / 8 px blocks, Immerkaer and Laplacian compared).
+REFERENCE_QUANTILE = 0.05
+#: Immerkaer's mask (Immerkaer 1996): outer([1, -2, 1], [1, -2, 1]) / 6, unit gain on white noise. It
+#: annihilates every image that is linear along rows or columns, so edges along either axis leave none.
+IMMERKAER = (np.outer([1.0, -2.0, 1.0], [1.0, -2.0, 1.0]) / 6.0).astype(np.float32)
+#: Variance of the 4-neighbour Laplacian of unit white noise (16 + 4 x 1).
+LAPLACIAN_GAIN = 20.0
+
+
+def block_energies(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
+    """Mean squared residual per ``block`` x ``block`` block, (N, blocks), float64."""
+    n, h, w = resid.shape
+    hb, wb = h // block, w // block
+    e = (resid[:, :hb * block, :wb * block].astype(np.float64) ** 2).reshape(n, hb, block, wb, block).mean(axis=(2, 4))
+    return e.reshape(n, -1)
 
 
 def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
@@ -19,14 +44,7 @@ def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
     Texture raises the energy of some blocks; the flattest blocks carry the noise alone, so low
     quantiles measure noise where the whole-patch energy would read texture as noise.
     """
-    n, h, w = resid.shape
-    hb, wb = h // block, w // block
-    e = (resid[:, :hb * block, :wb * block].astype(np.float64) ** 2).reshape(n, hb, block, wb, block).mean(axis=(2, 4))
-    return np.log(np.quantile(e.reshape(n, -1), BLOCK_QUANTILES, axis=1).T + 1e-6)
-
-
-#: Variance of the 4-neighbour Laplacian of unit white noise (16 + 4 x 1).
-LAPLACIAN_GAIN = 20.0
+    return np.log(np.quantile(block_energies(resid, block), BLOCK_QUANTILES, axis=1).T + 1e-6)
 
 
 def laplacian(patches: np.ndarray) -> np.ndarray:
@@ -37,24 +55,53 @@ def laplacian(patches: np.ndarray) -> np.ndarray:
     return out
 
 
-def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
-                   meta_norm: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """(maps (N, 3, H, W), scalars (N, 23), physics prediction) for noisy patches (N, H, W) in DN.
+def immerkaer(patches: np.ndarray) -> np.ndarray:
+    """Immerkaer residual of every patch of an (N, H, W) float32 batch (cv2, reflect-101 border)."""
+    out = np.empty_like(patches, dtype=np.float32)
+    for i, p in enumerate(patches):
+        out[i] = cv2.filter2D(np.asarray(p, dtype=np.float32), cv2.CV_32F, IMMERKAER)
+    return out
+
+
+@lru_cache(maxsize=None)
+def unit_noise_quantile(h: int, w: int) -> float:
+    """The ``REFERENCE_QUANTILE`` of the Immerkaer block energies of unit white noise on an h x w patch
+    (the order statistic's bias in :func:`reference_sigma`; seeded Monte-Carlo over 256 patches)."""
+    noise = np.random.default_rng(20240).standard_normal((256, h, w)).astype(np.float32)
+    return float(np.quantile(block_energies(immerkaer(noise)), REFERENCE_QUANTILE, axis=1).mean())
+
+
+def reference_sigma(noisy: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """Noise scale (DN) from the image alone: a low quantile of the block energies of the Immerkaer
+    residual divided by the model's sigma shape, corrected by its value on white noise."""
+    n, h, w = noisy.shape
+    q = np.quantile(block_energies(immerkaer(noisy) / shape), REFERENCE_QUANTILE, axis=1)
+    return np.maximum(np.sqrt(q / unit_noise_quantile(h, w)), SIGMA_MODEL_FLOOR)
+
+
+def compact_inputs(noisy: np.ndarray, tables: np.ndarray,
+                   group_of: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(maps (N, 3, H, W), scalars (N, 12), physics prediction + ``reference``) for noisy patches in DN.
 
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
-    noise; a linear ramp leaves none), both divided by the model's sigma at the pixel's smoothed level,
-    and the intensity / 255 - 0.5. scalars: normalised metadata (11), log sigma_model, the sources'
-    shares of sigma_model^2 (3), per residual the log mean square and its block quantiles (2 x 4).
+    noise; a linear ramp leaves none), both divided by the model's sigma shape (unit RMS per patch)
+    and the image's reference scale (:func:`reference_sigma`), and the intensity / 255 - 0.5.
+    scalars: log reference, the sources' shares of sigma_model^2 (3), per residual the log mean
+    square and its block quantiles (2 x 4). No metadata scale: see the module docstring.
     """
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
     sigma_map = np.maximum(phys.pop("sigma_map"), SIGMA_MAP_FLOOR)
-    resid = (noisy - smooth) / sigma_map
-    lap = laplacian(noisy) / (np.sqrt(LAPLACIAN_GAIN, dtype=np.float32) * sigma_map)
+    shape = sigma_map / np.sqrt(np.mean(np.square(sigma_map, dtype=np.float64), axis=(1, 2), keepdims=True)).astype(np.float32)
+    ref = reference_sigma(noisy, shape)
+    norm = shape * ref.astype(np.float32)[:, None, None]
+    resid = (noisy - smooth) / norm
+    lap = laplacian(noisy) / (np.sqrt(LAPLACIAN_GAIN, dtype=np.float32) * norm)
     maps = np.stack([resid, lap, noisy / 255.0 - 0.5], axis=1).astype(np.float32)
     total = np.maximum(phys["total"], SIGMA_MODEL_FLOOR)
     shares = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1) / total[:, None] ** 2
     energy = [np.log(np.mean(r.astype(np.float64) ** 2, axis=(1, 2)) + 1e-6)[:, None] for r in (resid, lap)]
-    scalars = np.concatenate([meta_norm, np.log(total)[:, None], shares, energy[0], block_energy_quantiles(resid),
+    scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
                               energy[1], block_energy_quantiles(lap)], axis=1).astype(np.float32)
+    phys["reference"] = ref
     return maps, scalars, phys

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..physics import CameraMetadata, NoiseModel
 from . import onnx_weights
-from .features import SIGMA_MODEL_FLOOR, compact_inputs
+from .features import compact_inputs
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -188,10 +188,9 @@ class FullMetaEstimator(_Base):
         group_of = np.empty(len(x), dtype=np.int64)
         for g, idx in enumerate(groups.values()):
             group_of[idx] = g
-        meta_norm = np.stack([m.normalized() for m in groups])[group_of]
-        maps, scalars, phys = compact_inputs(x, tables, group_of, meta_norm)
+        maps, scalars, phys = compact_inputs(x, tables, group_of)
         r = np.clip(self._run_net(maps, scalars).astype(np.float64), -6.0, 6.0)
-        sigma_image = np.maximum(phys["total"], SIGMA_MODEL_FLOOR) * np.exp(r)
+        sigma_image = phys.pop("reference") * np.exp(r)
         out = {s: phys[s] for s in SOURCES + ((EXTRA,) if EXTRA in phys else ())}
         out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
                    total=phys["total"].copy())

@@ -141,19 +141,19 @@ def default_strides(depth: int) -> tuple[int, ...]:
 
 #: Maps of the compact net: box residual and Laplacian residual (both / model sigma), intensity.
 N_MAPS = 3
-#: Scalar inputs of the compact net: normalised metadata (11), log sigma_model, source fractions (3),
-#: log residual energy ratios (2), log block-energy quantiles of both residuals (6)
-#: (see ``features.compact_inputs``).
-N_SCALARS = len(NORMALIZED_ORDER) + 12
+#: Scalar inputs of the compact net: log reference scale, source fractions (3), log residual energy
+#: ratios (2), log block-energy quantiles of both residuals (6) (see ``features.compact_inputs``).
+N_SCALARS = 12
 
 
 class ImageNoiseNet(nn.Module):
-    """Measures the noise actually in a patch as ``log(sigma_image / sigma_model)``.
+    """Measures the noise actually in a patch as ``log(sigma_image / reference)``.
 
     Inputs: ``maps`` (N, N_MAPS, H, W) and ``scalars`` (N, N_SCALARS) (``features.compact_inputs``).
     A strided 3x3 trunk feeds attention pooling (``heads`` softmax-weighted averages over positions:
     the net learns to read the noise where the patch is flat) and mean / RMS pooling, fused with the
-    scalars by an MLP. A zero output means "the image holds exactly the modelled noise".
+    scalars by an MLP. A zero output means "the noise is the image's reference scale"
+    (``features.reference_sigma``); the stated metadata's scale is not an input.
     """
 
     def __init__(self, cfg: CompactConfig) -> None:

@@ -10,7 +10,7 @@ import torch
 from tqdm import tqdm
 
 from .device import resolve_device
-from .features import SIGMA_MODEL_FLOOR, compact_inputs
+from .features import compact_inputs
 from .networks import SIGMA_SCALE, build_network
 
 HUBER_DELTA_DN = 1.0
@@ -38,12 +38,12 @@ def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
 
 def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
     """Network inputs and targets of a dataset for a variant."""
-    meta_norm = meta_norm_of(data)
     if variant == "full_meta":
-        maps, scalars, phys = compact_inputs(data["noisy"], data["tables"], data["group_of"], meta_norm)
+        maps, scalars, phys = compact_inputs(data["noisy"], data["tables"], data["group_of"])
         return {"maps": torch.from_numpy(maps), "scalars": torch.from_numpy(scalars),
-                "sigma_model": torch.from_numpy(np.maximum(phys["total"], SIGMA_MODEL_FLOOR)).float(),
+                "reference": torch.from_numpy(phys["reference"]).float(),
                 "target": torch.from_numpy(data["truth_sigma_image"]).float()}
+    meta_norm = meta_norm_of(data)
     t = {"patch": torch.from_numpy(data["noisy"][:, None] / np.float32(255.0)), "meta": torch.from_numpy(meta_norm)}
     for k in ("pn", "dcsn", "rn", "xi", "sigma_image"):
         t[k] = torch.from_numpy(data[f"truth_{k}"] / SIGMA_SCALE).float()
@@ -54,7 +54,7 @@ def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Te
 def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) -> torch.Tensor:
     if variant == "full_meta":
         r = net(batch["maps"], batch["scalars"])
-        est = batch["sigma_model"] * torch.exp(r.clamp(-6.0, 6.0))
+        est = batch["reference"] * torch.exp(r.clamp(-6.0, 6.0))
         return torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
     out = net(batch["patch"], batch["meta"])
     return sum(torch.nn.functional.mse_loss(out[k], batch[k]) for k in out) / len(out)
