@@ -8,7 +8,7 @@ sigma_image does not follow the stated gain (test_estimator.py measures the leak
 """
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import cv2
 import numpy as np
@@ -63,7 +63,7 @@ def immerkaer(patches: np.ndarray) -> np.ndarray:
     return out
 
 
-@lru_cache(maxsize=None)
+@cache
 def unit_noise_quantile(h: int, w: int) -> float:
     """The ``REFERENCE_QUANTILE`` of the Immerkaer block energies of unit white noise on an h x w patch
     (the order statistic's bias in :func:`reference_sigma`; seeded Monte-Carlo over 256 patches)."""
