@@ -164,7 +164,7 @@ def photo_variants_of(data: dict[str, np.ndarray]) -> int:
 
 def save(data: dict[str, np.ndarray], path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **data)
+    np.savez(path, **data)  # type: ignore[arg-type]  # numpy's stub types **kwds as allow_pickle
 
 
 def load(path: Path) -> dict[str, np.ndarray]:

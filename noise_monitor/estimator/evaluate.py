@@ -120,8 +120,8 @@ def sensitivity_sweep(predict_total: Callable[[np.ndarray, CameraMetadata], floa
     rows: dict[str, dict] = {}
     cells = [("mean_intensity_dn", v, base) for v in SWEEP_INTENSITIES]
     for field, values in SWEEPS.items():
-        ref = base.replace(sensor_type="ccd") if field == "thermal_white_noise_v_per_sqrt_hz" else base
-        cells += [(field, v, ref.replace(**{field: float(v)})) for v in values]
+        swept = base.replace(sensor_type="ccd") if field == "thermal_white_noise_v_per_sqrt_hz" else base
+        cells += [(field, v, swept.replace(**{field: float(v)})) for v in values]
     for field, value, meta in tqdm(cells, desc="sensitivity", leave=False):
         level = float(value) if field == "mean_intensity_dn" else 128.0
         clean = np.full((patch_size, patch_size), level, dtype=np.float32)

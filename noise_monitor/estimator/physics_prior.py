@@ -65,9 +65,9 @@ class PhysicsPrior:
         m2 = [t[s][1] for s in SOURCES]
         extra = self.extra_effects
         if extra:
-            mean = sum(t[n][0] for n in extra)
+            mean = np.sum([t[n][0] for n in extra], axis=0)
             m1.append(mean)
-            m2.append(sum(t[n][1] - t[n][0] ** 2 for n in extra) + mean**2)
+            m2.append(np.sum([t[n][1] - t[n][0] ** 2 for n in extra], axis=0) + mean**2)
         return np.stack([np.stack(m1), np.stack(m2)])
 
     def predict(self, smooth: np.ndarray, metas: Sequence[CameraMetadata], with_map: bool = False,
@@ -131,7 +131,7 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
     n = smooth.shape[0]
     names = (SOURCES + (EXTRA,))[: tables.shape[2]]
     sig = np.empty((n, len(names)))
-    sigma_map = np.empty(smooth.shape, dtype=np.float32) if with_map else None
+    sigma_map: np.ndarray | None = np.empty(smooth.shape, dtype=np.float32) if with_map else None
     g = tables.shape[-1]
     for k in np.unique(group_of):
         idx = np.flatnonzero(group_of == k)
@@ -146,7 +146,7 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
         hist = histogram(i0, frac, g)
         sig[idx] = np.sqrt(np.maximum(hist @ m2.T - (hist @ m1.T) ** 2, 0.0))
         if sigma_map is not None:
-            sigma_map[idx] = (sigma_level[i0] * (1.0 - frac) + sigma_level[i0 + 1] * frac).astype(np.float32)
+            sigma_map[idx] = sigma_level[i0] * (1.0 - frac) + sigma_level[i0 + 1] * frac
     out = {s: sig[:, j] for j, s in enumerate(names)}
     out["total"] = np.sqrt((sig**2).sum(axis=1))
     if sigma_map is not None:

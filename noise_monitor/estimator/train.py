@@ -4,6 +4,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -57,7 +58,7 @@ def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) 
         est = batch["reference"] * torch.exp(r.clamp(-6.0, 6.0))
         return torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
     out = net(batch["patch"], batch["meta"])
-    return sum(torch.nn.functional.mse_loss(out[k], batch[k]) for k in out) / len(out)
+    return torch.stack([torch.nn.functional.mse_loss(out[k], batch[k]) for k in out]).mean()
 
 
 def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, resume: bool = False,
@@ -77,7 +78,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     ckpt_path = out_dir / "checkpoint.pt"
     patch_size = int(data["noisy"].shape[-1])
     torch.manual_seed(settings.seed)
-    net = build_network(settings.variant, patch_size, settings.width, settings.depth).to(dev)
+    net: Any = build_network(settings.variant, patch_size, settings.width, settings.depth).to(dev)
     opt = torch.optim.Adam(net.parameters(), lr=settings.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=settings.steps, eta_min=settings.lr * 0.05)
     step, elapsed, prior_steps, prior_s = 0, 0.0, 0, 0.0
