@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+from noise_monitor.physics.table_grid import GridSpec
 from noise_monitor.text import clip
 
 from .config import DESCRIPTIONS, MonitorConfig, read_ros_params
@@ -161,8 +162,8 @@ class MonitorRuntime:
         else:
             name = profile or p["profile"]
             self.profile = load_profile(name) if name else None
-        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None,
-                                         interpolate=p["physics_tables"] == "interpolated")
+        interpolate = GridSpec(exact_first=True) if p["physics_tables"] == "interpolated" else False
+        self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None, interpolate=interpolate)
         threads = inference_threads(p["threads"])
         if "torch" in sys.modules or p["device"] != "cpu":  # torch runs (or will run) inference
             set_inference_threads(threads)

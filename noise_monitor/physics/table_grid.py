@@ -37,6 +37,9 @@ class GridSpec:
     temperature_step_c: float = 5.0
     #: exact node tables kept (each ~8 KB per table of the model), least recently used dropped first
     max_nodes: int = 2048
+    #: the first metadata set of a camera and mode gets its exact tables (one set instead of a lattice cell's
+    #: 8 nodes: a fast start); the lattice takes over when the conditions first change
+    exact_first: bool = False
 
     def __post_init__(self) -> None:
         for name in ("gain_step_db", "log_exposure_step", "temperature_step_c"):
@@ -85,6 +88,7 @@ class TableGrid:
         self.spec = spec or GridSpec()
         self._nodes: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray]] = OrderedDict()
         self._cells: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray] | None] = OrderedDict()
+        self._first: dict[tuple, CameraMetadata] = {}  # per (camera, mode): the first metadata set (exact_first)
         self.nodes_computed = 0
 
     def _surrogate(self, meta: CameraMetadata, mode: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -148,7 +152,10 @@ class TableGrid:
         return cell
 
     def tables(self, meta: CameraMetadata, mode: str) -> Tables:
-        """Tables for ``meta`` interpolated between the 8 surrounding nodes (exact outside the lattice)."""
+        """Tables for ``meta`` interpolated between the 8 surrounding nodes (exact outside the lattice and,
+        with ``GridSpec.exact_first``, for a camera's first metadata set)."""
+        if self.spec.exact_first and self._first.setdefault((static_key(meta), mode), meta) == meta:
+            return self.exact(meta, mode)
         u = self.spec.coordinates(meta)
         base = np.floor(u).astype(np.int64)
         frac = u - base
