@@ -63,6 +63,9 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
                                        "temperature (metadata that changes every frame) or exact (recomputed per set)"),
 }
 PHYSICS_TABLES = ("interpolated", "exact")
+#: Table requests per frame are 2-3 (monitor, estimator prior, temporal): metadata held for about 2 frames or
+#: more gets exact tables, metadata drifting every frame interpolated ones (see GridSpec.held_exact_requests).
+HELD_EXACT_REQUESTS = 4
 #: Accepted diagnostics_rate_hz: from one report every 1000 s (slower is no heartbeat, and 1e-320 Hz would
 #: overflow the period) to 1000 per second (a timer faster than this only burns CPU).
 MIN_DIAGNOSTICS_RATE_HZ, MAX_DIAGNOSTICS_RATE_HZ = 1e-3, 1000.0
@@ -162,7 +165,7 @@ class MonitorRuntime:
         else:
             name = profile or p["profile"]
             self.profile = load_profile(name) if name else None
-        interpolate = GridSpec(exact_first=True) if p["physics_tables"] == "interpolated" else False
+        interpolate = GridSpec(held_exact_requests=HELD_EXACT_REQUESTS) if p["physics_tables"] == "interpolated" else False
         self.model = model or NoiseModel(extra=self.profile.effects if self.profile else None, interpolate=interpolate)
         threads = inference_threads(p["threads"])
         if "torch" in sys.modules or p["device"] != "cpu":  # torch runs (or will run) inference

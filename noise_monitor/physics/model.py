@@ -48,6 +48,7 @@ class NoiseModel:
         order = {n: i for i, n in enumerate(SEQUENTIAL_ORDER)}
         self.effects: list[Effect] = sorted(base, key=lambda e: order.get(e.name, len(order)))
         self._cache: dict = {}
+        self._served: dict[str, int] = {}  # per mode: requests served by the latest new metadata set
         self.interpolate = interpolate
         self._surrogate_last: tuple | None = None
         spec = interpolate if isinstance(interpolate, GridSpec) else GridSpec()
@@ -98,10 +99,15 @@ class NoiseModel:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         key = (meta, mode)
-        if key not in self._cache:
-            if len(self._cache) > 64:
-                self._cache.clear()
-            self._cache[key] = self.grid.tables(meta, mode) if self.grid else self._exact_tables(meta, mode)
+        if key in self._cache:
+            self._served[mode] = self._served.get(mode, 0) + 1
+            return self._cache[key]
+        if len(self._cache) > 64:
+            self._cache.clear()
+        held = self._served.get(mode, 1 << 30)  # the previous set's use (a first set counts as held)
+        self._served[mode] = 1
+        interpolate = self.grid is not None and held < max(self.grid.spec.held_exact_requests, 1)
+        self._cache[key] = self.grid.tables(meta, mode) if interpolate else self._exact_tables(meta, mode)
         return self._cache[key]
 
     def _exact_tables(self, meta: CameraMetadata, mode: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:

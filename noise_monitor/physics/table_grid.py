@@ -37,9 +37,11 @@ class GridSpec:
     temperature_step_c: float = 5.0
     #: exact node tables kept (each ~8 KB per table of the model), least recently used dropped first
     max_nodes: int = 2048
-    #: the first metadata set of a camera and mode gets its exact tables (one set instead of a lattice cell's
-    #: 8 nodes: a fast start); the lattice takes over when the conditions first change
-    exact_first: bool = False
+    #: held metadata gets exact tables: a new metadata set is computed exactly when the previous one served
+    #: at least this many table requests (frames) - a camera's first set too - and interpolated when the
+    #: conditions change faster (0 = always interpolate). Exact tables of one set cost less than a new
+    #: lattice cell's nodes; the lattice pays off only for conditions that drift frame by frame.
+    held_exact_requests: int = 0
 
     def __post_init__(self) -> None:
         for name in ("gain_step_db", "log_exposure_step", "temperature_step_c"):
@@ -88,7 +90,6 @@ class TableGrid:
         self.spec = spec or GridSpec()
         self._nodes: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray]] = OrderedDict()
         self._cells: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray] | None] = OrderedDict()
-        self._first: dict[tuple, CameraMetadata] = {}  # per (camera, mode): the first metadata set (exact_first)
         self.nodes_computed = 0
 
     def _surrogate(self, meta: CameraMetadata, mode: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -152,10 +153,7 @@ class TableGrid:
         return cell
 
     def tables(self, meta: CameraMetadata, mode: str) -> Tables:
-        """Tables for ``meta`` interpolated between the 8 surrounding nodes (exact outside the lattice and,
-        with ``GridSpec.exact_first``, for a camera's first metadata set)."""
-        if self.spec.exact_first and self._first.setdefault((static_key(meta), mode), meta) == meta:
-            return self.exact(meta, mode)
+        """Tables for ``meta`` interpolated between the 8 surrounding nodes (exact outside the lattice)."""
         u = self.spec.coordinates(meta)
         base = np.floor(u).astype(np.int64)
         frac = u - base

@@ -105,3 +105,21 @@ def test_grid_spec_rejects_bad_steps():
         GridSpec(gain_step_db=0.0)
     with pytest.raises(ValueError, match="max_nodes"):
         GridSpec(max_nodes=2)
+
+
+def test_held_metadata_gets_exact_tables_and_drifting_metadata_the_lattice():
+    """GridSpec.held_exact_requests (the runtime's policy): a first or held metadata set is computed
+    exactly (cheaper than a lattice cell), conditions changing at every request are interpolated."""
+    profile = load_profile("icx285")
+    exact = NoiseModel()
+    model = NoiseModel(interpolate=GridSpec(held_exact_requests=3))
+    held = [profile.metadata(gain_db=g, exposure_time_s=0.01, sensor_temperature_c=40.0) for g in (6.1, 9.3, 12.7)]
+    for meta in held:  # each set serves 3 requests (frames) before the next arrives
+        for _ in range(3):
+            tables = model.tables(meta, "joint")
+        for name, (m1, m2) in exact.tables(meta, "joint").items():
+            np.testing.assert_array_equal(tables[name][1], m2)
+    assert model.grid.nodes_computed == 0
+    for i in range(20):  # a temperature drifting every frame
+        model.tables(profile.metadata(gain_db=12.7, exposure_time_s=0.01, sensor_temperature_c=40.0 + 0.05 * i), "joint")
+    assert 0 < model.grid.nodes_computed <= 16
