@@ -24,7 +24,7 @@ from noise_monitor.physics import CameraMetadata
 #: edge (px) of the downsampled frame the global motion is estimated on
 MOTION_SIZE_PX = 256
 #: metadata drift tolerated inside one hold
-GAIN_TOL_DB, EXPOSURE_TOL_REL, TEMPERATURE_TOL_C = 0.05, 0.01, 1.0
+GAIN_TOL_DB, EXPOSURE_TOL_REL, TEMPERATURE_TOL_C = 0.05, 0.01, 3.0
 BLOCK = 8
 
 
