@@ -12,6 +12,8 @@ White noise of variance s2 puts ``d * s2`` into a part of dimension d; per-colum
 variance c2 put ``B (B - 2) c2`` into the column (row) part. Solving these relations per block gives
 unbiased per-pixel variances. Within a segment the spread of the residuals over frames gives the
 temporal noise, the residual of the segment's mean image the fixed-pattern noise (temporal / K removed).
+The temporal deviations are split the same way: white temporal noise (``temporal``) and row/column
+offsets that change from frame to frame (``temporal_row``, ``temporal_column``).
 Textured blocks (spatially correlated residual, or a robust sigma far above the block's intensity bin),
 blocks disturbed by motion and blocks near the clipping limits are excluded. Every cell (segment x
 intensity bin) carries the standard error of its mean over blocks.
@@ -25,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
+from scipy.stats import chi2 as chi2_dist
 
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
@@ -49,6 +52,9 @@ CLIP_SIGMAS = 3.0
 TRIM_PIXELS = 4
 #: smallest per-block standard deviation of a variance estimate (DN^2): 8-bit rounding noise scale
 MIN_VAR_ERR_DN2 = 0.01
+#: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
+#: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
+SPIKE_FACTOR = 5.0
 _NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
 
 
@@ -80,6 +86,7 @@ class SegmentMeasurement:
     frames: list[int]
     intensity_dn: np.ndarray  # (B,) block mean intensity
     region: np.ndarray  # (B,) region index 0..8 (3 x 3 grid, row-major)
+    position: np.ndarray  # (B, 2) block centre (y, x) on the sensor, normalised to 0..1
     values: dict[str, np.ndarray]  # component -> (B,) variance DN^2 per block
     robust_sigma_dn: np.ndarray  # (B,) robust sigma of the mean residual (outlier threshold basis)
     span_dn: np.ndarray  # (B,) range of the fitted plane over the block (DN)
@@ -89,6 +96,10 @@ class SegmentMeasurement:
     pixels_checked: int
     blocks_total: int
     excluded: dict[str, int]
+    #: pixels of the accepted blocks whose temporal variance is a SPIKE_FACTOR outlier, and the number
+    #: white temporal noise would give
+    temporal_spikes: int = 0
+    temporal_spikes_expected: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -235,23 +246,30 @@ class _SegmentAccumulator:
         self.proj, self.slopes = plane
         self.frames: list[int] = []
         self.metas: list[CameraMetadata] = []
-        self.s1 = self.s2 = self.mean = self.slope = None
+        self.s1 = self.s2 = self.s2_col = self.s2_row = self.s2_pixel = self.mean = self.slope = None
 
     def add(self, frame_index: int, blocks: np.ndarray, meta: CameraMetadata) -> None:
         r = blocks @ self.proj
         if self.s1 is None:
             self.s1 = np.zeros_like(r)
             self.s2 = np.zeros(r.shape[0])
+            self.s2_col = np.zeros(r.shape[0])
+            self.s2_row = np.zeros(r.shape[0])
+            self.s2_pixel = np.zeros_like(r)
             self.mean = np.zeros(r.shape[0])
             self.slope = np.zeros((r.shape[0], 2))
         self.slope += blocks @ self.slopes
         self.s1 += r
-        self.s2 += np.sum(r * r, axis=1)
+        self.s2_pixel += r * r
+        energy, col, row = _energies(r, self.b)
+        self.s2 += energy
+        self.s2_col += col
+        self.s2_row += row
         self.mean += blocks.mean(axis=1)
         self.frames.append(frame_index)
         self.metas.append(meta)
 
-    def finish(self, grid: tuple[int, int]) -> SegmentMeasurement:
+    def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> SegmentMeasurement:
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
@@ -263,8 +281,13 @@ class _SegmentAccumulator:
         core, col, row = _split(*_energies(np.where(is_out, lines, rm) @ self.proj, b), b)  # re-fit the plane
         values: dict[str, np.ndarray] = {}
         if k >= 2:
-            temporal = (self.s2 - np.sum(self.s1 * self.s1, axis=1) / k) / ((k - 1) * (b * b - 3))
-            values = {"temporal": temporal, "fixed": core - temporal / k}
+            # energies of the frames' deviations from the mean, split like the mean's
+            e_tot, e_col, e_row = _energies(rm, b)
+            temporal, t_col, t_row = _split(*((x - k * e) / (k - 1) for x, e in (
+                (self.s2, e_tot), (self.s2_col, e_col), (self.s2_row, e_row))), b)
+            values = {"temporal": temporal, "fixed": core - temporal / k,
+                      "temporal_column": t_col, "temporal_row": t_row}
+            col, row = col - t_col / k, row - t_row / k
         else:
             temporal = None
             values = {"single": core}
@@ -294,10 +317,18 @@ class _SegmentAccumulator:
             excluded["motion"] = int(np.sum(moving))
             keep &= ~moving
         amp = np.abs(centred[keep][is_out[keep]])
+        spikes, spikes_expected = 0, 0.0
+        if k >= 2 and keep.any():
+            vp = (self.s2_pixel[keep] - self.s1[keep] ** 2 / k) / (k - 1)  # per-pixel temporal variance
+            level = np.median(vp, axis=1, keepdims=True) / (chi2_dist.median(k - 1) / (k - 1))
+            spikes = int(np.sum(vp > SPIKE_FACTOR * level))
+            spikes_expected = float(vp.size * chi2_dist.sf(SPIKE_FACTOR * (k - 1), k - 1))
 
         gy, gx = grid
         iy, ix = np.divmod(np.arange(n), gx)
         region = (3 * iy // max(gy, 1)) * 3 + (3 * ix // max(gx, 1))
+        h, w = shape if shape is not None else (gy * b, gx * b)
+        position = np.stack([(iy + 0.5) * b / h, (ix + 0.5) * b / w], axis=1)
         mid = len(self.metas) // 2
         return SegmentMeasurement(
             index=self.index,
@@ -306,6 +337,7 @@ class _SegmentAccumulator:
             frames=list(self.frames),
             intensity_dn=v[keep],
             region=region[keep],
+            position=position[keep],
             values={c: a[keep] for c, a in values.items()},
             robust_sigma_dn=robust[keep],
             span_dn=(b - 1) * np.abs(self.slope[keep] / k).sum(axis=1),
@@ -315,16 +347,18 @@ class _SegmentAccumulator:
             pixels_checked=int(keep.sum()) * b * b,
             blocks_total=n,
             excluded=excluded,
+            temporal_spikes=spikes,
+            temporal_spikes_expected=spikes_expected,
         )
 
 
 #: components that are pooled over the whole segment in every cell: line offsets belong to image lines
 #: (a cell covers few of them) and outlier pixels are sparse; both are assumed independent of intensity
-POOLED = ("column", "row", "outlier")
+POOLED = ("column", "row", "outlier", "temporal_column", "temporal_row")
 
 
 #: pooled components whose gross outliers (an edge that slipped through) are trimmed
-TRIMMED = ("column", "row")
+TRIMMED = ("column", "row", "temporal_column", "temporal_row")
 TRIM_MADS = 8.0
 
 
@@ -372,6 +406,9 @@ def _theoretical_se(vals: dict[str, float], k: int, b: int) -> dict[str, float]:
         out = {"single": white * math.sqrt(2.0 / d_rest)}
     for comp in ("column", "row"):
         out[comp] = math.sqrt(2.0 / d_line) * (white + b * pos[comp]) / b
+    if k >= 2:
+        for comp in ("temporal_column", "temporal_row"):
+            out[comp] = math.sqrt(2.0 / ((k - 1) * d_line)) * (pos["temporal"] + b * pos[comp]) / b
     out["outlier"] = 0.0
     return out
 
@@ -441,11 +478,11 @@ def measure_frames(
         assert meta is not None  # skip_reason checked it
         if acc is None or len(acc.frames) >= tolerance.max_frames or not tolerance.same(acc.metas[0], meta):
             if acc is not None:
-                segments.append(acc.finish(grid))
+                segments.append(acc.finish(grid, shape))
             acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, plane)
         acc.add(i, _blocks(img, block), meta)
     if acc is not None:
-        segments.append(acc.finish(grid))
+        segments.append(acc.finish(grid, shape))
     if not segments:
         reasons = ", ".join(f"{k}: {v}" for k, v in skipped.items()) or "no frames"
         raise ValueError(f"no usable frames to measure ({reasons})")

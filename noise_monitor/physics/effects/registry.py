@@ -8,7 +8,7 @@ from collections.abc import Iterable, Mapping
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from .base import DISTRIBUTIONS, Distribution, Effect, EffectError
+from .base import DISTRIBUTIONS, STRUCTURES, Distribution, Effect, EffectError
 from .builtin import BUILTIN_EFFECTS
 
 ENTRY_POINT_GROUP = "noise_monitor.effects"
@@ -23,6 +23,9 @@ def register(cls: type[Effect]) -> type[Effect]:
     if not isinstance(cls.distribution, Distribution):
         raise EffectError(f"effect {cls.name!r}: unknown distribution {cls.distribution!r}; "
                           f"choose from {', '.join(DISTRIBUTIONS)}")
+    if cls.structure not in STRUCTURES:
+        raise EffectError(f"effect {cls.name!r}: unknown structure {cls.structure!r}; "
+                          f"choose from {', '.join(STRUCTURES)}")
     _REGISTRY[cls.name] = cls
     return cls
 
