@@ -17,6 +17,7 @@ from .compare import Comparison, baseline_effects, by_condition, region_table, r
 from .diagnose import EffectSpec, candidate_names, diagnose, fit
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
+from .signature import plugin_skeleton, unexplained
 
 
 def parse_add_effect(text: str) -> EffectSpec:
@@ -83,6 +84,7 @@ def analyze(
     replace_builtins: bool = False,
     report_dir: str | Path | None = None,
     write_profile: str | Path | None = None,
+    write_plugin_skeleton: str | Path | None = None,
     candidates: Sequence[str] | None = None,
     tolerance: SegmentTolerance = SegmentTolerance(),
     progress: bool = False,
@@ -94,7 +96,8 @@ def analyze(
 
     Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma), ``by_condition``,
     ``candidates`` (ranked best first: ``effect``, ``significant``, ``explained_fraction``, ``params``,
-    ...), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
+    ...), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
+    no candidate explains a significant residual), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
     ``rms_error_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With
     ``estimator`` (None: skip), ``estimator``: the monitor's xi and sigma_image per model (``before``,
     ``after``) on the same frames (:func:`.estimate.estimator_views`; ``weights``: e.g. fine-tuned ones).
@@ -124,8 +127,11 @@ def analyze(
         "rms_error_dn": rms_error(rows),
         "by_condition": {**by_condition(rows), "region": region_table(comp)},
         "candidates": [c.as_dict() for c in cands],
+        "unexplained": unexplained(comp, rows, cands),
         "cells": _strip(rows),
     }
+    if write_plugin_skeleton:
+        out["plugin_skeleton_written"] = str(_write_skeleton(write_plugin_skeleton, out["unexplained"]))
     after_model = None
     if specs:
         res = fit(comp, specs)
@@ -174,6 +180,17 @@ def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[E
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text(new.to_yaml())
     load_profile(p)  # the written profile must load again
+    return p
+
+
+def _write_skeleton(path: str | Path, sig: dict[str, Any]) -> Path:
+    """A plug-in file prefilled from the residual's signature (it must import and register)."""
+    if not sig["residual_significant"]:
+        raise ValueError("--write-plugin-skeleton: the residual is within the measurement's uncertainty; "
+                         "there is no effect to write a plug-in for")
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(plugin_skeleton(sig, p.name))
     return p
 
 

@@ -21,6 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="PATH", help="write the JSON summary to PATH")
     parser.add_argument("--write-profile", metavar="OUT.yaml",
                         help="save the profile extended with the added (fitted) effects")
+    parser.add_argument("--write-plugin-skeleton", metavar="PATH.py",
+                        help="write an effect plug-in prefilled from the residual's signature (distribution, "
+                             "temporal flag, structure, position, fitted law) for you to complete")
     parser.add_argument("--no-estimator", action="store_true",
                         help="skip the estimator's view (the monitor's xi and sigma_image on the same frames)")
     parser.add_argument("--weights", metavar="PT", help="estimator weights for that view (e.g. fine-tuned with "
@@ -38,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
         replace_builtins=args.replace_builtin_effects,
         report_dir=args.report,
         write_profile=args.write_profile,
+        write_plugin_skeleton=args.write_plugin_skeleton,
         progress=not args.quiet,
         estimator=None if args.no_estimator else "full_meta",
         weights=args.weights,
@@ -56,6 +60,11 @@ def run(args: argparse.Namespace) -> int:
         print(f" {mark} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}")
     sig = [c for c in summary["candidates"] if c["significant"]]
     print(f"most likely missing effect: {sig[0]['reading']}" if sig else "no candidate effect is significant")
+    un = summary["unexplained"]
+    if un["significant"]:
+        print(f"unexplained: {un['reading']}")
+    if "plugin_skeleton_written" in summary:
+        print(f"plug-in skeleton: {summary['plugin_skeleton_written']}")
     if "rms_error_after_dn" in summary:
         print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN")
     for name, view in summary.get("estimator", {}).items():

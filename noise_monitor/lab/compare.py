@@ -19,29 +19,43 @@ from scipy.special import ndtr
 from ..physics import CameraMetadata, CameraProfile, Effect, EffectError, NoiseModel, build_effects, make_effect
 from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
-from ..physics.sensor import Conditions
+from ..physics.effects import Effect as _Effect
+from ..physics.sensor import Conditions, Pixels
 from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMeasurement
 from .quantization import quantized_variance
 
-MEASURED = ("temporal", "fixed", "column", "row", "outlier")
+MEASURED = ("temporal", "fixed", "column", "row", "outlier", "temporal_column", "temporal_row")
 #: assumed standard error of the quantization-step measurement beyond its statistical error (DN)
 STEP_SYSTEMATIC_DN = 0.05
 #: outlier pixels a segment needs before their mean amplitude is compared with the model
 MIN_OUTLIERS_FOR_AMPLITUDE = 5
 #: blocks per cell at which the model is evaluated (evenly spread over the cell's intensities)
 MAX_MODEL_BLOCKS = 16
+#: blocks a region (3 x 3 grid) needs for its contrast to be an observable
+MIN_REGION_BLOCKS = 6
+#: smallest per-block spread (DN^2) of a regional contrast
+MIN_VAR_ERR = 0.01
+#: components whose regional contrasts are fitted (where on the sensor the variance sits)
+REGIONAL = ("temporal", "fixed")
 
 
-def component_of(effect: Effect) -> str | None:
-    """Which measured component an effect's variance lands in (None: modifiers)."""
-    if effect.distribution == "modifier":
+def component_of(effect: Effect, temporal: bool | None = None) -> str | None:
+    """Which measured component an effect's (``temporal`` or fixed-pattern) variance lands in, by its
+    structure (None: modifiers and responses, which change the other effects)."""
+    if effect.distribution in ("modifier", "response"):
         return None
-    axis = getattr(type(effect), "axis", None)
-    if axis == 1:
-        return "column"
-    if axis == 0:
-        return "row"
-    return "temporal" if effect.temporal else "fixed"
+    temporal = effect.temporal if temporal is None else temporal
+    structure = effect.structure
+    if structure == "pixel":
+        return "temporal" if temporal else "fixed"
+    return f"temporal_{structure}" if temporal else structure
+
+
+def is_plain(effect: Effect) -> bool:
+    """A Poisson or Gaussian effect the clip-aware tables of ``NoiseModel.predict`` capture exactly:
+    position-independent and wholly temporal or wholly fixed."""
+    return (effect.distribution in ("poisson", "gaussian") and not effect.spatial
+            and type(effect).temporal_share is _Effect.temporal_share)
 
 
 def baseline_effects(profile: CameraProfile | None, meta: CameraMetadata, integer_output: bool) -> list[Effect]:
@@ -53,17 +67,31 @@ def baseline_effects(profile: CameraProfile | None, meta: CameraMetadata, intege
     return effects
 
 
-def _conditions(effects: Sequence[Effect], meta: CameraMetadata) -> Conditions:
+def _conditions(effects: Sequence[Effect], meta: CameraMetadata, position: np.ndarray | None = None) -> Conditions:
     cond = Conditions.from_meta(meta)
     for e in effects:
         if e.distribution == "modifier":
             cond = e.modify(cond)
-    return cond
+    return cond if position is None else cond.replace(where=Pixels(position[:, 0], position[:, 1]))
+
+
+def _slope(effects: Sequence[Effect], cond: Conditions, v: np.ndarray) -> np.ndarray | None:
+    """Product of the response effects' slopes at block intensities ``v`` (None: linear)."""
+    slopes = [np.asarray(e.at("slope", v, cond), dtype=float) for e in effects if e.distribution == "response"]
+    return np.broadcast_to(np.prod(np.broadcast_arrays(*slopes), axis=0), v.shape) if slopes else None
+
+
+def _linear(effects: Sequence[Effect], cond: Conditions, v: np.ndarray) -> np.ndarray:
+    """The linear signal behind block intensities ``v`` (through the response effects, last first)."""
+    for e in reversed([e for e in effects if e.distribution == "response"]):
+        v = np.asarray(e.linear(v, cond), dtype=float)
+    return v
 
 
 def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """A fixed mixture's (fraction, clipped offset, probability that an affected pixel is an outlier)."""
-    frac, off = effect.mixture(v, cond)
+    """A mixture's fixed part as the frame average shows it: (fraction, clipped offset, probability that
+    an affected pixel is an outlier)."""
+    frac, off = effect.fixed_mixture(v, cond)
     off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
     s = np.maximum(sigma, 1e-6)
     thr = OUTLIER_PIXEL_SIGMAS * s
@@ -76,40 +104,60 @@ Partner = tuple[CameraMetadata, np.ndarray, np.ndarray]
 
 def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray,
                          sigma: np.ndarray, span: np.ndarray | None = None,
+                         position: np.ndarray | None = None,
                          partners: Sequence[Partner] = ()) -> dict[str, np.ndarray]:
-    """Unclipped variance (DN^2) per measured component at block intensities ``v``.
+    """Unclipped variance (DN^2) per measured component at block intensities ``v`` (block centres at
+    ``position``, (B, 2) normalised y, x: what spatial effects see; None: sensor averages).
 
-    A fixed mixture (hot pixels) goes to "outlier" where its offset stands out of the block's noise
-    ``sigma`` (robust, DN) and to the white fixed-pattern core elsewhere; its offsets are clipped.
-    Quantization acts on the temporal noise at each block's level ``v`` over its range of levels ``span`` (DN).
-    With ``partners`` (cross-view measurement, see :func:`.measure._cross_views`) the fixed, column and
-    row components are the weighted products of each fixed effect's sigma here and in the partner views;
-    the quantization's fixed part, a pattern of the scene's levels, moves with the scene and cancels.
+    Each effect's variance is split by its ``temporal_share`` into a temporal and a fixed-pattern part and
+    lands in the components of its ``structure``. The fixed part of a mixture (hot pixels) goes to
+    "outlier" where its offset stands out of the block's noise ``sigma`` (robust, DN) and to the white
+    fixed-pattern core elsewhere; its offsets are clipped. Response effects scale everything by their
+    slope squared. Quantization acts on the temporal noise at each block's level ``v`` over its range
+    of levels ``span`` (DN).
+    With ``partners`` (cross-view measurement, see :func:`.measure._cross_views`) the fixed-pattern parts
+    (fixed, column, row) are the weighted products of each effect's fixed sigma (slope included) here and
+    in the partner views, which see the same sensor blocks (same ``position``) at other intensities; the
+    quantization's fixed part, a pattern of the scene's levels, moves with the scene and cancels.
     """
-    cond = _conditions(effects, meta)
-    pconds = [_conditions(effects, pm) for pm, _, _ in partners]
+    cond = _conditions(effects, meta, position)
+    pconds = [_conditions(effects, pm, position) for pm, _, _ in partners]
+    plins = [_linear(effects, pc, pv) for (_, pv, _), pc in zip(partners, pconds)]
+    pslopes = [_slope(effects, pc, pv) for (_, pv, _), pc in zip(partners, pconds)]
     out = {c: np.zeros(v.shape) for c in MEASURED}
+    cross = {c: np.zeros(v.shape) for c in MEASURED}  # cross-view parts, slopes already applied
+    lin = _linear(effects, cond, v)
+    slope = _slope(effects, cond, v)
     for e in effects:
-        comp = component_of(e)
-        if comp is None or e.distribution == "quantization":
+        if component_of(e) is None or e.distribution == "quantization":
             continue
-        if e.distribution == "mixture" and not e.temporal:
-            frac, off, p = _detection(e, cond, v, sigma)
+        share = np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0)
+        comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
+        if e.distribution == "mixture":
+            frac, off = e.mixture(lin, cond)
+            off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
             var = frac * (1.0 - frac) * off**2
-            out["outlier"] = out["outlier"] + var * p
-            if partners:
-                var = var * (1.0 - p)
-                out[comp] = out[comp] + sum(
-                    w * np.sqrt(var * _mixture_var(e, pc, pv)) for (_, pv, w), pc in zip(partners, pconds))
-            else:
-                out[comp] = out[comp] + var * (1.0 - p)
-        elif partners and not e.temporal:
-            here = np.sqrt(np.maximum(np.asarray(e.variance_dn2(v, cond), dtype=float), 0.0))
-            out[comp] = out[comp] + sum(
-                w * here * np.sqrt(np.maximum(np.asarray(e.variance_dn2(pv, pc), dtype=float), 0.0))
-                for (_, pv, w), pc in zip(partners, pconds))
+            _, _, p = _detection(e, cond, v, sigma)
+            fixed_var = (1.0 - share) * var
+            out["outlier"] = out["outlier"] + fixed_var * p
+            core = fixed_var * (1.0 - p)
         else:
-            out[comp] = out[comp] + np.asarray(e.variance_dn2(v, cond), dtype=float)
+            var = np.asarray(e.variance_dn2(lin, cond), dtype=float)
+            core = (1.0 - share) * var
+        out[comp_t] = out[comp_t] + share * var
+        if not partners:
+            out[comp_f] = out[comp_f] + core
+            continue
+        here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
+        for (_, pv, w), pc, pl, ps in zip(partners, pconds, plins, pslopes):
+            p_share = np.clip(np.asarray(e.temporal_share(pl, pc), dtype=float), 0.0, 1.0)
+            p_var = _mixture_var(e, pc, pl, pv) if e.distribution == "mixture" else \
+                np.asarray(e.variance_dn2(pl, pc), dtype=float)
+            there = np.sqrt(np.maximum((1.0 - p_share) * p_var, 0.0)) * (1.0 if ps is None else ps)
+            cross[comp_f] = cross[comp_f] + w * here * there
+    if slope is not None:
+        out = {c: a * slope**2 for c, a in out.items()}
+    out = {c: out[c] + cross[c] for c in MEASURED}
     added, fixed, spread = quantization_variance(effects, cond, out["temporal"], v if span is not None else None,
                                                  span)
     out["temporal"] = out["temporal"] + added
@@ -119,8 +167,9 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
     return out
 
 
-def _mixture_var(effect: Effect, cond: Conditions, v: np.ndarray) -> np.ndarray:
-    frac, off = effect.mixture(v, cond)
+def _mixture_var(effect: Effect, cond: Conditions, lin: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """A mixture's variance at linear signal ``lin`` (block intensities ``v``), offsets clipped."""
+    frac, off = effect.mixture(lin, cond)
     off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
     return frac * (1.0 - frac) * off**2
 
@@ -159,7 +208,7 @@ def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.n
     cond = _conditions(effects, meta)
     count = weighted = 0.0
     for e in effects:
-        if e.distribution == "mixture" and not e.temporal:
+        if e.distribution == "mixture":
             frac, off, p = _detection(e, cond, v, sigma)
             count += float(np.sum(frac * p * pixels))
             weighted += float(np.sum(frac * p * np.abs(off) * pixels))
@@ -209,7 +258,7 @@ class _SegmentBase:
         rep = np.concatenate(picks)
         self.rep = rep
         self.weights = np.concatenate(weights)
-        self.v, self.sigma = seg.intensity_dn[rep], seg.robust_sigma_dn[rep]
+        self.v, self.sigma, self.pos = seg.intensity_dn[rep], seg.robust_sigma_dn[rep], seg.position[rep]
         # range of clean levels in a block: its gradient plus the measured spread beyond temporal noise
         spread = np.zeros(rep.size)
         if "temporal" in seg.values:
@@ -226,7 +275,31 @@ class _SegmentBase:
         self.pooled_values = np.array([cells[0].values[k] for k in self.pooled])
         self.pooled_errors = np.maximum(np.array([cells[0].errors[k] for k in self.pooled]), 1e-9)
         self.pixels_per_block = seg.pixels_checked // max(1, seg.intensity_dn.size)
+        # regional contrasts: mean block excess (measured - model) per region minus the segment's mean
+        regions = seg.region[rep]
+        self.regions = [np.flatnonzero(regions == k) for k in np.unique(regions)]
+        self.regions = [idx for idx in self.regions if idx.size >= MIN_REGION_BLOCKS] if len(self.regions) > 1 else []
+        self.regional = tuple(k for k in REGIONAL if k in seg.values)
+
+        self.region_errors: dict[str, list[float]] = {}
         self.partners: list[Partner] = []
+
+    def set_region_errors(self, comps: dict[str, np.ndarray]) -> None:
+        """Standard errors of the regional contrasts: the spread of the blocks' excess over the baseline
+        model ``comps`` (fixed once, so a fit cannot widen its own errors)."""
+        for k in self.regional:
+            x = self.seg.values[k][self.rep] - comps[k]
+            floor = max(float(np.median(np.abs(comps[k]))) * 0.01, MIN_VAR_ERR)
+            self.region_errors[k] = [max(float(x[idx].std(ddof=1)), floor) / math.sqrt(idx.size) for idx in self.regions]
+
+    def region_contrasts(self, comps: dict[str, np.ndarray]) -> np.ndarray:
+        """(measured - model) regional contrasts divided by their standard errors."""
+        out = []
+        for k in self.regional:
+            x = self.seg.values[k][self.rep] - comps[k]
+            mean = x.mean()
+            out.extend((x[idx].mean() - mean) / err for idx, err in zip(self.regions, self.region_errors[k]))
+        return np.asarray(out)
 
     def set_partners(self, metas: Sequence[CameraMetadata]) -> None:
         """Partner views (cross-view fixed pattern) of the representative blocks; ``metas``: every
@@ -247,19 +320,30 @@ class _SegmentBase:
         return np.stack([_cell_values(self, comps, k) for k in self.observed], axis=1)
 
     def model_pooled(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        return np.array([_pooled(comps[k], self.weights) for k in self.pooled])
+        return np.array([_pooled(as_measured(self, comps, k), self.weights) for k in self.pooled])
 
 
 def _pooled(x: np.ndarray, weights: np.ndarray) -> float:
     return float(np.sum(x * weights) / np.sum(weights))
 
 
-def _cell_values(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+def as_measured(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+    """A model component as the segment measures it: a single frame cannot tell temporal from fixed."""
     if comp == "single":
-        return sb.average @ (comps["temporal"] + comps["fixed"])
+        return comps["temporal"] + comps["fixed"]
+    if "temporal" in sb.seg.values:
+        return comps[comp]
+    if comp in ("column", "row"):
+        return comps[comp] + comps[f"temporal_{comp}"]
+    return comps[comp]
+
+
+def _cell_values(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+    if comp in ("temporal_column", "temporal_row") and "temporal" not in sb.seg.values:
+        return np.zeros(sb.average.shape[0])
     if comp in POOLED:
-        return np.full(sb.average.shape[0], _pooled(comps[comp], sb.weights))
-    return sb.average @ comps[comp]
+        return np.full(sb.average.shape[0], _pooled(as_measured(sb, comps, comp), sb.weights))
+    return sb.average @ as_measured(sb, comps, comp)
 
 
 class Comparison:
@@ -278,9 +362,9 @@ class Comparison:
         for c in meas.cells:
             by_seg.setdefault(c.segment, []).append(c)
         self.segments: list[_SegmentBase] = []
-        analytic = [e for e in self.effects if e.distribution in ("poisson", "gaussian")]
+        analytic = [e for e in self.effects if is_plain(e)]
         rest = [e for e in self.effects if e not in analytic]
-        clip_model = NoiseModel(analytic + [e for e in rest if e.distribution == "modifier"])
+        clip_model = NoiseModel(analytic + [e for e in rest if e.distribution in ("modifier", "response")])
         metas = [s.meta for s in meas.segments]
         for seg in meas.segments:
             if seg.index not in by_seg:
@@ -289,7 +373,7 @@ class Comparison:
             sb.set_partners(metas)
             pred = clip_model.predict(sb.v, seg.meta)
             comps = unclipped_components([e for e in rest if e.distribution != "quantization"], seg.meta, sb.v,
-                                         sb.sigma, partners=sb.partners)
+                                         sb.sigma, position=sb.pos, partners=sb.partners)
             preds_p = [clip_model.predict(pv, pm) for pm, pv, _ in sb.partners]
             for e in analytic:
                 here = np.asarray(pred[e.name], dtype=float)
@@ -305,7 +389,8 @@ class Comparison:
             if not sb.partners:
                 comps["fixed"] = comps["fixed"] + fixed
             sb.clip_aware = comps
-            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span, sb.partners)
+            sb.set_region_errors(comps)
+            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners)
             self.segments.append(sb)
             if progress is not None:
                 progress.update(1)
@@ -326,7 +411,7 @@ class Comparison:
         names = ", ".join(e.name for e in extra)
         for sb in self.segments:
             try:
-                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span, sb.partners)
+                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners)
             except EffectError:
                 raise
             except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
@@ -349,6 +434,7 @@ class Comparison:
             # Gaussian likelihood: a vaguer model pays log(err^2) (no escape into its own uncertainty)
             res.extend(np.sqrt(2.0 * np.log(err / sb.errors)).ravel())
             res.extend((sb.pooled_values - sb.model_pooled(comps)) / sb.pooled_errors)
+            res.extend(sb.region_contrasts(comps))
             seg = sb.seg
             count, amp = outlier_expectation(effects, seg.meta, sb.v, sb.sigma, sb.pixels_per_block * sb.weights)
             res.append((seg.outlier_pixels - count) / math.sqrt(max(count, seg.outlier_pixels, 1.0)))
@@ -466,7 +552,7 @@ def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
             })
         out[key] = table
     comp_table = []
-    for comp in ("temporal", "fixed", "column", "row", "single"):
+    for comp in ("temporal", "fixed", "column", "row", "temporal_column", "temporal_row", "single"):
         g = [r for r in rows if comp in r["measured_var_dn2"]]
         if not g:
             continue

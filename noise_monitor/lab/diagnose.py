@@ -5,7 +5,14 @@ of all observables (cell variances per component, outlier-pixel counts, quantiza
 parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - k ln N``; explained
 fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
 chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction and
-a minimum relative drop of the rms error (DN).
+a minimum relative drop of the model error (DN) where the effect acts: in the measured components the
+effect changes (temporal, fixed, rows, columns, ...). A floor of scene texture in other components then
+cannot hide a correct fit, and an effect that only bends the model towards a residual it cannot shape
+(a uniform dark-current change for a glowing corner) is not claimed.
+
+Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain
+(only a product of parameters is identifiable: fraction x amplitude^2) the error is the parameter's
+whole allowed range and the parameters are listed as ``degenerate``, never a spuriously tight value.
 """
 from __future__ import annotations
 
@@ -27,9 +34,15 @@ from .compare import Comparison, rms_error
 SIGNIFICANCE_P = 1e-6
 #: ... and the fraction of the chi-square it must explain
 MIN_EXPLAINED_FRACTION = 0.1
-#: ... and the relative drop of rms_error_dn it must bring (statistically significant but tiny
-#: improvements are what residual scene texture leaking into the flat-region statistics produces)
-MIN_RMS_REDUCTION = 0.2
+#: ... and the relative drop of the rms error it must bring in the components it changes (an effect that
+#: explains its part of the residual removes most of it there; a wrong one bends the model a little
+#: towards it; scene texture leaking into the statistics gives statistically significant tiny drops)
+MIN_OWN_REDUCTION = 0.5
+#: components an effect changes: those carrying at least this share of its total |variance change|
+OWN_COMPONENT_SHARE = 0.25
+#: a direction in parameter space is unidentified if crossing the whole allowed range along it changes
+#: the chi-square (scaled by chi2/dof) by less than this
+UNIDENTIFIED_CHI2 = 1.0
 MAX_GRID = 32
 #: best points of the coarse parameter scan refined by least squares
 N_STARTS = 3
@@ -45,6 +58,7 @@ class FitResult:
     errors: dict[str, dict[str, float | None]]
     chi2: float
     n_free: int
+    degenerate: dict[str, list[str]] | None = None
 
 
 @dataclass
@@ -61,6 +75,8 @@ class Candidate:
     significant: bool
     reading: str
     rms_error_after_dn: float
+    degenerate: list[str] | None = None
+    components: dict[str, dict[str, float]] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -74,6 +90,8 @@ class Candidate:
             "chi2": round(self.chi2, 3),
             "rms_error_after_dn": round(self.rms_error_after_dn, 5),
             "reading": self.reading,
+            "degenerate": self.degenerate or [],
+            "components": self.components or {},
         }
 
 
@@ -175,13 +193,20 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
     chi2, xc, xg, jac = best
     effects = build(xc, xg)
     errs: list[dict[str, float | None]] = [{} for _ in specs]
+    degenerate: list[list[str]] = [[] for _ in specs]
     if cont and jac is not None:
         dof = max(n_obs - len(cont) - len(grid), 1)
-        cov = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2 / dof)
+        lo = to_internal(np.array([p.bounds[0] for _, p in cont]))
+        hi = to_internal(np.array([p.bounds[1] for _, p in cont]))
+        cov, loose = _covariance(jac, max(1.0, chi2 / dof), hi - lo)
         ext = to_external(xc)
         for k, (i, p) in enumerate(cont):
             sd = math.sqrt(max(cov[k, k], 0.0))
-            errs[i][p.name] = float(sd * ext[k] * math.log(10.0) if logs[k] else sd)
+            err = 10.0 ** (xc[k] + sd) - ext[k] if logs[k] else sd  # log scale: the upper 1-sigma step
+            if loose[k]:  # unidentified: the whole range, wherever in it the fit stopped
+                err = p.bounds[1] - p.bounds[0]
+                degenerate[i].append(p.name)
+            errs[i][p.name] = float(min(err, p.bounds[1] - p.bounds[0]))
     for i, p in grid:
         errs[i][p.name] = None
     return FitResult(
@@ -191,7 +216,23 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
         errors={e.name: errs[i] for i, e in enumerate(effects)},
         chi2=chi2,
         n_free=len(cont) + len(grid),
+        degenerate={e.name: d for e, d in zip(effects, degenerate) if d},
     )
+
+
+def _covariance(jac: np.ndarray, scale: float, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Covariance of the fitted (internal) parameters and which take part in an unidentified direction.
+
+    Along an eigen-direction u of J^T J that moves the chi-square by less than UNIDENTIFIED_CHI2 over the
+    allowed range (extent R along u) the data say nothing: its variance becomes (R / 2)^2 (the range)
+    instead of the pseudo-inverse's zero or the inverse's meaningless huge value.
+    """
+    w, vecs = np.linalg.eigh(jac.T @ jac / scale)
+    extent = np.abs(vecs).T @ ranges  # R per direction
+    unidentified = w * extent**2 < UNIDENTIFIED_CHI2
+    inv = np.where(unidentified, (extent / 2.0) ** 2, 1.0 / np.maximum(w, 1e-300))
+    loose = np.any(unidentified[None, :] & (np.abs(vecs) > 0.1), axis=1)
+    return (vecs * inv) @ vecs.T, loose
 
 
 def candidate_names(extra: Iterable[str] = ()) -> list[str]:
@@ -200,11 +241,40 @@ def candidate_names(extra: Iterable[str] = ()) -> list[str]:
     return names + [n for n in extra if n not in names]
 
 
+def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """rms over cells of measured - model sigma (DN) per measured component."""
+    out: dict[str, list[float]] = {}
+    for r in rows:
+        for c, m in r["measured_var_dn2"].items():
+            p = r["model_var_dn2"].get(c, 0.0)
+            out.setdefault(c, []).append(math.sqrt(max(m, 0.0)) - math.sqrt(max(p, 0.0)))
+    return {c: float(np.sqrt(np.mean(np.square(v)))) for c, v in out.items()}
+
+
+def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) -> list[str]:
+    """The measured components an added effect changes (OWN_COMPONENT_SHARE of its |variance change|)."""
+    change: dict[str, float] = {}
+    for b, a in zip(before, after):
+        for c, p in a["model_var_dn2"].items():
+            change[c] = change.get(c, 0.0) + abs(p - b["model_var_dn2"].get(c, 0.0))
+    total = sum(change.values())
+    return [c for c, x in change.items() if total > 0 and x >= OWN_COMPONENT_SHARE * total]
+
+
+def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tuple[bool, dict[str, dict[str, float]]]:
+    """Whether an added effect cuts the rms model error (DN) by MIN_OWN_REDUCTION in every measured
+    component it changes; and those components' errors before and after."""
+    e0, e1 = component_errors(rows0), component_errors(rows1)
+    own = own_components(rows0, rows1)
+    comps = {c: {"rms_error_before_dn": round(e0[c], 5), "rms_error_after_dn": round(e1[c], 5)} for c in own}
+    return bool(own) and all(e1[c] <= (1.0 - MIN_OWN_REDUCTION) * e0[c] for c in own), comps
+
+
 def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any = None) -> list[Candidate]:
     """Fit every candidate, rank by BIC gain (best first) and test significance."""
     r0 = comp.residuals()
     chi0 = float(r0 @ r0)
-    rms0 = rms_error(comp.cell_table())
+    rows0 = comp.cell_table()
     n = r0.size
     reg = available()
     out = []
@@ -221,7 +291,9 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
         p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
         explained = drop / chi0 if chi0 > 0 else 0.0
         eff = res.effects[0]
-        rms1 = rms_error(comp.cell_table(extra=[eff]))
+        rows1 = comp.cell_table(extra=[eff])
+        rms1 = rms_error(rows1)
+        cut, comps = cuts_error(rows0, rows1)
         out.append(Candidate(
             effect=name,
             params=res.values[name],
@@ -230,10 +302,11 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             explained_fraction=explained,
             delta_bic=drop - k * math.log(n),
             p_value=p,
-            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION
-                             and rms1 <= (1.0 - MIN_RMS_REDUCTION) * rms0),
+            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION and cut),
             reading=eff.reading(),
             rms_error_after_dn=rms1,
+            degenerate=(res.degenerate or {}).get(name),
+            components=comps,
         ))
         if progress is not None:
             progress.update(1)

@@ -20,6 +20,10 @@ energies of a block's hold-mean residual with the same sensor block seen from ot
 hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so. Outlier
 pixels count when another view confirms them. Every cell (segment x intensity bin) carries the
 standard error of its mean over blocks.
+The temporal deviations are split like the residual: white temporal noise (``temporal``) and row/column
+offsets that change from frame to frame (``temporal_row``, ``temporal_column``); single-view column/row
+components have ``temporal_row / K`` (``temporal_column / K``) removed, cross-view ones need not (the
+temporal parts of two holds are independent). Blinking pixels are counted per hold (``temporal_spikes``).
 """
 from __future__ import annotations
 
@@ -30,6 +34,7 @@ from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
+from scipy.stats import chi2 as chi2_dist
 
 from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, global_shift
 from ..monitor.config import MonitorConfig
@@ -65,6 +70,9 @@ MAX_PARTNERS = 8
 CROSS_SE_MAX = 0.5
 #: an outlier pixel is confirmed when a partner view shows it beyond this many robust sigmas, same sign
 CONFIRM_SIGMAS = 3.0
+#: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
+#: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
+SPIKE_FACTOR = 5.0
 _NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
 
 
@@ -96,6 +104,7 @@ class SegmentMeasurement:
     frames: list[int]
     intensity_dn: np.ndarray  # (B,) block mean intensity
     region: np.ndarray  # (B,) region index 0..8 (3 x 3 grid, row-major)
+    position: np.ndarray  # (B, 2) block centre (y, x) on the sensor, normalised to 0..1
     values: dict[str, np.ndarray]  # component -> (B,) variance DN^2 per block
     robust_sigma_dn: np.ndarray  # (B,) robust sigma of the mean residual (outlier threshold basis)
     span_dn: np.ndarray  # (B,) range of the fitted plane over the block (DN)
@@ -110,6 +119,10 @@ class SegmentMeasurement:
     partners: tuple[int, ...] = ()
     partner_weight: np.ndarray | None = None  # (B, P) weight of each partner per block (0: not used)
     partner_intensity_dn: np.ndarray | None = None  # (B, P) the block's intensity in each partner view
+    #: pixels of the accepted blocks whose temporal variance is a SPIKE_FACTOR outlier, and the number
+    #: white temporal noise would give
+    temporal_spikes: int = 0
+    temporal_spikes_expected: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -264,6 +277,9 @@ class _SegmentAccumulator:
         # accumulators, shaped by the first frame (blocks x components)
         self.s1: Any = None
         self.s2: Any = None
+        self.s2_col: Any = None
+        self.s2_row: Any = None
+        self.s2_pixel: Any = None
         self.mean: Any = None
         self.slope: Any = None
         self.pixels: Any = None
@@ -275,18 +291,32 @@ class _SegmentAccumulator:
         if self.s1 is None:
             self.s1 = np.zeros_like(r)
             self.s2 = np.zeros(r.shape[0])
+            self.s2_col = np.zeros(r.shape[0])
+            self.s2_row = np.zeros(r.shape[0])
+            self.s2_pixel = np.zeros_like(r)
             self.mean = np.zeros(r.shape[0])
             self.pixels = np.zeros_like(r)
             self.slope = np.zeros((r.shape[0], 2))
         self.pixels += blocks
         self.slope += blocks @ self.slopes
         self.s1 += r
-        self.s2 += np.sum(r * r, axis=1)
+        self.s2_pixel += r * r
+        energy, col, row = _energies(r, self.b)
+        self.s2 += energy
+        self.s2_col += col
+        self.s2_row += row
         self.mean += blocks.mean(axis=1)
         self.frames.append(frame_index)
         self.metas.append(meta)
 
-    def finish(self, grid: tuple[int, int]) -> _Full:
+    def _blinking(self, k: int) -> np.ndarray:
+        """(N, b*b) blinking pixels: per-pixel temporal variance beyond SPIKE_FACTOR x the block's typical
+        one (its median, scaled to the chi-square mean)."""
+        vp = (self.s2_pixel - self.s1**2 / k) / (k - 1)
+        level = np.median(vp, axis=1, keepdims=True) / (chi2_dist.median(k - 1) / (k - 1))
+        return vp > SPIKE_FACTOR * level
+
+    def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> _Full:
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
@@ -299,8 +329,13 @@ class _SegmentAccumulator:
         core, col, row = _split(*_energies(clean, b), b)
         values: dict[str, np.ndarray] = {}
         if k >= 2:
-            temporal = (self.s2 - np.sum(self.s1 * self.s1, axis=1) / k) / ((k - 1) * (b * b - 3))
-            values = {"temporal": temporal, "fixed": core - temporal / k}
+            # energies of the frames' deviations from the mean, split like the mean's
+            e_tot, e_col, e_row = _energies(rm, b)
+            temporal, t_col, t_row = _split(*((x - k * e) / (k - 1) for x, e in (
+                (self.s2, e_tot), (self.s2_col, e_col), (self.s2_row, e_row))), b)
+            values = {"temporal": temporal, "fixed": core - temporal / k,
+                      "temporal_column": t_col, "temporal_row": t_row}
+            col, row = col - t_col / k, row - t_row / k
         else:
             temporal = None
             values = {"single": core}
@@ -332,16 +367,20 @@ class _SegmentAccumulator:
         flat_mask = keep.copy()
         if temporal is not None:
             # frame differences that do not fit pure noise: residual motion, flicker, a moving object
-            moving = keep & ~block_temporal(np.stack(self.images), b).accepted
+            # (blinking pixels are temporal noise, measured as temporal_spikes, not a scene change)
+            moving = keep & ~block_temporal(np.stack(self.images), b, exclude=self._blinking(k)).accepted
             excluded["not_static"] = int(np.sum(moving))
             keep &= ~moving
         self.images = []
+        spikes = self._blinking(k).sum(axis=1) if k >= 2 else np.zeros(n, dtype=int)
         gy, gx = grid
         iy, ix = np.divmod(np.arange(n), gx)
         region = (3 * iy // max(gy, 1)) * 3 + (3 * ix // max(gx, 1))
+        h, w = shape if shape is not None else (gy * b, gx * b)
+        position = np.stack([(iy + 0.5) * b / h, (ix + 0.5) * b / w], axis=1)
         return _Full(self.index, self.metas[len(self.metas) // 2], self.stamp_ns, list(self.frames), self.pose,
                      v, region, values, robust, (b - 1) * np.abs(self.slope / k).sum(axis=1), is_out, centred,
-                     keep, flat_mask, excluded, clean, np.maximum(white, 0.0))
+                     keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes)
 
 
 @dataclass
@@ -365,6 +404,8 @@ class _Full:
     excluded: dict[str, int]
     residual: np.ndarray  # (N, b*b) plane-fit residual of the hold mean, outlier pixels replaced
     white: np.ndarray  # (N,) white variance of that residual (fixed + temporal / k), single view
+    position: np.ndarray  # (N, 2) block centre (y, x), normalised to 0..1
+    spikes: np.ndarray  # (N,) blinking pixels per block (SPIKE_FACTOR outliers of the temporal variance)
     partners: tuple[int, ...] = ()
     partner_weight: np.ndarray | None = None  # (N, P)
     partner_v: np.ndarray | None = None  # (N, P)
@@ -373,6 +414,8 @@ class _Full:
 def _select(f: _Full, b: int) -> SegmentMeasurement:
     keep = f.keep
     amp = np.abs(f.centred[keep][f.is_out[keep]])
+    k = len(f.frames)
+    spikes_expected = float(keep.sum()) * b * b * float(chi2_dist.sf(SPIKE_FACTOR * (k - 1), k - 1)) if k >= 2 else 0.0
     return SegmentMeasurement(
         index=f.index,
         meta=f.meta,
@@ -380,6 +423,7 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         frames=f.frames,
         intensity_dn=f.v[keep],
         region=f.region[keep],
+        position=f.position[keep],
         values={c: a[keep] for c, a in f.values.items()},
         robust_sigma_dn=f.robust[keep],
         span_dn=f.span[keep],
@@ -392,6 +436,8 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         partners=f.partners,
         partner_weight=None if f.partner_weight is None else f.partner_weight[keep],
         partner_intensity_dn=None if f.partner_v is None else f.partner_v[keep],
+        temporal_spikes=int(f.spikes[keep].sum()),
+        temporal_spikes_expected=spikes_expected,
     )
 
 
@@ -452,12 +498,14 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
 
 #: components that are pooled over the whole segment in every cell: line offsets belong to image lines
 #: (a cell covers few of them) and outlier pixels are sparse; both are assumed independent of intensity
-POOLED = ("column", "row", "outlier")
+POOLED = ("column", "row", "outlier", "temporal_column", "temporal_row")
 
 
 #: pooled components whose gross outliers (an edge that slipped through) are trimmed
-TRIMMED = ("column", "row")
+TRIMMED = ("column", "row", "temporal_column", "temporal_row")
 TRIM_MADS = 8.0
+#: components that are cross energies between views when a segment has partners (zero-mean noise either way)
+CROSS_VIEW = ("fixed", "column", "row")
 
 
 def _inliers(x: np.ndarray, symmetric: bool = False) -> np.ndarray:
@@ -473,7 +521,7 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
     if seg.intensity_dn.size == 0:
         return out
     bins = np.floor(seg.intensity_dn / BIN_WIDTH_DN).astype(int)
-    pooled = {comp: _inliers(arr, bool(seg.partners)) if comp in TRIMMED else np.arange(arr.size)
+    pooled = {comp: _inliers(arr, bool(seg.partners) and comp in CROSS_VIEW) if comp in TRIMMED else np.arange(arr.size)
               for comp, arr in seg.values.items() if comp in POOLED}
     for k in np.unique(bins):
         idx = np.flatnonzero(bins == k)
@@ -506,6 +554,9 @@ def _theoretical_se(vals: dict[str, float], k: int, b: int) -> dict[str, float]:
         out = {"single": white * math.sqrt(2.0 / d_rest)}
     for comp in ("column", "row"):
         out[comp] = math.sqrt(2.0 / d_line) * (white + b * pos[comp]) / b
+    if k >= 2:
+        for comp in ("temporal_column", "temporal_row"):
+            out[comp] = math.sqrt(2.0 / ((k - 1) * d_line)) * (pos["temporal"] + b * pos[comp]) / b
     out["outlier"] = 0.0
     return out
 
@@ -583,12 +634,12 @@ def measure_frames(
         if (acc is None or moved or len(acc.frames) >= tolerance.max_frames
                 or not tolerance.same(acc.metas[0], meta)):
             if acc is not None:
-                segments.append(acc.finish(grid))
+                segments.append(acc.finish(grid, shape))
             acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, plane)
             acc.pose = pose.copy()
         acc.add(i, img, meta)
     if acc is not None:
-        segments.append(acc.finish(grid))
+        segments.append(acc.finish(grid, shape))
     if not segments:
         reasons = ", ".join(f"{k}: {v}" for k, v in skipped.items()) or "no frames"
         raise ValueError(f"no usable frames to measure ({reasons})")

@@ -16,8 +16,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..physics import NoiseModel  # noqa: E402
-from .compare import Comparison, model_curve  # noqa: E402
+from .compare import Comparison, as_measured, model_curve  # noqa: E402
 from .diagnose import Candidate  # noqa: E402
+from .measure import BLOCK  # noqa: E402
 
 CONDITION_LABELS = {
     "intensity_dn": "intensity [DN]",
@@ -135,6 +136,29 @@ def _component_plot(summary: dict[str, Any]) -> str:
     return _png(fig)
 
 
+def _excess_map_plot(comp: Comparison, component: str) -> str:
+    """Measured - model variance of ``component`` per block position on the sensor (mean over segments)."""
+    gy, gx = max(comp.meas.shape[0] // BLOCK, 1), max(comp.meas.shape[1] // BLOCK, 1)  # the block grid
+    total, count = np.zeros((gy, gx)), np.zeros((gy, gx))
+    for sb, comps in comp.predict_with():
+        if component not in sb.seg.values:
+            continue
+        x = sb.seg.values[component][sb.rep] - as_measured(sb, comps, component)
+        iy = np.minimum((sb.pos[:, 0] * gy).astype(int), gy - 1)
+        ix = np.minimum((sb.pos[:, 1] * gx).astype(int), gx - 1)
+        np.add.at(total, (iy, ix), x)
+        np.add.at(count, (iy, ix), 1.0)
+    mean = np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
+    lim = float(np.nanpercentile(np.abs(mean), 98)) if np.isfinite(mean).any() else 1.0
+    fig, ax = plt.subplots(figsize=(5.6, 4.4))
+    im = ax.imshow(mean, extent=(0, 1, 1, 0), cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+    fig.colorbar(im, ax=ax, label=f"{component} variance: measured - model [DN²]")
+    ax.set_xlabel("sensor x [fraction of the width]")
+    ax.set_ylabel("sensor y [fraction of the height]")
+    ax.set_title(f"Unexplained {component} noise on the sensor (blank: no flat block)")
+    return _png(fig)
+
+
 def _table(rows: Sequence[dict[str, Any]], cols: Sequence[str]) -> str:
     head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols) + "</tr>" for r in rows)
@@ -151,6 +175,40 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _unexplained_html(un: dict[str, Any] | None) -> str:
+    """The residual's signature: what the model lacks, in physics terms, and the plug-in it suggests."""
+    if not un:
+        return ""
+    head = "<h2>Unexplained residual</h2>"
+    if not un["residual_significant"]:
+        return head + "<p>The residual is within the measurement's uncertainty.</p>"
+    intro = ("<p class='sig'>No candidate effect explains it: " if un["significant"]
+             else f"<p>Explained by {html.escape(', '.join(un['explained_by']))}; before that: ")
+    rows = [{"component": k, **{x: v for x, v in st.items()}} for k, st in un["components"].items()]
+    parts = [head, intro + html.escape(un["reading"]) + "</p>",
+             "<p>Per measured component (variance, DN²: measured − model):</p>",
+             _table(rows, ["component", "excess_dn2", "excess_err_dn2", "model_dn2", "z", "significant"])]
+    px = un["pixels"]
+    parts.append(f"<p>Outlier pixels of the frame averages: {px['outlier_pixels']:.0f} (model "
+                 f"{px['outlier_pixels_expected']:.1f}); pixels blinking between frames: {px['temporal_spikes']:.0f} "
+                 f"(white noise gives {px['temporal_spikes_expected']:.1f}).</p>")
+    if un.get("law"):
+        law = un["law"]
+        parts.append("<p>Law of the excess: " + html.escape(
+            f"intensity^{law['intensity_power']} x exposure^{law['exposure_power']} x gain^{law['gain_power']}"
+            + (" x dark-current(T)" if law["dark_current_law"] else "")
+            + f", amplitude {law['amplitude_dn2']:.4g} DN² at the reference {law['reference']}") + "</p>")
+    if un.get("spatial"):
+        sp = un["spatial"]
+        parts.append("<p>Position on the sensor: " + html.escape(
+            f"{sp['pattern']} (explains {sp['explained_fraction']:.0%} of the block excess beyond segment means, "
+            f"p = {sp['p_value']:.2g}; {'significant' if sp['significant'] else 'not significant'})") + "</p>")
+    if un.get("suggested"):
+        parts.append("<p>A plug-in for it (<code>--write-plugin-skeleton PATH</code>): "
+                     + html.escape(_fmt(un["suggested"])) + "</p>")
+    return "".join(parts)
+
+
 def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison, candidates: list[Candidate],
                  after: NoiseModel | None = None) -> Path:
     """Write ``report.html`` (self-contained) and ``summary.json`` into ``out_dir``; returns the HTML path."""
@@ -164,6 +222,9 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     }
     if summary.get("estimator"):
         images["Estimator: xi per frame"] = _xi_plot(summary["estimator"])
+    un = summary.get("unexplained") or {}
+    if un.get("significant") and un.get("dominant_component") in ("temporal", "fixed", "single"):
+        images["Unexplained residual on the sensor"] = _excess_map_plot(comp, un["dominant_component"])
     cand_rows = [{**c.as_dict(), "params": c.params} for c in candidates]
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>noise_monitor analysis</title>",
@@ -192,7 +253,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         if sig else "<p>No candidate effect explains a significant part of the model error.</p>"
     )
     parts.append(_table(cand_rows, ["effect", "significant", "explained_fraction", "delta_bic", "p_value", "params",
-                                    "param_errors", "rms_error_after_dn", "reading"]))
+                                    "param_errors", "degenerate", "rms_error_after_dn", "reading"]))
+    parts.append(_unexplained_html(summary.get("unexplained")))
     for title, b64 in images.items():
         parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{b64}'>")
     parts.append("<h2>Where the model fails (by condition)</h2>")

@@ -96,30 +96,38 @@ def blocks_of(img: np.ndarray, b: int) -> np.ndarray:
     return x.reshape(*lead, (h // b) * (w // b), b * b)
 
 
-def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE) -> BlockTemporal:
-    """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN)."""
+def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
+                   exclude: np.ndarray | None = None) -> BlockTemporal:
+    """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN).
+
+    ``exclude``: (N, block * block) pixels left out of the test and the variance (e.g. blinking pixels,
+    noise that is not a scene change but would correlate with the brightness regressor)."""
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
     k = x.shape[0]
-    n = block * block
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
     mean = x.mean(axis=0)
     gy, gx = np.gradient(mean)
     mb = blocks_of(mean, block)  # (N, n)
+    use = np.ones(mb.shape, dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    if use.shape != mb.shape:
+        raise ValueError(f"exclude must have shape {mb.shape} (blocks x pixels), got {use.shape}")
     design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, block),
-                       blocks_of(gy, block)], axis=2)  # (N, n, 4)
+                       blocks_of(gy, block)], axis=2) * use[:, :, None]  # (N, n, 4)
     q, _ = np.linalg.qr(design)
-    d = blocks_of(x, block) - mb[None]  # (k, N, n)
+    d = (blocks_of(x, block) - mb[None]) * use[None]  # (k, N, n)
     explained = np.sum(np.einsum("knp,npr->knr", d, q) ** 2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
-    d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (n - N_REGRESSORS)
+    m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
+    d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (m - N_REGRESSORS)
     ratio = (explained / d1) / np.maximum((total - explained) / d2, 1e-12)
     p = f_dist.sf(ratio, d1, d2)
-    per_pixel = np.sum(d * d, axis=0) / (k - 1)  # (N, n)
-    var = per_pixel.mean(axis=1)
-    gauss = var * math.sqrt(2.0 / ((k - 1) * n))
-    err = np.maximum(per_pixel.std(axis=1, ddof=1) / math.sqrt(n), gauss)
+    per_pixel = np.sum(d * d, axis=0) / (k - 1)  # (N, n), zero where excluded
+    var = per_pixel.sum(axis=1) / m
+    spread = np.sqrt(np.maximum(np.sum(use * (per_pixel - var[:, None]) ** 2, axis=1) / (m - 1), 0.0))
+    gauss = var * np.sqrt(2.0 / ((k - 1) * m))
+    err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
     return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value)

@@ -14,11 +14,11 @@ from .metadata import (
     sample_static,
 )
 from .model import MODES, NoiseModel
-from .sensor import Conditions
+from .sensor import Conditions, Pixels
 
 __all__ = [
     "CameraMetadata", "CameraProfile", "Conditions", "Effect", "EffectError", "MetadataError", "MODES",
-    "NORMALIZED_ORDER", "NoiseModel", "PAPER_RANGES", "Param", "available", "build_effects", "db_to_factor",
+    "NORMALIZED_ORDER", "NoiseModel", "PAPER_RANGES", "Param", "Pixels", "available", "build_effects", "db_to_factor",
     "factor_to_db", "load_plugin_file", "load_profile", "make_effect", "register", "sample_dynamic",
     "sample_metadata", "sample_static",
 ]

@@ -50,8 +50,11 @@ def noise_moments(
     hi: float = DN_MAX,
     lsb: float | None = None,
     rounding: bool = False,
+    slope: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """E[n], E[n^2] and P(not clipped) of the clipped noise at clean values ``x`` (1-D).
+
+    ``slope`` (per x) scales the noise before clipping (a non-linear pixel response, linearised).
 
     With ``lsb`` the output is also rounded to the levels j * lsb (0 and 255 are levels), exactly
     where the noise is narrow against the step and with Sheppard's correction where it is wide;
@@ -71,7 +74,7 @@ def noise_moments(
         out = [np.empty(n) for _ in range(3)]
         for sel in (exact, ~exact):
             part = noise_moments(x[sel], lam[sel], scale, s2[sel], [(f, o[sel]) for f, o in mixtures],
-                                 lo, hi, lsb, rounding)
+                                 lo, hi, lsb, rounding, None if slope is None else slope[sel])
             for arr, val in zip(out, part):
                 arr[sel] = val
         return out[0], out[1], out[2]
@@ -91,6 +94,10 @@ def noise_moments(
         pk = np.ones((1, n))
         shift = np.zeros((1, n))
 
+    if slope is not None:
+        slope = np.broadcast_to(np.asarray(slope, dtype=float), (n,))
+        s2 = np.asarray(s2 * slope**2)
+        shift, offsets = shift * slope, offsets * slope
     s = np.sqrt(s2)[None, None, :]
     mu = shift[None, :, :] + offsets[:, None, :]  # (C, K, n)
     lo_x, hi_x = (lo - x)[None, None, :], (hi - x)[None, None, :]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .effects import available, load_plugin_file
+from .effects import Effect, available, load_plugin_file
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,13 +20,19 @@ def run(args: argparse.Namespace) -> int:
     listing = {}
     for name, cls in sorted(available().items()):
         kind = "temporal" if cls.temporal else "fixed-pattern"
-        print(f"{name:18s} {cls.distribution:12s} {kind:13s} {cls.description}")
+        if cls.temporal_share is not Effect.temporal_share:
+            kind = "temporal+fixed"
+        shape = cls.structure + (", by position" if cls.spatial else "")
+        print(f"{name:18s} {cls.distribution:12s} {kind:14s} {shape:18s} {cls.description}")
         for p in cls.params:
             fit = "fittable" if p.fittable else "fixed"
             print(f"    {p.name} [{p.unit}] default {p.default:g}, bounds {p.bounds[0]:g}..{p.bounds[1]:g}, {fit}")
         listing[name] = {
             "distribution": cls.distribution,
             "temporal": cls.temporal,
+            "temporal_and_fixed": cls.temporal_share is not Effect.temporal_share,
+            "structure": cls.structure,
+            "spatial": cls.spatial,
             "description": cls.description,
             "params": {p.name: {"unit": p.unit, "default": p.default, "bounds": list(p.bounds), "fittable": p.fittable}
                        for p in cls.params},

@@ -10,7 +10,7 @@ from .constants import MODES
 from .effects import PAPER_EFFECTS, Effect, EffectError, build_effects, make_effect
 from .metadata import CameraMetadata
 from .sampling import standard_normal
-from .sensor import Conditions
+from .sensor import Conditions, Pixels
 from .table_grid import GridSpec, TableGrid
 
 #: Intensity grid of the analytic tables (DN); predictions interpolate linearly between nodes.
@@ -21,6 +21,8 @@ _Y_GRID = np.arange(0.0, DN_MAX + 1e-9, 0.5)
 #: The fast simulation path draws Poisson sources exactly below this mean (normal above: skewness < 0.1).
 FAST_POISSON_LAMBDA = 100.0
 SEQUENTIAL_ORDER = ("pn", "rn", "dcsn")
+#: table key of the total without the response effects (predict reports each response's signed change)
+_LINEAR_TOTAL = "_linear_total"
 
 
 class NoiseModel:
@@ -61,8 +63,33 @@ class NoiseModel:
 
     @property
     def noise_effects(self) -> list[Effect]:
-        """Effects that add noise (every effect but the modifiers)."""
-        return [e for e in self.effects if e.distribution != "modifier"]
+        """Effects that add noise (every effect but the modifiers and responses)."""
+        return [e for e in self.effects if e.distribution not in ("modifier", "response")]
+
+    @property
+    def responses(self) -> list[Effect]:
+        """Non-linear response effects (scale the noise in front of them)."""
+        return [e for e in self.effects if e.distribution == "response"]
+
+    def slope(self, x: np.ndarray, cond: Conditions) -> np.ndarray | None:
+        """Product of the response effects' slopes at clean values ``x`` (None: linear camera)."""
+        if not self.responses:
+            return None
+        out = np.ones(np.shape(x))
+        for e in self.responses:
+            k = np.asarray(_guarded(e, "evaluate", e.at, "slope", x, cond), dtype=float)
+            if not (np.all(np.isfinite(k)) and np.all(k >= 0.0)):
+                raise EffectError(f"effect {e.name!r} returned a NaN, infinite or negative response slope")
+            out = out * k
+        return out
+
+    def linear_signal(self, x: np.ndarray, cond: Conditions) -> np.ndarray:
+        """The linear signal behind output levels ``x`` (through the response effects, last first)."""
+        for e in reversed(self.responses):
+            x = np.asarray(_guarded(e, "evaluate", e.linear, x, cond), dtype=np.asarray(x).dtype)
+            if not np.all(np.isfinite(x)):
+                raise EffectError(f"effect {e.name!r} returned a NaN or infinite linear signal")
+        return x
 
     def with_effects(self, *extra: Effect | str) -> NoiseModel:
         """A new model with more effects (an effect of the same name is replaced)."""
@@ -128,7 +155,10 @@ class NoiseModel:
         _, own, total = self._surrogate_last
         if mode == "sequential":
             return _carried(own)
-        return {**own, "total": total} if total is not None else dict(own)
+        out = {**own, "total": total} if total is not None else dict(own)
+        if self.responses and total is not None:  # the same keys as the exact tables
+            out[_LINEAR_TOTAL] = total
+        return out
 
     def _gaussian_moments(self, effects: list[Effect], cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
         lam, s2, mixes = self._components(effects, _V_GRID, cond)
@@ -143,18 +173,21 @@ class NoiseModel:
         mixes = []
         for e in effects:
             if e.distribution == "poisson":
-                lam = lam + np.broadcast_to(np.asarray(_guarded(e, "evaluate", e.electrons, x, cond), dtype=float), x.shape)
+                lam = lam + np.broadcast_to(np.asarray(_guarded(e, "evaluate", e.at, "electrons", x, cond), dtype=float),
+                                            x.shape)
             elif e.distribution == "gaussian":
-                sig = np.asarray(_guarded(e, "evaluate", e.sigma_dn, x, cond), dtype=float)
+                sig = np.asarray(_guarded(e, "evaluate", e.at, "sigma_dn", x, cond), dtype=float)
                 s2 = s2 + np.broadcast_to(sig**2, x.shape)
             elif e.distribution == "mixture":
                 frac, off = _guarded(e, "evaluate", e.mixture, x, cond)
                 mixes.append((float(frac), np.broadcast_to(np.asarray(off, dtype=float), x.shape)))
         return lam, s2, mixes
 
-    def _moments(self, effects: list[Effect], x: np.ndarray, cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
-        """E[n|x], E[n^2|x] of the effects applied together in one pass (clipped, then quantized)."""
-        lam, s2, mixes = self._components(effects, x, cond)
+    def _moments(self, effects: list[Effect], x: np.ndarray, cond: Conditions,
+                 linear: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """E[n|x], E[n^2|x] of the effects applied together in one pass (through the response unless
+        ``linear``; clipped, then quantized)."""
+        lam, s2, mixes = self._components(effects, x if linear else self.linear_signal(x, cond), cond)
         _check_finite(effects, lam, s2, mixes)
         lsbs = [self.lsb(e, cond) for e in effects if e.distribution == "quantization"]
         if lsbs and len(lsbs) == len(effects):
@@ -163,14 +196,16 @@ class NoiseModel:
             step = _Y_GRID[1] - _Y_GRID[0]
             r1, r2, _ = noise_moments(x, 0.0, 1.0, step**2 / 12.0, None, lsb=max(lsbs), rounding=True)
             return r1, r2
-        m1, m2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=max(lsbs) if lsbs else None)
+        slope = None if linear else self.slope(x, cond)
+        m1, m2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=max(lsbs) if lsbs else None, slope=slope)
         return m1, m2
 
     def _quantization_moments(self, e: Effect, x: np.ndarray, cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
         """Joint mode: moments of the rounding error of the one-pass noisy output (as ``simulate``)."""
         others = [o for o in self.noise_effects if o.distribution != "quantization"]
-        lam, s2, mixes = self._components(others, x, cond)
-        r1, r2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=self.lsb(e, cond), rounding=True)
+        lam, s2, mixes = self._components(others, self.linear_signal(x, cond), cond)
+        r1, r2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=self.lsb(e, cond), rounding=True,
+                                  slope=self.slope(x, cond))
         return r1, r2
 
     def _joint_tables(self, cond: Conditions) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -180,6 +215,8 @@ class NoiseModel:
             for e in self.noise_effects
         }
         out["total"] = self._moments(self.noise_effects, _V_GRID, cond)
+        if self.responses:
+            out[_LINEAR_TOTAL] = self._moments(self.noise_effects, _V_GRID, cond, linear=True)
         return out
 
     def _sequential_tables(self, cond: Conditions) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -228,7 +265,7 @@ class NoiseModel:
             raise ValueError("intensity_dn contains NaN or inf")
         x = np.clip(x, 0.0, DN_MAX)
         out: dict[str, float | np.ndarray] = {}
-        for name, (t1, t2) in tables.items():
+        for name, (t1, t2) in tables.items():  # includes the linear total of a model with responses
             m1 = np.interp(x, _V_GRID, t1)
             m2 = np.interp(x, _V_GRID, t2)
             if x.ndim >= 2:
@@ -239,6 +276,9 @@ class NoiseModel:
             out[name] = np.sqrt(np.maximum(var, 0.0))
         if mode == "sequential":
             out["total"] = np.sqrt(sum(np.asarray(out[e.name]) ** 2 for e in self.noise_effects))
+        linear = out.pop(_LINEAR_TOTAL, None)
+        for e in self.responses:  # signed: how much the response changes the total sigma
+            out[e.name] = np.asarray(out["total"]) - (np.asarray(out["total"]) if linear is None else linear)
         return {k: (float(v) if np.ndim(v) == 0 else v) for k, v in out.items()}
 
     # --- Monte-Carlo ------------------------------------------------------------------------
@@ -259,7 +299,9 @@ class NoiseModel:
         previous output in sequential mode (then total = sqrt of the sum of squares, as in the paper).
         ``per_source=False`` (joint mode only) is the fast path for frames: the temporal Poisson and
         Gaussian effects are drawn as one normal of their summed variance (exact Poisson where the mean
-        is below 100 electrons) and only the total sigma is returned.
+        is below 100 electrons) and only the total sigma is returned. The image is the whole sensor:
+        position-dependent effects see its pixel grid (``cond.where``); response effects scale the
+        noise by their slope at the clean value (at the previous output in sequential mode).
         """
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -269,26 +311,40 @@ class NoiseModel:
         if not np.all(np.isfinite(clean)):
             raise ValueError("clean_dn contains NaN or inf")
         overrides = overrides or {}
-        cond = self.conditions(meta)
-        conds = {e.name: (self.conditions(overrides[e.name]) if e.name in overrides else cond) for e in self.effects}
+        where = Pixels.frame(clean.shape)
+        cond = self.conditions(meta).replace(where=where)
+        conds = {e.name: (self.conditions(overrides[e.name]).replace(where=where) if e.name in overrides else cond)
+                 for e in self.effects}
         adders = [e for e in self.noise_effects if e.distribution != "quantization"]
         quant = [e for e in self.noise_effects if e.distribution == "quantization"]
         sigmas: dict[str, float] = {}
+        slope = self.slope(clean, cond)
+        slope = None if slope is None else slope.astype(np.float32)
+        signal = clean if slope is None else self.linear_signal(clean, cond).astype(np.float32)
         if mode == "joint" and not per_source:
-            noisy = self._merged_noise(adders, clean, conds, rng)
+            noisy = self._merged_noise(adders, signal, conds, rng)
+            if slope is not None:
+                noisy *= slope
             noisy += clean
             np.clip(noisy, 0.0, DN_MAX, out=noisy)
         elif mode == "joint":
             total = np.zeros_like(clean)
             for e in adders:
-                n = _checked_sample(e, clean, conds[e.name], rng)
+                n = _checked_sample(e, signal, conds[e.name], rng)
+                if slope is not None:
+                    n = n * slope
                 total += n
                 sigmas[e.name] = _std(np.clip(clean + n, 0.0, DN_MAX) - clean)
             noisy = np.clip(clean + total, 0.0, DN_MAX)
         else:
             noisy = clean
             for e in adders:
-                nxt = np.clip(noisy + _checked_sample(e, noisy, conds[e.name], rng), 0.0, DN_MAX)
+                if slope is None:
+                    n = _checked_sample(e, noisy, conds[e.name], rng)
+                else:
+                    n = _checked_sample(e, self.linear_signal(noisy, cond).astype(np.float32), conds[e.name], rng)
+                    n = n * np.asarray(self.slope(noisy, cond), dtype=np.float32)
+                nxt = np.clip(noisy + n, 0.0, DN_MAX)
                 sigmas[e.name] = _std(nxt - noisy)
                 noisy = nxt
         for e in quant:

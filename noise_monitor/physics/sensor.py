@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property, lru_cache
 
 import numpy as np
@@ -81,12 +81,40 @@ def ktc_sigma_v(meta: CameraMetadata, temperature_k: float) -> float:
     return math.sqrt(K_B_J * temperature_k / capacitance)
 
 
+#: positions (per axis) at which a position-dependent effect is averaged when no pixel position is given
+AVERAGE_GRID_POINTS = 15
+
+
+@dataclass(frozen=True)
+class Pixels:
+    """Where pixels sit on the sensor: normalised coordinates of their centres, 0 at the top (left)
+    edge and 1 at the bottom (right) edge, as arrays broadcastable to the signal."""
+
+    y: np.ndarray
+    x: np.ndarray
+
+    @classmethod
+    def frame(cls, shape: tuple[int, ...]) -> Pixels:
+        """Every pixel of a full frame (the last two axes of ``shape``): y (H, 1), x (1, W)."""
+        h, w = shape[-2], shape[-1]
+        return cls(((np.arange(h, dtype=np.float32) + 0.5) / h)[:, None],
+                   ((np.arange(w, dtype=np.float32) + 0.5) / w)[None, :])
+
+    @classmethod
+    def average_grid(cls) -> Pixels:
+        """An even grid over the sensor (column vectors of AVERAGE_GRID_POINTS**2 positions)."""
+        g = (np.arange(AVERAGE_GRID_POINTS) + 0.5) / AVERAGE_GRID_POINTS
+        yy, xx = np.meshgrid(g, g, indexing="ij")
+        return cls(yy.reshape(-1, 1), xx.reshape(-1, 1))
+
+
 @dataclass(frozen=True)
 class Conditions:
     """The physical state that generates the noise: the stated metadata plus what modifiers change.
 
     Metadata-error effects (true gain/exposure/temperature differ from stated ones) and dark-current
-    law deviations act by changing these fields; noise effects read them.
+    law deviations act by changing these fields; noise effects read them. ``where`` tells
+    position-dependent (``spatial``) effects where the evaluated pixels are on the sensor.
     """
 
     meta: CameraMetadata
@@ -95,6 +123,9 @@ class Conditions:
     temperature_k: float
     dark_scale: float = 1.0
     dark_rate_per_k: float = 0.0
+    #: pixel positions of the signal being evaluated (None: unknown; position-dependent effects are
+    #: then averaged over the sensor)
+    where: Pixels | None = field(default=None, compare=False, repr=False)
 
     @classmethod
     def from_meta(cls, meta: CameraMetadata) -> Conditions:

@@ -1,6 +1,6 @@
 """The effect plug-in API: a noise effect declares its parameters, variance and sampler.
 
-Every effect is one of five kinds of distribution, which tells the analytic model how to combine it
+Every effect is one of six kinds of distribution, which tells the analytic model how to combine it
 with the others under clipping:
 
 - ``poisson``: a shot noise; implement :meth:`Effect.electrons` (mean electrons per pixel).
@@ -9,10 +9,21 @@ with the others under clipping:
 - ``quantization``: rounds the output; implement :meth:`Effect.lsb_dn`.
 - ``modifier``: changes the physical conditions (true gain, dark-current law, ...); implement
   :meth:`Effect.modify`. Its variance contribution is the model's change with and without it.
+- ``response``: the pixel response is non-linear; implement :meth:`Effect.slope` (the local slope of
+  output vs linear signal at an output level, 1 = linear) and, if the response also bends the signal,
+  :meth:`Effect.linear` (the linear signal behind an output level). The other effects are evaluated at
+  the linear signal and their noise (all but quantization) is scaled by the slope, so the response's
+  variance contribution may be negative (a response compressing near full well *reduces* the noise).
+  Signals passed to effects are output levels (what the camera shows) everywhere else.
 
 ``temporal`` effects change from frame to frame; fixed-pattern ones (``temporal = False``) repeat in
-every frame of a camera and vanish from frame differences. Samplers have working defaults for every
-kind, so a plug-in usually implements one method.
+every frame of a camera and vanish from frame differences; an effect that is both (random telegraph
+pixels) overrides :meth:`Effect.temporal_share`. ``structure`` says how the noise is correlated:
+``"pixel"`` (white), ``"row"`` (one value per image row, the same along it) or ``"column"``.
+``spatial = True`` effects depend on where a pixel is on the sensor: they read ``cond.where``
+(:class:`~noise_monitor.physics.sensor.Pixels`, normalised coordinates); where no position is known the
+model averages them over the sensor. Samplers have working defaults for every kind, so a plug-in
+usually implements one method.
 """
 from __future__ import annotations
 
@@ -24,7 +35,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..sampling import poisson, standard_normal
-from ..sensor import Conditions
+from ..sensor import Conditions, Pixels
 
 
 class Distribution(StrEnum):
@@ -35,9 +46,11 @@ class Distribution(StrEnum):
     MIXTURE = "mixture"
     QUANTIZATION = "quantization"
     MODIFIER = "modifier"
+    RESPONSE = "response"
 
 
 DISTRIBUTIONS = tuple(d.value for d in Distribution)
+STRUCTURES = ("pixel", "row", "column")
 
 
 class EffectError(ValueError):
@@ -63,6 +76,10 @@ class Effect:
     name: ClassVar[str] = ""
     distribution: ClassVar[Distribution] = Distribution.GAUSSIAN
     temporal: ClassVar[bool] = True
+    #: correlation of the noise: "pixel" (white), "row" (constant along an image row), "column"
+    structure: ClassVar[str] = "pixel"
+    #: True if the effect depends on the pixel's position on the sensor (reads ``cond.where``)
+    spatial: ClassVar[bool] = False
     params: ClassVar[tuple[Param, ...]] = ()
     description: ClassVar[str] = ""
     #: plain-language reading of the effect's signature in residuals (format fields: the parameters)
@@ -133,19 +150,53 @@ class Effect:
         """New physical conditions (modifier effects)."""
         return cond
 
+    def slope(self, signal_dn: np.ndarray, cond: Conditions) -> np.ndarray:
+        """Local slope d(output)/d(linear signal) of a response effect at output level ``signal_dn``."""
+        raise NotImplementedError
+
+    def linear(self, signal_dn: np.ndarray, cond: Conditions) -> np.ndarray:
+        """The linear signal (DN) a response effect turns into output level ``signal_dn`` (default: the
+        same: the response changes only the noise)."""
+        return signal_dn
+
+    def temporal_share(self, signal_dn: np.ndarray, cond: Conditions) -> np.ndarray | float:
+        """Share (0..1) of the effect's variance that changes from frame to frame; the rest is a fixed
+        pattern. Default: 1 for temporal effects, 0 for fixed-pattern ones."""
+        return 1.0 if self.temporal else 0.0
+
+    def fixed_mixture(self, signal_dn: np.ndarray, cond: Conditions) -> tuple[float, np.ndarray]:
+        """(fraction, offset in DN) of the pixels a mixture effect leaves offset in a frame average:
+        what stands out as outlier pixels there. Default: the mixture itself for fixed-pattern effects,
+        none for temporal ones; effects both temporal and fixed override it."""
+        if self.temporal:
+            return 0.0, np.zeros(np.shape(signal_dn))
+        return self.mixture(signal_dn, cond)
+
     # --- derived -------------------------------------------------------------------------------
+    def at(self, method: str, signal_dn: np.ndarray, cond: Conditions):
+        """``method(signal_dn, cond)`` (``"sigma_dn"``, ``"electrons"``, ``"slope"``), averaged over the
+        sensor (rms for sigmas and slopes, mean for electrons) for a spatial effect without ``cond.where``."""
+        fn = getattr(self, method)
+        if not self.spatial or cond.where is not None:
+            return fn(signal_dn, cond)
+        s = np.asarray(signal_dn, dtype=float)
+        val = np.asarray(fn(s.reshape(1, -1), cond.replace(where=Pixels.average_grid())), dtype=float)
+        val = np.broadcast_to(val, (val.shape[0], s.size))
+        avg = val.mean(axis=0) if method == "electrons" else np.sqrt(np.mean(val**2, axis=0))
+        return avg.reshape(s.shape)
+
     def variance_dn2(self, signal_dn: np.ndarray | float, cond: Conditions) -> np.ndarray:
         """Unclipped variance contribution in DN^2 at clean signal ``signal_dn``.
 
-        Modifiers return 0 here: their contribution is a change of the other effects
+        Modifiers and responses return 0 here: their contribution is a change of the other effects
         (see :meth:`noise_monitor.physics.NoiseModel.predict`).
         """
         s = np.asarray(signal_dn)
         if self.distribution is Distribution.POISSON:
-            lam = np.asarray(self.electrons(s, cond))
+            lam = np.asarray(self.at("electrons", s, cond))
             return np.broadcast_to(cond.dn_per_e**2 * (lam.reshape(-1)[0] if _constant(lam) else lam), s.shape)
         if self.distribution is Distribution.GAUSSIAN:
-            sig = np.asarray(self.sigma_dn(s, cond))
+            sig = np.asarray(self.at("sigma_dn", s, cond))
             return np.broadcast_to(sig.reshape(-1)[0] ** 2 if _constant(sig) else sig**2, s.shape)
         if self.distribution is Distribution.MIXTURE:
             frac, off = self.mixture(s, cond)
@@ -189,7 +240,9 @@ class Effect:
     #: Poisson effects as one normal of the summed variance (true for effects using the default sampler)
     @classmethod
     def mergeable(cls) -> bool:
-        return cls.distribution in (Distribution.POISSON, Distribution.GAUSSIAN) and cls.temporal and cls.sample is Effect.sample
+        return (cls.distribution in (Distribution.POISSON, Distribution.GAUSSIAN) and cls.temporal
+                and cls.structure == "pixel" and cls.sample is Effect.sample
+                and cls.temporal_share is Effect.temporal_share)
 
     def sample(self, signal_dn: np.ndarray, cond: Conditions, rng: np.random.Generator) -> np.ndarray:
         """Noise in DN to add to ``signal_dn`` (before clipping); float32, same shape."""
@@ -199,8 +252,7 @@ class Effect:
             return (cond.dn_per_e * (poisson(rng, lam) - lam)).astype(np.float32)
         if self.distribution is Distribution.GAUSSIAN:
             sigma = np.asarray(self.sigma_dn(s, cond), dtype=np.float32)
-            z = standard_normal(rng, s.shape) if self.temporal else self.pattern(s.shape)
-            return z * sigma
+            return self._gaussian_field(s.shape, rng) * sigma
         if self.distribution is Distribution.MIXTURE:
             frac, off = self.mixture(s, cond)
             if self.temporal:
@@ -208,9 +260,25 @@ class Effect:
             else:
                 hit = self.hit_mask(s.shape, frac)
             return np.where(hit, np.asarray(off, dtype=np.float32), np.float32(0.0)).astype(np.float32)
-        if self.distribution is Distribution.MODIFIER:
+        if self.distribution in (Distribution.MODIFIER, Distribution.RESPONSE):
             return np.zeros(s.shape, dtype=np.float32)
         raise EffectError(f"effect {self.name!r}: quantization is applied by the model, not sampled")
+
+
+    def _gaussian_field(self, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+        """Unit-variance noise with the effect's ``structure`` (one value per row or column), new in
+        every frame for temporal effects and a fixed pattern otherwise."""
+        if self.structure == "pixel" or len(shape) < 2:
+            line = shape
+        elif self.structure == "row":
+            line = (*shape[:-1], 1)
+        else:
+            line = (*shape[:-2], 1, shape[-1])
+        if self.temporal:
+            z = standard_normal(rng, line)
+        else:
+            z = self.pattern(line if self.structure == "pixel" else line[-2:])
+        return np.broadcast_to(z, shape)
 
 
 def _constant(a: np.ndarray) -> bool:

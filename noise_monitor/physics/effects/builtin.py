@@ -115,6 +115,7 @@ class _LineOffsets(Effect):
 class RowOffsets(_LineOffsets):
     name = "row_offsets"
     axis = 0
+    structure = "row"
     description = "Row offsets: each image row carries its own offset (fixed pattern)."
     signature = (
         "constant residual variance concentrated in the row means, absent from frame differences: "
@@ -125,6 +126,7 @@ class RowOffsets(_LineOffsets):
 class ColumnOffsets(_LineOffsets):
     name = "column_offsets"
     axis = 1
+    structure = "column"
     description = "Column offsets: each image column carries its own offset (column amplifiers, fixed pattern)."
     signature = (
         "constant residual variance concentrated in the column means, absent from frame differences: "

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ...text import clip
-from .base import DISTRIBUTIONS, Distribution, Effect, EffectError
+from .base import DISTRIBUTIONS, STRUCTURES, Distribution, Effect, EffectError
 from .builtin import BUILTIN_EFFECTS
 
 ENTRY_POINT_GROUP = "noise_monitor.effects"
@@ -55,6 +55,9 @@ def register(cls: type[Effect], override: bool = False) -> type[Effect]:
     if not isinstance(cls.distribution, Distribution):
         raise EffectError(f"effect {clip(cls.name, 200)!r}: unknown distribution {clip(repr(cls.distribution), 80)}; "
                           f"choose from {', '.join(DISTRIBUTIONS)}")
+    if cls.structure not in STRUCTURES:
+        raise EffectError(f"effect {clip(cls.name, 200)!r}: unknown structure {clip(repr(cls.structure), 80)}; "
+                          f"choose from {', '.join(STRUCTURES)}")
     builtin = cls in BUILTIN_EFFECTS
     if cls.name in _BUILTIN_NAMES and not builtin and not override:
         raise EffectError(f"plug-in effect {cls.name!r} ({cls.__module__}.{cls.__qualname__}) has the name of a "

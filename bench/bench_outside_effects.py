@@ -1,0 +1,99 @@
+"""Effects outside the library: the lab on four effects it does not have (issue 14, item 4).
+
+For each effect (simulated in numpy, apart from the plug-in API: ``test/lab/outside_effects.py``) the lab
+runs twice: without a plug-in (is a built-in claimed? what does the ``unexplained`` signature say?) and
+with the plug-in a user writes for it (rank, significance, fitted value, rms error cut). Two sets:
+``tuned`` (the test's seed and magnitudes, which the thresholds were set on) and ``heldout`` (another
+scene and noise seed, 320x256 frames, other magnitudes). Prints a table; ``--json PATH`` writes it.
+
+    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_outside_effects.py [--sets tuned heldout] [--json out.json]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+
+from noise_monitor.lab import analyze
+from noise_monitor.physics import load_profile
+from noise_monitor.physics.effects import registry
+
+_spec = importlib.util.spec_from_file_location(
+    "outside_effects", Path(__file__).resolve().parents[1] / "test" / "lab" / "outside_effects.py")
+oe = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(oe)
+
+SETS = {
+    "tuned": {"seed": 0, "width": 160, "height": 128, "truth": {}},
+    "heldout": {"seed": 11, "width": 320, "height": 256, "truth": {
+        "amp_glow": {"rate_e_per_s": 6.0e4, "radius": 0.2},
+        "row_noise": {"sigma_dn": 1.5},
+        "nonlinearity": {"beta": 0.12},
+        "rts": {"fraction": 0.01, "q": 0.5, "amplitude_dn": 20.0},
+    }},
+}
+
+
+def run(effect: str, cfg: dict, plugin: Path) -> dict:
+    truth = {**oe.TRUTH[effect], **cfg["truth"].get(effect, {})}
+    frames = oe.simulate(load_profile("ev76c661"), effect, width=cfg["width"], height=cfg["height"],
+                         seed=cfg["seed"], truth=truth)
+    reg = dict(registry._REGISTRY)
+    name, param, _ = oe.PLUGIN_TRUTH[effect]
+    t0 = time.perf_counter()
+    bare = analyze(frames, "ev76c661", estimator=None)
+    t_bare = time.perf_counter() - t0
+    with_plugin = analyze(frames, "ev76c661", plugins=[plugin], add_effects=[f"{name}=fit"], estimator=None)
+    registry._REGISTRY.clear()
+    registry._REGISTRY.update(reg)
+    un = bare["unexplained"]
+    best = with_plugin["candidates"][0]
+    fitted = with_plugin["added_effects"][0]
+    before, after = with_plugin["rms_error_before_dn"], with_plugin["rms_error_after_dn"]
+    return {
+        "effect": effect, "truth": truth,
+        "builtins_claimed_without_plugin": [c["effect"] for c in bare["candidates"] if c["significant"]],
+        "unexplained_significant": un["significant"], "kind": un["kind"], "traits": un["traits"],
+        "suggested": un.get("suggested"), "reading": un["reading"],
+        "plugin_rank": [c["effect"] for c in with_plugin["candidates"]].index(name) + 1,
+        "plugin_significant": best["effect"] == name and best["significant"],
+        "claimed_with_plugin": [c["effect"] for c in with_plugin["candidates"] if c["significant"]],
+        "fitted": fitted["fitted"], "fitted_errors": fitted["param_errors"],
+        "rms_error_before_dn": before, "rms_error_after_dn": after, "error_cut": 1.0 - after / before,
+        "analysis_time_s": round(t_bare, 1),
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS))
+    ap.add_argument("--effects", nargs="+", default=sorted(oe.TRUTH), choices=sorted(oe.TRUTH))
+    ap.add_argument("--json", metavar="PATH")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    tmp = Path(tempfile.mkdtemp())
+    rows = []
+    for set_name in args.sets:
+        for effect in args.effects:
+            plugin = tmp / f"{effect}.py"
+            plugin.write_text(oe.PLUGINS[effect])
+            r = {"set": set_name, **run(effect, SETS[set_name], plugin)}
+            rows.append(r)
+            print(f"{set_name:8s} {effect:13s} built-ins claimed: {r['builtins_claimed_without_plugin'] or 'none'}; "
+                  f"unexplained: {r['unexplained_significant']} ({r['kind']}: {'; '.join(r['traits'])}); "
+                  f"plug-in rank {r['plugin_rank']} significant {r['plugin_significant']}, claimed "
+                  f"{r['claimed_with_plugin']}; fitted {r['fitted']} (truth {r['truth']}); rms "
+                  f"{r['rms_error_before_dn']:.3f} -> {r['rms_error_after_dn']:.3f} DN "
+                  f"(cut {r['error_cut']:.0%}); {r['analysis_time_s']} s", flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
