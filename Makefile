@@ -18,6 +18,7 @@ $(STAMP): requirements.txt setup.py setup.cfg $(wildcard */__init__.py)
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 	$(PY) -m pytest -q -p no:cacheprovider test
 
 demo: $(STAMP)

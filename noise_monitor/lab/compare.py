@@ -232,7 +232,7 @@ def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) 
     v = np.asarray(v, dtype=float)
     clip_model = NoiseModel([e for e in effects if e.distribution != "quantization"])
     pred = clip_model.predict(v, meta)
-    temporal = sum(np.asarray(pred[e.name]) ** 2 for e in clip_model.noise_effects if e.temporal)
+    temporal = np.zeros(v.shape) + sum(np.asarray(pred[e.name]) ** 2 for e in clip_model.noise_effects if e.temporal)
     added, fixed, _ = quantization_variance(effects, clip_model.conditions(meta), temporal)
     return np.sqrt(np.maximum(np.asarray(pred["total"]) ** 2 + added + fixed, 0.0))
 
@@ -294,7 +294,7 @@ class _SegmentBase:
 
     def region_contrasts(self, comps: dict[str, np.ndarray]) -> np.ndarray:
         """(measured - model) regional contrasts divided by their standard errors."""
-        out = []
+        out: list[float] = []
         for k in self.regional:
             x = self.seg.values[k][self.rep] - comps[k]
             mean = x.mean()
@@ -306,6 +306,7 @@ class _SegmentBase:
         segment's metadata by index."""
         seg = self.seg
         if seg.partner_weight is not None:
+            assert seg.partner_intensity_dn is not None  # recorded together with the weights
             self.partners = [(metas[p], seg.partner_intensity_dn[self.rep, j], seg.partner_weight[self.rep, j])
                              for j, p in enumerate(seg.partners)]
 
@@ -382,7 +383,9 @@ class Comparison:
                               for (_, _, w), pp in zip(sb.partners, preds_p))
                 else:
                     var = here**2
-                comps[component_of(e)] = comps[component_of(e)] + var
+                name = component_of(e)
+                assert name is not None  # analytic effects are poisson or gaussian: a measured component
+                comps[name] = comps[name] + var
             added, fixed, comps[QUANT_SPREAD] = quantization_variance(
                 self.effects, clip_model.conditions(seg.meta), comps["temporal"], sb.v, sb.span)
             comps["temporal"] = comps["temporal"] + added
@@ -439,14 +442,14 @@ class Comparison:
             count, amp = outlier_expectation(effects, seg.meta, sb.v, sb.sigma, sb.pixels_per_block * sb.weights)
             res.append((seg.outlier_pixels - count) / math.sqrt(max(count, seg.outlier_pixels, 1.0)))
             if seg.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE and count >= 1.0:
-                err = math.hypot(seg.outlier_amplitude_err_dn, 0.05 * seg.outlier_amplitude_dn)
-                res.append((seg.outlier_amplitude_dn - amp) / max(err, 1e-6))
+                amp_err = math.hypot(seg.outlier_amplitude_err_dn, 0.05 * seg.outlier_amplitude_dn)
+                res.append((seg.outlier_amplitude_dn - amp) / max(amp_err, 1e-6))
             else:
                 res.append(0.0)
         if math.isfinite(self.meas.quant_step_dn):
             step = predicted_step(effects, self.segments[0].seg.meta, self.meas.output_step_dn)
-            err = math.hypot(self.meas.quant_step_err_dn, STEP_SYSTEMATIC_DN)
-            res.append((self.meas.quant_step_dn - step) / err)
+            step_err = math.hypot(self.meas.quant_step_err_dn, STEP_SYSTEMATIC_DN)
+            res.append((self.meas.quant_step_dn - step) / step_err)
         return np.asarray(res)
 
     # --- reporting ---------------------------------------------------------------------------
@@ -492,8 +495,8 @@ def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[st
     model_var: dict[int, list[float]] = {}
     for sb, comps in comp.predict_with(extra):
         seg = sb.seg
-        measured = sum(seg.values[c][sb.rep] for c in seg.values)
-        model = sum(comps[c] for c in MEASURED)
+        measured = np.sum([seg.values[c][sb.rep] for c in seg.values], axis=0)
+        model = np.sum([comps[c] for c in MEASURED], axis=0)
         for region, m, p in zip(seg.region[sb.rep], measured, model):
             meas_var.setdefault(int(region), []).append(float(m))
             model_var.setdefault(int(region), []).append(float(p))

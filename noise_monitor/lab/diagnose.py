@@ -168,7 +168,7 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
         return np.where(np.isfinite(r), r, 1e6)
 
     n_obs = comp.residuals().size
-    grids = [()]
+    grids: list[tuple[float, ...]] = [()]
     for _, p in grid:
         grids = [g + (float(v),) for g in grids for v in range(int(p.bounds[0]), int(p.bounds[1]) + 1)]
     best: tuple[float, np.ndarray, tuple, Any] | None = None
@@ -190,6 +190,7 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
             chi2 = float(sol.fun @ sol.fun)
             if best is None or chi2 < best[0]:
                 best = (chi2, sol.x, xg, sol.jac)
+    assert best is not None  # grids holds at least the empty tuple
     chi2, xc, xg, jac = best
     effects = build(xc, xg)
     errs: list[dict[str, float | None]] = [{} for _ in specs]

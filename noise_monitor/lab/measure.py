@@ -331,8 +331,9 @@ class _SegmentAccumulator:
         if k >= 2:
             # energies of the frames' deviations from the mean, split like the mean's
             e_tot, e_col, e_row = _energies(rm, b)
-            temporal, t_col, t_row = _split(*((x - k * e) / (k - 1) for x, e in (
-                (self.s2, e_tot), (self.s2_col, e_col), (self.s2_row, e_row))), b)
+            d_tot, d_col, d_row = ((x - k * e) / (k - 1) for x, e in (
+                (self.s2, e_tot), (self.s2_col, e_col), (self.s2_row, e_row)))
+            temporal, t_col, t_row = _split(d_tot, d_col, d_row, b)
             values = {"temporal": temporal, "fixed": core - temporal / k,
                       "temporal_column": t_col, "temporal_row": t_row}
             col, row = col - t_col / k, row - t_row / k

@@ -133,8 +133,10 @@ class NoiseModel:
             self._cache.clear()
         held = self._served.get(mode, 1 << 30)  # the previous set's use (a first set counts as held)
         self._served[mode] = 1
-        interpolate = self.grid is not None and held < max(self.grid.spec.held_exact_requests, 1)
-        self._cache[key] = self.grid.tables(meta, mode) if interpolate else self._exact_tables(meta, mode)
+        if self.grid is not None and held < max(self.grid.spec.held_exact_requests, 1):
+            self._cache[key] = self.grid.tables(meta, mode)
+        else:
+            self._cache[key] = self._exact_tables(meta, mode)
         return self._cache[key]
 
     def _exact_tables(self, meta: CameraMetadata, mode: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
