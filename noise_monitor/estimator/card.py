@@ -58,6 +58,19 @@ def _stages(train: dict) -> list[dict]:
     return (_stages(train["init_from"]) if "init_from" in train else []) + ([train] if train else [])
 
 
+def rms_cell(s: dict | None) -> str:
+    return "-" if s is None else f"{s['rms']:.3f}"
+
+
+def declined_alarms(d: dict) -> str:
+    if "false_alarm_rate" in d:
+        return f"false {100 * d['false_alarm_rate']:.1f} %"
+    if d.get("hit_rate") is None:
+        return "-"
+    acc = d.get("hit_rate_accepted")
+    return f"hits {100 * d['hit_rate']:.1f} % / {'-' if acc is None else f'{100 * acc:.1f} %'}"
+
+
 def _benchmark(name: str, label: str, results: dict) -> list[str]:
     size = results["patch_size"].get(name)
     title = f"{size}x{size} patches" + (" (native)" if label.startswith("native") else "")
@@ -75,6 +88,12 @@ def _benchmark(name: str, label: str, results: dict) -> list[str]:
         rate = r.get("false_alarm_rate", r.get("hit_rate"))
         alarm = "-" if rate is None else f"{'false' if 'false_alarm_rate' in r else 'hits'} {100 * rate:.1f} %"
         lines.append(f"| ({part}) | " + " | ".join(cells) + f" | {alarm} |")
+    declined = {part: rows[name]["declined"] for part, rows in results["parts"].items() if "declined" in rows.get(name, {})}
+    if declined:
+        lines += ["", "Unmeasurable patches declined (confidence head; a declined patch is never a false alarm nor a hit):", "",
+                  "| part | coverage | xi RMS on accepted | alarms (all candidates / accepted) |", "|---|---|---|---|"]
+        for part, d in declined.items():
+            lines.append(f"| ({part}) | {100 * d['coverage']:.1f} % | {rms_cell(d['xi'])} | {declined_alarms(d)} |")
     sens = results.get("sensitivity_full_meta")
     if sens and name == "full_meta":
         lines += ["", f"Metadata sensitivity sweep (paper's protocol, sequential model reference): max |estimator - model| = "

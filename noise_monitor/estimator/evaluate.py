@@ -5,7 +5,10 @@ images plus dead-leaves images (most of its patches), the ``photos`` set matplot
 sample images only; noise and crops come from seeds never used in training. Metrics are the paper's:
 Bias = |mean(est - truth)|, Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). Alarms: false alarms = |xi| > 1 DN on (a); hits on
 (b)/(c) = |xi| > 1 DN with the true sign, among patches with |xi_true| > 2 DN. Peers measure sigma_image
-(xi = physics sigma_model - their estimate).
+(xi = physics sigma_model - their estimate). With a confidence output (``measurable``), ``declined``
+scores the same patches with the unmeasurable ones declined: coverage, xi on the accepted patches, and
+alarm rates where a declined patch is never a false alarm nor a hit (hits also among accepted candidates);
+the top-level figures stay those of every patch.
 """
 from __future__ import annotations
 
@@ -82,6 +85,23 @@ def score(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -
             hit = (np.abs(xi) > ALARM_DN) & (np.sign(xi) == np.sign(xi_true))
             out["hit_rate"] = round(float(hit[big].mean()), 4) if big.any() else None
             out["n_hit_candidates"] = int(big.sum())
+        if "measurable" in pred:
+            out["declined"] = _declined(xi, xi_true, np.asarray(pred["measurable"], dtype=bool), part)
+    return out
+
+
+def _declined(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray, part: str) -> dict:
+    """Scores with the unmeasurable patches declined (see the module docstring)."""
+    out: dict = {"coverage": round(float(ok.mean()), 4),
+                 "xi": stats(xi[ok], xi_true[ok]) if ok.any() else None}
+    alarm = ok & (np.abs(xi) > ALARM_DN)
+    if part == "a":
+        out["false_alarm_rate"] = round(float(alarm.mean()), 4)
+    else:
+        big = np.abs(xi_true) > HIT_TRUTH_DN
+        hit = alarm & (np.sign(xi) == np.sign(xi_true))
+        out["hit_rate"] = round(float(hit[big].mean()), 4) if big.any() else None
+        out["hit_rate_accepted"] = round(float(hit[big & ok].mean()), 4) if (big & ok).any() else None
     return out
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .card import write_card
+from .card import declined_alarms, rms_cell, write_card
 from .data import PARTS
 from .evaluate import HELDOUT_SETS, heldout, peer_predictions, score, sensitivity_sweep, timed_predict
 from .inference import NAMES, WEIGHTS_DIR, load
@@ -99,6 +99,10 @@ def _table(results: dict) -> str:
             cells = " ".join(f"{r[k]['rms']:6.3f}" if k in r else "     -" for k in ("pn", "dcsn", "rn", "sigma_image", "xi"))
             rate = r.get("false_alarm_rate", r.get("hit_rate"))
             lines.append(f"  {name:<28} {cells}  {'' if rate is None else f'{100 * rate:.1f} %'}")
+            d = r.get("declined")
+            if d is not None:
+                lines.append(f"  {'  declined unmeasurable':<28} coverage {100 * d['coverage']:.1f} %, xi RMS on accepted "
+                             f"{rms_cell(d['xi'])}, {declined_alarms(d)}")
     sens = results.get("sensitivity_full_meta")
     if sens:
         lines.append(f"sensitivity sweep (full_meta): max |estimator - model| = {sens['max_abs_diff_dn']} DN, "

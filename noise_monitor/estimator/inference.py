@@ -3,7 +3,10 @@
 ``full_meta`` (shipped): per-source sigma = the analytic model (sequential protocol) on each patch's
 5x5-smoothed intensity map with the stated metadata; sigma_model = sqrt(PN^2 + DCSN^2 + RN^2);
 sigma_image = the compact network's measurement of the noise actually in the patch; xi = sigma_model -
-sigma_image; total = sigma_model (the paper's total without xi). With a camera model of more effects
+sigma_image; total = sigma_model (the paper's total without xi). Weights with a confidence head also give
+``sigma_image_error`` (the measurement's predicted error, DN) and ``measurable`` (that error <=
+``MEASURABLE_ERROR_DN``: a patch whose noise the image cannot reveal, e.g. under dense pixel-scale
+texture, is declined rather than read). With a camera model of more effects
 (``model``, or the effects a network was fine-tuned with), ``extra`` is their joint sigma and sigma_model
 includes it. The paper-family variants return their branch outputs (``drne``: total only).
 
@@ -29,6 +32,9 @@ from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")
 MIN_PATCH = 16
+#: A patch is measurable when the predicted error of its sigma_image is at most this (DN; chosen on crops
+#: of the training photographs, see the model card: a quarter of... the 1 DN alarm threshold's margin).
+MEASURABLE_ERROR_DN = 0.4
 
 
 def validate_patches(patches_dn, min_size: int = MIN_PATCH) -> np.ndarray:
@@ -189,11 +195,15 @@ class FullMetaEstimator(_Base):
         for g, idx in enumerate(groups.values()):
             group_of[idx] = g
         maps, scalars, phys = compact_inputs(x, tables, group_of)
-        r = np.clip(self._run_net(maps, scalars).astype(np.float64), -6.0, 6.0)
+        raw = self._run_net(maps, scalars).astype(np.float64)
+        r = np.clip(raw[:, 0] if raw.ndim == 2 else raw, -6.0, 6.0)
         sigma_image = phys.pop("reference") * np.exp(r)
         out = {s: phys[s] for s in SOURCES + ((EXTRA,) if EXTRA in phys else ())}
         out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
                    total=phys["total"].copy())
+        if raw.ndim == 2:  # confidence head: log-space error std -> DN (first order)
+            out["sigma_image_error"] = sigma_image * np.exp(np.clip(raw[:, 1], -8.0, 4.0))
+            out["measurable"] = out["sigma_image_error"] <= MEASURABLE_ERROR_DN
         return out
 
 

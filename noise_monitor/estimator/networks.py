@@ -129,6 +129,8 @@ class CompactConfig:
     heads: int = 4
     hidden: tuple[int, ...] = field(default=(64, 32))
     patch_size: int = 64
+    #: hidden sizes of the confidence head (empty: none; see ``ImageNoiseNet``)
+    confidence: tuple[int, ...] = field(default=())
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -154,6 +156,11 @@ class ImageNoiseNet(nn.Module):
     the net learns to read the noise where the patch is flat) and mean / RMS pooling, fused with the
     scalars by an MLP. A zero output means "the noise is the image's reference scale"
     (``features.reference_sigma``); the stated metadata's scale is not an input.
+
+    With ``cfg.confidence`` a second head predicts the log standard deviation of the measurement's own
+    error (in log space, trained by Gaussian NLL on the residual of the detached measurement) from the
+    pooled features, the scalars, the MLP's last hidden layer and the measurement; the output is then
+    (N, 2) = [log(sigma_image / reference), log error std] instead of (N,).
     """
 
     def __init__(self, cfg: CompactConfig) -> None:
@@ -173,13 +180,32 @@ class ImageNoiseNet(nn.Module):
             n_in = n
         mlp.append(nn.Linear(n_in, 1))
         self.mlp = nn.Sequential(*mlp)
+        if cfg.confidence:
+            n_conf = 2 * cfg.width + cfg.heads + N_SCALARS + n_in + 1
+            self.confidence = dense_block(n_conf, cfg.confidence)
+            # standardisation of the head's inputs, set from the training data (train.fit_confidence_inputs)
+            self.register_buffer("conf_mean", torch.zeros(n_conf))
+            self.register_buffer("conf_std", torch.ones(n_conf))
 
-    def forward(self, maps: torch.Tensor, scalars: torch.Tensor) -> torch.Tensor:
+    def confidence_inputs(self, maps: torch.Tensor, scalars: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(measurement (N,), the confidence head's raw inputs (N, n_conf))."""
         f = self.convs(maps)
         value, logit = self.attend(f).flatten(2).chunk(2, dim=1)
         attended = (torch.softmax(logit, dim=2) * value).sum(dim=2)
         pooled = torch.cat([f.mean(dim=(2, 3)), f.square().mean(dim=(2, 3)).sqrt(), attended], dim=1)
-        return self.mlp(torch.cat([pooled, scalars], dim=1)).squeeze(1)
+        h = torch.cat([pooled, scalars], dim=1)
+        z = h
+        for layer in list(self.mlp)[:-1]:
+            h = layer(h)
+        mu = self.mlp[-1](h).squeeze(1)
+        return mu, torch.cat([z, h, mu[:, None]], dim=1)
+
+    def forward(self, maps: torch.Tensor, scalars: torch.Tensor) -> torch.Tensor:
+        mu, z = self.confidence_inputs(maps, scalars)
+        if not self.cfg.confidence:
+            return mu
+        log_err = self.confidence((z.detach() - self.conf_mean) / self.conf_std).squeeze(1)
+        return torch.stack([mu, log_err], dim=1)
 
 
 def count_parameters(net: nn.Module) -> int:
@@ -203,6 +229,7 @@ def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
     cfg = dict(ckpt["config"])
     if ckpt["variant"] == "full_meta":
         cfg["hidden"], cfg["strides"] = tuple(cfg["hidden"]), tuple(cfg["strides"])
+        cfg["confidence"] = tuple(cfg.get("confidence", ()))
         net: torch.nn.Module = ImageNoiseNet(CompactConfig(**cfg))
     else:
         cfg["dense"] = tuple(cfg["dense"])

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -12,9 +12,11 @@ from tqdm import tqdm
 
 from .device import resolve_device
 from .features import compact_inputs
-from .networks import SIGMA_SCALE, build_network
+from .networks import SIGMA_SCALE, ImageNoiseNet, build_network
 
 HUBER_DELTA_DN = 1.0
+#: Hidden sizes of the confidence head added by ``TrainSettings.confidence``.
+CONFIDENCE_HIDDEN = (32, 32)
 
 
 @dataclass
@@ -27,6 +29,8 @@ class TrainSettings:
     width: int | None = None
     depth: int | None = None
     checkpoint_every: int = 250
+    #: full_meta only, with ``init``: add a confidence head and train it alone (the measurement frozen)
+    confidence: bool = False
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -52,11 +56,21 @@ def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Te
     return t
 
 
-def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor], measure: bool = True) -> torch.Tensor:
+    """Training loss. full_meta: Huber on sigma_image (``measure``) plus, with a confidence head, the
+    Gaussian NLL of the measurement's log-space residual under the head's predicted error."""
     if variant == "full_meta":
-        r = net(batch["maps"], batch["scalars"])
-        est = batch["reference"] * torch.exp(r.clamp(-6.0, 6.0))
-        return torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
+        out = net(batch["maps"], batch["scalars"])
+        r = out[:, 0] if out.ndim == 2 else out
+        loss = torch.zeros((), device=r.device)
+        if measure:
+            est = batch["reference"] * torch.exp(r.clamp(-6.0, 6.0))
+            loss = torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
+        if out.ndim == 2:
+            resid = torch.log(batch["target"] / batch["reference"]) - r.detach()
+            log_err = out[:, 1].clamp(-8.0, 4.0)
+            loss = loss + (0.5 * (resid / log_err.exp()) ** 2 + log_err).mean()
+        return loss
     out = net(batch["patch"], batch["meta"])
     return torch.stack([torch.nn.functional.mse_loss(out[k], batch[k]) for k in out]).mean()
 
@@ -78,8 +92,16 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     ckpt_path = out_dir / "checkpoint.pt"
     patch_size = int(data["noisy"].shape[-1])
     torch.manual_seed(settings.seed)
-    net: Any = build_network(settings.variant, patch_size, settings.width, settings.depth).to(dev)
-    opt = torch.optim.Adam(net.parameters(), lr=settings.lr)
+    net: Any = build_network(settings.variant, patch_size, settings.width, settings.depth)
+    if settings.confidence:
+        if settings.variant != "full_meta" or init is None:
+            raise ValueError("a confidence head is trained on a full_meta network given by --init")
+        net = ImageNoiseNet(replace(net.cfg, confidence=CONFIDENCE_HIDDEN))
+    net = net.to(dev)
+    trainable = [p for name, p in net.named_parameters() if not settings.confidence or name.startswith("confidence.")]
+    for p in net.parameters():
+        p.requires_grad_(any(p is q for q in trainable))
+    opt = torch.optim.Adam(trainable, lr=settings.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=settings.steps, eta_min=settings.lr * 0.05)
     step, elapsed, prior_steps, prior_s = 0, 0.0, 0, 0.0
     rng = np.random.default_rng(settings.seed)
@@ -89,7 +111,11 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         ck = torch.load(init, map_location=dev, weights_only=True)
         if ck.get("variant") != settings.variant or _layers(ck["config"]) != _layers(net.cfg.as_dict()):
             raise ValueError(f"--init: {init} is not a {settings.variant} network of the same configuration")
-        net.load_state_dict(ck["state_dict"])
+        missing, unexpected = net.load_state_dict(ck["state_dict"], strict=False)
+        if unexpected or any(not k.startswith(("confidence.", "conf_")) for k in missing):
+            raise ValueError(f"--init: {init} does not fit the network (missing {missing}, unexpected {unexpected})")
+        if missing:  # a new confidence head: standardise its inputs on the data
+            fit_confidence_inputs(net, data, dev)
         net.cfg.patch_size = int(ck["config"]["patch_size"])  # the operating size stays; see the docstring
         prior_steps, prior_s = ck["step"] + ck.get("prior_steps", 0), ck["elapsed_s"] + ck.get("prior_elapsed_s", 0.0)
     if resume:
@@ -116,7 +142,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     while step < settings.steps:
         idx = torch.from_numpy(rng.integers(0, n, settings.batch))
         batch = {k: v[idx].to(dev) for k, v in tensors.items()}
-        loss = loss_of(settings.variant, net, batch)
+        loss = loss_of(settings.variant, net, batch, measure=not settings.confidence)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -138,8 +164,20 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
 
 
 def _layers(config: dict) -> dict:
-    """A network configuration without its operating patch size (what the weights' shapes depend on)."""
-    return {k: v for k, v in config.items() if k != "patch_size"}
+    """A network configuration without its operating patch size and confidence head (the measurement's
+    weight shapes depend on the rest)."""
+    return {k: v for k, v in config.items() if k not in ("patch_size", "confidence")}
+
+
+@torch.no_grad()
+def fit_confidence_inputs(net: ImageNoiseNet, data: dict[str, np.ndarray], dev: Any, n: int = 4096) -> None:
+    """Set the confidence head's input standardisation from the first ``n`` patches of the data."""
+    maps, scalars, _ = compact_inputs(data["noisy"][:n], data["tables"], data["group_of"][:n])
+    z = torch.cat([net.confidence_inputs(torch.from_numpy(maps[i:i + 256]).to(dev),
+                                         torch.from_numpy(scalars[i:i + 256]).to(dev))[1]
+                   for i in range(0, len(maps), 256)])
+    net.conf_mean.copy_(z.mean(dim=0))
+    net.conf_std.copy_(z.std(dim=0) + 1e-6)
 
 
 def _checkpoint(net, settings: TrainSettings, step: int, elapsed: float, opt=None, sched=None, rng=None) -> dict:

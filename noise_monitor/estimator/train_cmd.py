@@ -36,6 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint.pt")
     p.add_argument("--init", type=Path, default=None, help="start from these weights (<variant>.pt; fine-tuning)")
+    p.add_argument("--confidence", action="store_true",
+                   help="full_meta with --init: add a confidence head (the measurement's predicted error; patches "
+                        "it cannot measure are declined) and train it alone, the measurement frozen")
     p.add_argument("--profile", default=None,
                    help="camera profile (YAML or bundled name): its effects are simulated and enter the physics "
                         "prior, and its sensor fields replace the random sensor (e.g. a profile written by "
@@ -58,6 +61,8 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError("--patch-size must be >= 16")
     if args.lr <= 0:
         raise ValueError("--lr must be > 0")
+    if args.confidence and (args.variant != "full_meta" or args.init is None):
+        raise ValueError("--confidence needs --variant full_meta and --init (the measurement to qualify)")
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -102,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         save(data, data_path)
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
-                             width=args.width, depth=args.depth)
+                             width=args.width, depth=args.depth, confidence=args.confidence)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),

@@ -72,6 +72,7 @@ class FrameResult:
     cause: str | None = None
     patches: PatchSelection | None = None
     patch_xi: list[float] = field(default_factory=list)  # this frame's xi per patch (same source as ``xi``)
+    patches_measurable: int | None = None  # patches the estimator could measure (None: no confidence output)
     processing_ms: float = 0.0
     counters: dict[str, int] = field(default_factory=dict)
 
@@ -98,6 +99,8 @@ class FrameResult:
         out.update({f"sigma_{k}_filtered": self.filtered[k] for k in SOURCES + ("total",)})
         out["alarm"] = float(self.alarm_active)
         out["patches"] = float(len(self.patches.corners))
+        if self.patches_measurable is not None:
+            out["patches_measurable"] = float(self.patches_measurable)
         out["processing_ms"] = self.processing_ms
         return out
 
@@ -226,12 +229,16 @@ class Monitor:
             model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
         except EffectError as exc:  # e.g. a plug-in effect of the profile failing for this metadata
             return self._skip(frame, f"evaluation failed: {exc}")
-        sigma = {k: float(np.median(v)) for k, v in per_patch.items()}
-        model = {k: float(np.median(v)) for k, v in model_pp.items()}
+        # medians over the patches the estimator can measure (all without a confidence output; with none
+        # measurable, over all for the report while only a static hold's temporal measurement may drive xi)
+        ok = np.asarray(est["measurable"], dtype=bool).reshape(-1) if "measurable" in est else np.ones(len(patches), bool)
+        use = ok if ok.any() else np.ones_like(ok)
+        sigma = {k: float(np.median(v[use])) for k, v in per_patch.items()}
+        model = {k: float(np.median(v[use])) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
         image_pp = np.asarray(est.get("sigma_image", est["total"]), dtype=np.float64).reshape(-1)
-        sigma["image"] = float(np.median(image_pp))
-        xi_model = float(np.median(model_pp["total"] - image_pp))
+        sigma["image"] = float(np.median(image_pp[use]))
+        xi_model = float(np.median((model_pp["total"] - image_pp)[use]))
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
         xi, xi_t, weight, held = xi_image, None, 0.0, 0
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
@@ -243,6 +250,11 @@ class Monitor:
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
+        if not ok.any():
+            if xi_t is None:
+                return self._skip(frame, f"no measurable patch: the estimator's predicted sigma_image error is too large on "
+                                         f"all {len(ok)} patches (fine texture hides the noise) and no static hold")
+            xi, weight = xi_t, 1.0
         patch_xi = per_patch["xi"] if self.xi_source == "estimator" else model_pp["total"] - image_pp
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")
@@ -254,6 +266,7 @@ class Monitor:
             xi_model=xi_model, xi_image=xi_image, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],
+            patches_measurable=int(ok.sum()) if "measurable" in est else None,
             processing_ms=(time.perf_counter() - t0) * 1e3,
         )
 

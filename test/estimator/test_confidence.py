@@ -1,0 +1,72 @@
+"""The measurement's confidence head: unmeasurable patches are declined, the measurement itself unchanged."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from noise_monitor.estimator import load
+from noise_monitor.estimator.data import Scheme, generate, metas_of
+from noise_monitor.estimator.evaluate import score
+from noise_monitor.estimator.inference import MEASURABLE_ERROR_DN
+from noise_monitor.estimator.networks import N_MAPS, N_SCALARS, CompactConfig, ImageNoiseNet
+from noise_monitor.estimator.train import TrainSettings, train
+from noise_monitor.physics import load_profile
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def meta():
+    return load_profile("icx285").metadata(gain_db=12.0, exposure_time_s=0.05, sensor_temperature_c=40.0)
+
+
+def test_confidence_head_leaves_the_measurement_unchanged():
+    torch.manual_seed(0)
+    cfg = CompactConfig(width=8, heads=2, patch_size=32)
+    plain = ImageNoiseNet(cfg).eval()
+    with_head = ImageNoiseNet(CompactConfig(width=8, heads=2, patch_size=32, confidence=(8,))).eval()
+    missing, unexpected = with_head.load_state_dict(plain.state_dict(), strict=False)
+    assert not unexpected and all(k.startswith(("confidence.", "conf_")) for k in missing)
+    maps, scalars = torch.rand(5, N_MAPS, 32, 32), torch.rand(5, N_SCALARS)
+    out = with_head(maps, scalars)
+    assert out.shape == (5, 2) and plain(maps, scalars).shape == (5,)
+    assert torch.allclose(out[:, 0], plain(maps, scalars))
+
+
+def test_confidence_training_freezes_the_measurement(tmp_path, meta):
+    data = generate(48, 32, seed=7, group=8, progress=False)
+    base = train(TrainSettings("full_meta", steps=2, batch=8), data, tmp_path / "base", threads=1, progress=False)
+    with pytest.raises(ValueError, match="--init"):
+        train(TrainSettings("full_meta", steps=1, confidence=True), data, tmp_path / "x", threads=1, progress=False)
+    path = train(TrainSettings("full_meta", steps=60, batch=16, lr=1e-2, confidence=True), data, tmp_path / "conf",
+                 threads=1, progress=False, init=base)
+    before, after = torch.load(base, weights_only=True), torch.load(path, weights_only=True)
+    assert after["config"]["confidence"] and not before["config"]["confidence"]
+    for k, v in before["state_dict"].items():  # the measurement is frozen
+        assert torch.equal(v, after["state_dict"][k]), k
+    assert not torch.allclose(after["state_dict"]["conf_std"], torch.ones_like(after["state_dict"]["conf_std"]))
+    a = load("full_meta", device="cpu", weights=base, backend="torch").predict(data["noisy"], metas_of(data))
+    b = load("full_meta", device="cpu", weights=path, backend="onnx").predict(data["noisy"], metas_of(data))
+    assert "measurable" not in a and np.allclose(a["sigma_image"], b["sigma_image"], rtol=1e-4)
+    assert np.all(b["sigma_image_error"] > 0)
+    assert np.array_equal(b["measurable"], b["sigma_image_error"] <= MEASURABLE_ERROR_DN)
+    # the head learned the size of the measurement's errors (log-space NLL on its training data)
+    err = np.log(b["sigma_image"] / data["truth_sigma_image"])
+    rel = b["sigma_image_error"] / b["sigma_image"]
+    assert 0.3 < np.sqrt(np.mean(rel**2)) / np.sqrt(np.mean(err**2)) < 3.0
+
+
+def test_score_with_declined_patches():
+    data = {"truth_xi": np.array([0.0, 0.0, 3.0, -3.0, 0.5])}
+    ok = np.array([True, False, True, False, True])
+    a = score({"xi": np.array([0.2, 1.5, 0.0, 0.0, 1.2]), "measurable": ok}, data, "a")
+    assert a["false_alarm_rate"] == pytest.approx(0.4)  # every patch
+    d = a["declined"]
+    assert d["coverage"] == pytest.approx(0.6) and d["false_alarm_rate"] == pytest.approx(0.2)  # declined: no alarm
+    assert d["xi"]["rms"] == pytest.approx(np.sqrt((0.04 + 9.0 + 0.49) / 3), abs=1e-3)
+    b = score({"xi": np.array([0.0, 0.0, -2.5, -1.5, 0.0]), "measurable": ok}, data, "b")
+    assert b["hit_rate"] == pytest.approx(0.5)
+    assert b["declined"]["hit_rate"] == pytest.approx(0.0) and b["declined"]["hit_rate_accepted"] == pytest.approx(0.0)
+    c = score({"xi": np.array([0.0, 0.0, 2.5, -1.5, 0.0]), "measurable": ok}, data, "c")
+    assert c["declined"]["hit_rate"] == pytest.approx(0.5) and c["declined"]["hit_rate_accepted"] == pytest.approx(1.0)
