@@ -26,6 +26,8 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
              f"{ck['step'] + ck.get('prior_steps', 0)} steps, {(ck['elapsed_s'] + ck.get('prior_elapsed_s', 0.0)) / 60:.1f} min "
              "training wall time in total on the shared 2-core CPU" + (" (fine-tuned from an earlier run, see command)" if ck.get("prior_steps") else "")]
     for stage in _stages(train)[:-1]:
+        if stage.get("init_note"):
+            lines += [f"- Before the next stage: {stage['init_note']}"]
         lines += [f"- Earlier stage (its weights are this run's `--init`): `{stage.get('command', '?')}` "
                   f"({stage['patches']} patches, data {stage['data_seconds'] / 60:.1f} min, training "
                   f"{stage['train_seconds'] / 60:.1f} min)"]
@@ -40,6 +42,12 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
                            " (pre-generated dataset file; the same command without --data regenerates it identically "
                            "from the data seed)"),
                   f"- Training settings: {json.dumps(train['settings'])}"]
+    if ck["config"].get("confidence"):
+        from .inference import MEASURABLE_ERROR_DN
+
+        lines += [f"- Confidence head {ck['config']['confidence']} (predicted error of sigma_image): trained alone with the "
+                  "measurement frozen (`--confidence`, Gaussian NLL of the log residual); a patch whose predicted error "
+                  f"exceeds {MEASURABLE_ERROR_DN} DN is declined as not measurable"]
     lines += ["", f"Benchmark command: `{command}`"]
     for label, results in runs.items():
         lines += _benchmark(name, label, results)

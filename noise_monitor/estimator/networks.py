@@ -163,6 +163,9 @@ class ImageNoiseNet(nn.Module):
     (N, 2) = [log(sigma_image / reference), log error std] instead of (N,).
     """
 
+    conf_mean: torch.Tensor
+    conf_std: torch.Tensor
+
     def __init__(self, cfg: CompactConfig) -> None:
         super().__init__()
         self.cfg = cfg

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from noise_monitor.estimator import load
-from noise_monitor.estimator.data import Scheme, generate, metas_of
+from noise_monitor.estimator.data import generate, metas_of
 from noise_monitor.estimator.evaluate import score
 from noise_monitor.estimator.inference import MEASURABLE_ERROR_DN
 from noise_monitor.estimator.networks import N_MAPS, N_SCALARS, CompactConfig, ImageNoiseNet
