@@ -229,8 +229,8 @@ class Monitor:
             model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
         except EffectError as exc:  # e.g. a plug-in effect of the profile failing for this metadata
             return self._skip(frame, f"evaluation failed: {exc}")
-        # medians over the patches the estimator can measure (all without a confidence output; with none
-        # measurable, over all for the report while only a static hold's temporal measurement may drive xi)
+        # medians over the patches the estimator can measure (its confidence output; all patches when it has
+        # none or declines every patch: then as before, ``patches_measurable`` = 0 tells)
         ok = np.asarray(est["measurable"], dtype=bool).reshape(-1) if "measurable" in est else np.ones(len(patches), bool)
         use = ok if ok.any() else np.ones_like(ok)
         sigma = {k: float(np.median(v[use])) for k, v in per_patch.items()}
@@ -250,11 +250,6 @@ class Monitor:
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
-        if not ok.any():
-            if xi_t is None:
-                return self._skip(frame, f"no measurable patch: the estimator's predicted sigma_image error is too large on "
-                                         f"all {len(ok)} patches (fine texture hides the noise) and no static hold")
-            xi, weight = xi_t, 1.0
         patch_xi = per_patch["xi"] if self.xi_source == "estimator" else model_pp["total"] - image_pp
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")

@@ -70,3 +70,26 @@ def test_score_with_declined_patches():
     assert b["declined"]["hit_rate"] == pytest.approx(0.0) and b["declined"]["hit_rate_accepted"] == pytest.approx(0.0)
     c = score({"xi": np.array([0.0, 0.0, 2.5, -1.5, 0.0]), "measurable": ok}, data, "c")
     assert c["declined"]["hit_rate"] == pytest.approx(0.5) and c["declined"]["hit_rate_accepted"] == pytest.approx(1.0)
+
+
+def test_shipped_weights_decline_pixel_scale_texture(meta):
+    """Flat patches are measurable; patches of pixel-scale texture (the noise's own scale) get a far larger
+    predicted error;
+    on new crops of the training photographs the accepted patches' xi error is well below all patches'."""
+    import cv2
+
+    est = load("full_meta", device="cpu")
+    rng = np.random.default_rng(4)
+    flat = np.full((4, 64, 64), 100.0, np.float32)
+    tex = np.stack([100 + 40 * cv2.GaussianBlur(rng.standard_normal((64, 64)).astype(np.float32), (0, 0), 0.8)
+                    for _ in range(4)])
+    noisy = np.stack([est.prior.model.simulate(np.clip(c, 5, 250), meta, rng, mode="sequential")[0] for c in (*flat, *tex)])
+    out = est.predict(noisy, meta)
+    assert np.all(out["measurable"][:4]) and np.all(out["sigma_image_error"][:4] < 0.2)
+    assert out["sigma_image_error"][4:].min() > 3 * out["sigma_image_error"][:4].max()
+    d = generate(160, 64, seed=41, split="train", photo_variants=3, progress=False)
+    p = est.predict(d["noisy"], metas_of(d))
+    err, ok = p["xi"] - d["truth_xi"], p["measurable"]
+    rms_all, rms_ok = np.sqrt(np.mean(err**2)), np.sqrt(np.mean(err[ok] ** 2))
+    print(f"coverage {ok.mean():.2f}, xi RMS accepted {rms_ok:.3f} vs all {rms_all:.3f} DN")
+    assert 0.3 < ok.mean() < 0.95 and rms_ok < 0.6 * rms_all

@@ -269,3 +269,26 @@ def test_auto_xi_source_uses_the_model_when_the_profile_adds_effects(rng):
         noisy, _ = prnu.simulate(scene(), META, rng)
         res = mon.process(Frame(i, mono8(noisy), META))
     assert res.level == OK and abs(res.xi_filtered) < 0.5 and res.model["prnu"] > 2.0
+
+
+def test_medians_over_the_patches_the_estimator_can_measure(rng):
+    """With the shipped estimator's confidence output the frame's sigmas and xi are medians over its
+    measurable patches only; a frame of fine texture everywhere falls back to every patch."""
+    from noise_monitor.estimator import load
+
+    est = load("full_meta", device="cpu", model=MODEL)
+    mon = Monitor(MonitorConfig(min_patches=4), est, MODEL, "cam", "icx285/cam")
+    clean = scene()
+    fine = 40.0 * cv2.GaussianBlur(rng.standard_normal((256, 256)).astype(np.float32), (0, 0), 0.8)  # pixel-scale texture
+    x = np.mgrid[0:256, 0:256][1]
+    for content, some_declined in ((clean + fine * (x >= 64), True), (clean + fine, False)):
+        noisy, _ = MODEL.simulate(np.clip(content, 5, 250).astype(np.float32), META, rng)
+        res = mon.process(Frame(0, mono8(noisy), META))
+        assert res.processed, res.skip_reason
+        out = est.predict(res.patches.extract(mono8(noisy)), META)
+        ok = out["measurable"]
+        assert res.numeric()["patches_measurable"] == ok.sum() == res.patches_measurable
+        use = ok if ok.any() else np.ones_like(ok)
+        assert res.sigma["image"] == pytest.approx(float(np.median(out["sigma_image"][use])), rel=1e-5)
+        assert res.xi_image == pytest.approx(float(np.median(out["xi"][use])), abs=1e-5)
+        assert (0 < ok.sum() < len(ok)) if some_declined else not ok.any()
