@@ -92,11 +92,18 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     ckpt_path = out_dir / "checkpoint.pt"
     patch_size = int(data["noisy"].shape[-1])
     torch.manual_seed(settings.seed)
+    if settings.confidence and (settings.variant != "full_meta" or init is None):
+        raise ValueError("a confidence head is trained on a full_meta network given by --init")
+    ck_init = None
+    if init is not None:
+        if not Path(init).is_file():
+            raise FileNotFoundError(f"--init: {init} not found")
+        ck_init = torch.load(init, map_location=dev, weights_only=True)
     net: Any = build_network(settings.variant, patch_size, settings.width, settings.depth)
-    if settings.confidence:
-        if settings.variant != "full_meta" or init is None:
-            raise ValueError("a confidence head is trained on a full_meta network given by --init")
-        net = ImageNoiseNet(replace(net.cfg, confidence=CONFIDENCE_HIDDEN))
+    # a head of the init weights is kept (and trained along: its loss sees the detached measurement)
+    head = tuple((ck_init or {}).get("config", {}).get("confidence") or ()) or (CONFIDENCE_HIDDEN if settings.confidence else ())
+    if head and settings.variant == "full_meta":
+        net = ImageNoiseNet(replace(net.cfg, confidence=head))
     net = net.to(dev)
     trainable = [p for name, p in net.named_parameters() if not settings.confidence or name.startswith("confidence.")]
     for p in net.parameters():
@@ -105,10 +112,8 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=settings.steps, eta_min=settings.lr * 0.05)
     step, elapsed, prior_steps, prior_s = 0, 0.0, 0, 0.0
     rng = np.random.default_rng(settings.seed)
-    if init is not None:
-        if not Path(init).is_file():
-            raise FileNotFoundError(f"--init: {init} not found")
-        ck = torch.load(init, map_location=dev, weights_only=True)
+    if ck_init is not None:
+        ck = ck_init
         if ck.get("variant") != settings.variant or _layers(ck["config"]) != _layers(net.cfg.as_dict()):
             raise ValueError(f"--init: {init} is not a {settings.variant} network of the same configuration")
         missing, unexpected = net.load_state_dict(ck["state_dict"], strict=False)

@@ -93,3 +93,18 @@ def test_shipped_weights_decline_pixel_scale_texture(meta):
     rms_all, rms_ok = np.sqrt(np.mean(err**2)), np.sqrt(np.mean(err[ok] ** 2))
     print(f"coverage {ok.mean():.2f}, xi RMS accepted {rms_ok:.3f} vs all {rms_all:.3f} DN")
     assert 0.3 < ok.mean() < 0.95 and rms_ok < 0.6 * rms_all
+
+
+def test_fine_tuning_weights_with_a_head_keeps_it(tmp_path):
+    """``--init`` with the shipped weights (which carry a head) trains the measurement and the head together."""
+    from noise_monitor.estimator.inference import WEIGHTS_DIR
+
+    data = generate(16, 32, seed=9, group=8, progress=False)
+    path = train(TrainSettings("full_meta", steps=2, batch=4), data, tmp_path, threads=1, progress=False,
+                 init=WEIGHTS_DIR / "full_meta.pt")
+    before = torch.load(WEIGHTS_DIR / "full_meta.pt", weights_only=True)["state_dict"]
+    after = torch.load(path, weights_only=True)
+    assert tuple(after["config"]["confidence"]) == (32, 32)
+    assert not torch.equal(before["mlp.0.weight"], after["state_dict"]["mlp.0.weight"])  # the measurement trains
+    assert not torch.equal(before["confidence.0.weight"], after["state_dict"]["confidence.0.weight"])
+    assert torch.equal(before["conf_mean"], after["state_dict"]["conf_mean"])
