@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from noise_monitor.monitor.pipeline import FrameResult
 from noise_monitor.monitor.status import StatusReport
 
@@ -17,6 +19,9 @@ from .diagnostics import jazzy_typestore, to_rclpy, to_rosbags
 DIAGNOSTICS_TOPIC = "/diagnostics"
 DIAGNOSTICS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 NUMBER_TYPE = "std_msgs/msg/Float32"
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+#: ``<namespace>/debug_image``: the frame with its patches coloured by xi (msg_adapters.debug_image).
+DEBUG_IMAGE = "debug_image"
 DEFAULT_NAMESPACE = "/noise_monitor"
 #: FrameResult.numeric() keys published as their own topic (<namespace>/<key>).
 NUMERIC_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_total", "sigma_model", "xi", "xi_filtered",
@@ -30,6 +35,11 @@ def output_topics(namespace: str = DEFAULT_NAMESPACE) -> dict[str, str]:
 
 
 OUTPUT_TOPICS: dict[str, str] = output_topics()
+
+
+def debug_image_topic(namespace: str = DEFAULT_NAMESPACE) -> str:
+    """``<namespace>/debug_image`` (sensor_msgs/Image rgb8, at most debug_image_rate_hz)."""
+    return "/" + namespace.strip("/") + "/" + DEBUG_IMAGE
 
 
 def _parts(result: FrameResult | StatusReport, stamp_ns: int | None, namespace: str
@@ -63,3 +73,21 @@ def rosbags_messages(result: FrameResult | StatusReport, stamp_ns: int | None = 
     out: dict[str, Any] = {DIAGNOSTICS_TOPIC: to_rosbags([report], stamp, ts)}
     out.update({topic: number(data=float(v)) for topic, v in numbers.items()})
     return out
+
+
+def rosbags_image(image: np.ndarray, stamp_ns: int, frame_id: str = "", typestore: Any = None) -> Any:
+    """A rosbags sensor_msgs/Image of an (H, W) uint8 (mono8) / uint16 (mono16) or (H, W, 3) uint8 (rgb8) array."""
+    ts = typestore or jazzy_typestore()
+    img = np.ascontiguousarray(image)
+    if img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8:
+        encoding = "rgb8"
+    elif img.ndim == 2 and img.dtype in (np.uint8, np.uint16):
+        encoding = "mono8" if img.dtype == np.uint8 else "mono16"
+        img = img.astype("<u2") if img.dtype == np.uint16 else img
+    else:
+        raise ValueError(f"an image message needs (H, W) uint8/uint16 or (H, W, 3) uint8, got {img.shape} {img.dtype}")
+    t = ts.types
+    stamp = t["builtin_interfaces/msg/Time"](sec=int(stamp_ns // 10**9), nanosec=int(stamp_ns % 10**9))
+    return t[IMAGE_TYPE](header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id), height=img.shape[0],
+                         width=img.shape[1], encoding=encoding, is_bigendian=0, step=img.strides[0],
+                         data=np.frombuffer(img.tobytes(), np.uint8))

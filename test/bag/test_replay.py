@@ -10,7 +10,7 @@ import pytest
 import torch
 from mcap.reader import make_reader
 
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, IMAGE_TYPE, OUTPUT_TOPICS, debug_image_topic
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import truth_check
@@ -53,7 +53,7 @@ def test_summary_contract_and_accounting(replayed):
         st = s[key]
         assert st["p5"] <= st["mean"] <= st["p95"] and st["n"] == 20
     assert s["sigma_pn"]["mean"] > 0 and s["sigma_rn"]["mean"] > 0
-    assert s["topics_out"] == OUTPUT_TOPICS
+    assert s["topics_out"] == {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}
     assert s["realtime_factor"] > 0 and s["bag_duration_s"] == pytest.approx(19 / 5.0)
 
 
@@ -102,9 +102,10 @@ def test_mcap_has_exactly_the_node_topics_and_is_readable_by_the_mcap_library(re
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             schemas[channel.topic] = schema.name
         assert reader.get_header().profile == "ros2"
-    assert schemas == OUTPUT_TOPICS
+    assert schemas == {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}
     assert counts[DIAGNOSTICS_TOPIC] == 20  # one status per frame (no gaps in this bag)
     assert all(counts[t] == 20 for t in OUTPUT_TOPICS if t != DIAGNOSTICS_TOPIC)
+    assert counts[debug_image_topic()] == 4  # debug_image_rate_hz 1 in bag time: 20 frames at 5 Hz span 3.8 s
 
 
 def test_csv_png_and_json_files(replayed):
