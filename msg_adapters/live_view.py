@@ -19,6 +19,7 @@ from foxglove.websocket import Capability, ChannelView, Client, ServerListener
 from .diagnostics import jazzy_typestore
 from .outputs import rosbags_image
 
+
 class _SubscriptionListener(ServerListener):
     """Sets an event when a client subscribes to any channel (the replay waits for it)."""
 
@@ -83,6 +84,10 @@ class LiveView:
     def wait_for_subscriber(self, timeout_s: float) -> bool:
         """Block until a client subscribed to a channel (True) or ``timeout_s`` passed (False)."""
         return self._listener.subscribed.wait(timeout_s)
+
+    def has_subscribers(self, topic: str) -> bool:
+        """True when a client subscribed to ``topic`` (callers skip serialising otherwise)."""
+        return self._channels[topic].has_sinks()
 
     def log_cdr(self, topic: str, data: bytes, stamp_ns: int) -> None:
         """Log an already CDR-serialised message (e.g. rclpy's ``serialize_message``) at ``stamp_ns``."""
