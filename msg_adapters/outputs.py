@@ -25,7 +25,7 @@ DEBUG_IMAGE = "debug_image"
 DEFAULT_NAMESPACE = "/noise_monitor"
 #: FrameResult.numeric() keys published as their own topic (<namespace>/<key>).
 NUMERIC_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_total", "sigma_model", "xi", "xi_filtered",
-                "xi_model", "alarm")
+                "xi_model", "alarm", "xi_threshold")
 
 
 def output_topics(namespace: str = DEFAULT_NAMESPACE) -> dict[str, str]:

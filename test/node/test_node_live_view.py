@@ -3,8 +3,11 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
+import json
+import re
 import threading
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +15,7 @@ import numpy as np
 import pytest
 import websockets
 
+from noise_monitor import dashboards
 from noise_monitor.cli import main
 
 rclpy = pytest.importorskip("rclpy")
@@ -46,6 +50,13 @@ def test_live_view_mirrors_the_nodes_topics(rig_factory):
     assert topics["/live/image_raw"] == "sensor_msgs/msg/Image" and topics[f"{ns}/xi"] == "std_msgs/msg/Float32"
     assert topics["/diagnostics"] == "diagnostic_msgs/msg/DiagnosticArray"
     assert topics[f"{ns}/debug_image"] == "sensor_msgs/msg/Image"
+    # the dashboards generated for this node's namespace read only topics it publishes
+    layout = ET.fromstring(dashboards.plotjuggler_layout(ns))
+    assert {t.get("name") for t in layout.iter("topic")} <= set(topics)
+    if importlib.util.find_spec("foxglove") is not None:
+        fox = json.dumps(dashboards.foxglove_layout(ns, "live"))
+        used = set(re.findall(r'"(/[\w/]+)\.', fox)) - {dashboards.BAND_TOPIC}
+        assert used and used <= set(topics)
     wanted = [f"{ns}/xi", f"{ns}/sigma_rn", "/diagnostics", f"{ns}/debug_image", "/live/image_raw"]
     done, got = threading.Event(), []
 
