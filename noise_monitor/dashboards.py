@@ -14,6 +14,7 @@ import json
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Literal
 
 from msg_adapters.outputs import DEFAULT_NAMESPACE, DIAGNOSTICS_TOPIC, debug_image_topic
 
@@ -47,7 +48,7 @@ def foxglove_layout(namespace: str = DEFAULT_NAMESPACE, camera_name: str = "came
     import foxglove.layouts as fl
 
     ns = _ns(namespace)
-    receive = "receiveTime"  # the numbers are std_msgs/Float32: the log time is the image stamp (MCAP, --foxglove)
+    receive: Literal["receiveTime"] = "receiveTime"  # the numbers are std_msgs/Float32: the log time is the image stamp (MCAP, --foxglove)
     sigma = fl.PlotPanel(title="Noise per source [DN]", config=fl.PlotConfig(
         paths=[fl.PlotSeries(value=f"{ns}/{k}.data", label=label, color=c, timestamp_method=receive)
                for k, label, c in SIGMA_SERIES],
@@ -104,7 +105,7 @@ def plotjuggler_layout(namespace: str = DEFAULT_NAMESPACE) -> str:
     """The PlotJuggler layout XML (curves ``<topic>/data``; loads an MCAP or subscribes to ROS 2 topics)."""
     ns = _ns(namespace)
     root = ET.Element("root")
-    tabs = ET.SubElement(root, "tabbed_widget", name="Main Window", parent="main_window")
+    tabs = ET.SubElement(root, "tabbed_widget", {"name": "Main Window", "parent": "main_window"})
     tab = ET.SubElement(tabs, "Tab", tab_name="noise monitor", containers="1")
     splitter = ET.SubElement(ET.SubElement(tab, "Container"), "DockSplitter", orientation="-", count="3",
                              sizes="0.4;0.4;0.2")
