@@ -55,7 +55,6 @@ class LiveView:
         except RuntimeError as exc:  # e.g. the port is taken
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {exc}") from exc
         self.host = host
-        self.counts: dict[str, int] = dict.fromkeys(self.types, 0)
 
     def add_topic(self, topic: str, type_name: str) -> None:
         """Advertise ``topic`` with the ROS 2 message definition of ``type_name``."""
@@ -69,8 +68,6 @@ class LiveView:
         schema = foxglove.Schema(name=type_name, encoding="ros2msg", data=msgdef.encode())
         self._channels[topic] = foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=self._context)
         self.types[topic] = type_name
-        if hasattr(self, "counts"):
-            self.counts.setdefault(topic, 0)
 
     @property
     def port(self) -> int:
@@ -92,16 +89,18 @@ class LiveView:
     def log_cdr(self, topic: str, data: bytes, stamp_ns: int) -> None:
         """Log an already CDR-serialised message (e.g. rclpy's ``serialize_message``) at ``stamp_ns``."""
         self._channels[topic].log(bytes(data), log_time=int(stamp_ns))
-        self.counts[topic] += 1
 
     def log(self, messages: Mapping[str, Any], stamp_ns: int) -> None:
-        """Log rosbags messages of this view's typestore ``{topic: msg}`` at ``stamp_ns``."""
+        """Log rosbags messages of this view's typestore ``{topic: msg}`` at ``stamp_ns`` (serialised only for
+        topics a client subscribed to)."""
         for topic, msg in messages.items():
-            self.log_cdr(topic, self.typestore.serialize_cdr(msg, msg.__msgtype__), stamp_ns)
+            if self.has_subscribers(topic):
+                self.log_cdr(topic, self.typestore.serialize_cdr(msg, msg.__msgtype__), stamp_ns)
 
     def log_image(self, topic: str, image: Any, stamp_ns: int, frame_id: str = "") -> None:
         """Log a sensor_msgs/Image of an (H, W) uint8/uint16 gray or (H, W, 3) uint8 RGB array."""
-        self.log({topic: rosbags_image(image, stamp_ns, frame_id, self.typestore)}, stamp_ns)
+        if self.has_subscribers(topic):
+            self.log({topic: rosbags_image(image, stamp_ns, frame_id, self.typestore)}, stamp_ns)
 
     def broadcast_time(self, stamp_ns: int) -> None:
         """Move the clients' clock to ``stamp_ns`` (bag time in a replay)."""

@@ -241,7 +241,7 @@ def run_replay(
                     writer.write(topic, msg, res.stamp_ns)
             if live is not None:
                 live.log(out, res.stamp_ns)
-                if bf.image_dn is not None:
+                if bf.image_dn is not None and live.has_subscribers(input_topic):
                     live.log_image(input_topic, _gray_image(bf.image_dn, opts.bit_depth), res.stamp_ns)
                 live.broadcast_time(res.stamp_ns)
             last_pub, last_log = res.stamp_ns, bf.log_time_ns
