@@ -16,7 +16,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Literal
 
-from msg_adapters.outputs import DEFAULT_NAMESPACE, DIAGNOSTICS_TOPIC, debug_image_topic
+from msg_adapters.diagnostics import jazzy_typestore
+from msg_adapters.outputs import DEFAULT_NAMESPACE, DIAGNOSTICS_TOPIC, NUMBER_TYPE, debug_image_topic
 
 FOXGLOVE_FILE = "foxglove_layout.json"
 PLOTJUGGLER_FILE = "plotjuggler_layout.xml"
@@ -38,36 +39,61 @@ def _ns(namespace: str) -> str:
     return "/" + namespace.strip("/")
 
 
+def number_field(type_name: str = NUMBER_TYPE) -> list[str]:
+    """Field path of the number in a per-frame topic: the first floating-point leaf of its ROS 2 type
+    (std_msgs/Float32: ``data``; geometry_msgs/Vector3Stamped: ``vector.x``)."""
+    ts = jazzy_typestore()
+    for name, (_, detail) in ts.fielddefs[type_name][1]:
+        if isinstance(detail, str):
+            try:
+                return [name, *number_field(detail)]
+            except LookupError:
+                continue
+        elif detail[0] in ("float32", "float64"):
+            return [name]
+    raise LookupError(f"{type_name} has no floating-point field")
+
+
+def stamped(type_name: str = NUMBER_TYPE) -> bool:
+    """True when the per-frame numbers carry a header (plots then use the image's stamp)."""
+    return any(name == "header" for name, _ in jazzy_typestore().fielddefs[type_name][1])
+
+
 def status_name(camera_name: str) -> str:
     """The monitor's DiagnosticStatus name (``noise_monitor: <camera_name>``)."""
     return f"noise_monitor: {camera_name}"
 
 
-def foxglove_layout(namespace: str = DEFAULT_NAMESPACE, camera_name: str = "camera") -> dict:
-    """The Foxglove layout as a JSON object (``foxglove.layouts.Layout``)."""
+def foxglove_layout(namespace: str = DEFAULT_NAMESPACE, camera_name: str = "camera",
+                    number_type: str = NUMBER_TYPE) -> dict:
+    """The Foxglove layout as a JSON object (``foxglove.layouts.Layout``); ``number_type``: the per-frame
+    topics' message type."""
     import foxglove.layouts as fl
 
     ns = _ns(namespace)
-    receive: Literal["receiveTime"] = "receiveTime"  # the numbers are std_msgs/Float32: the log time is the image stamp (MCAP, --foxglove)
+    field = "." + ".".join(number_field(number_type))
+    # stamped numbers plot at the image's header stamp; Float32 ones at the log time (= the image stamp in the
+    # replay's MCAP and over --foxglove; the receive time through foxglove_bridge), like the band script's output
+    when: Literal["headerStamp", "receiveTime"] = "headerStamp" if stamped(number_type) else "receiveTime"
     sigma = fl.PlotPanel(title="Noise per source [DN]", config=fl.PlotConfig(
-        paths=[fl.PlotSeries(value=f"{ns}/{k}.data", label=label, color=c, timestamp_method=receive)
+        paths=[fl.PlotSeries(value=f"{ns}/{k}{field}", label=label, color=c, timestamp_method=when)
                for k, label, c in SIGMA_SERIES],
         y_axis_label="sigma [DN]", x_axis_label="time [s]", show_legend=True, legend_display="top", is_synced=True))
     band = [fl.PlotSeries(value=f"{BAND_TOPIC}.{edge}", label=f"{sign}xi_threshold", color=BAND_COLOUR,
-                          line_style="dashed", timestamp_method=receive) for edge, sign in (("upper", "+"), ("lower", "-"))]
+                          line_style="dashed", timestamp_method="receiveTime") for edge, sign in (("upper", "+"), ("lower", "-"))]
     xi = fl.PlotPanel(title="xi = sigma_model - sigma_image [DN] and the alarm threshold", config=fl.PlotConfig(
-        paths=[fl.PlotSeries(value=f"{ns}/{k}.data", label=label, color=c, timestamp_method=receive)
+        paths=[fl.PlotSeries(value=f"{ns}/{k}{field}", label=label, color=c, timestamp_method=when)
                for k, label, c in XI_SERIES] + band,
         y_axis_label="xi [DN]", x_axis_label="time [s]", show_legend=True, legend_display="top", is_synced=True))
     level_path = f'{DIAGNOSTICS_TOPIC}.status[:]{{name=="{status_name(camera_name)}"}}.level'
     states = fl.StateTransitionsPanel(title="Alarm and /diagnostics level", config=fl.StateTransitionsConfig(
         is_synced=True, x_axis_label="time [s]", paths=[
-            fl.StateTransitionsSeries(value=f"{ns}/alarm.data", label="xi alarm", timestamp_method=receive,
+            fl.StateTransitionsSeries(value=f"{ns}/alarm{field}", label="xi alarm", timestamp_method=when,
                                       custom_states=fl.StateTransitionsDiscreteCustomStates(states=[
                                           fl.StateTransitionsDiscreteCustomState(value="0", label="ok", color="#2ca02c"),
                                           fl.StateTransitionsDiscreteCustomState(value="1", label="ALARM",
                                                                                  color="#d62728")])),
-            fl.StateTransitionsSeries(value=level_path, label="/diagnostics level", timestamp_method=receive,
+            fl.StateTransitionsSeries(value=level_path, label="/diagnostics level", timestamp_method="headerStamp",
                                       custom_states=fl.StateTransitionsDiscreteCustomStates(states=[
                                           fl.StateTransitionsDiscreteCustomState(value=str(v), label=n, color=c)
                                           for v, n, c in LEVELS]))]))
@@ -86,7 +112,7 @@ export const inputs = ["{ns}/xi_threshold"];
 export const output = "{BAND_TOPIC}";
 
 export default function script(event: Input<"{ns}/xi_threshold">): Output {{
-  const threshold = event.message.data;
+  const threshold = event.message{field};
   return {{ upper: threshold, lower: -threshold }};
 }}
 '''
@@ -101,18 +127,19 @@ export default function script(event: Input<"{ns}/xi_threshold">): Output {{
     return json.loads(layout.to_json())
 
 
-def plotjuggler_layout(namespace: str = DEFAULT_NAMESPACE) -> str:
-    """The PlotJuggler layout XML (curves ``<topic>/data``; loads an MCAP or subscribes to ROS 2 topics)."""
+def plotjuggler_layout(namespace: str = DEFAULT_NAMESPACE, number_type: str = NUMBER_TYPE) -> str:
+    """The PlotJuggler layout XML (curves ``<topic>/<field>``; loads an MCAP or subscribes to ROS 2 topics)."""
     ns = _ns(namespace)
+    field = "/" + "/".join(number_field(number_type))
     root = ET.Element("root")
     tabs = ET.SubElement(root, "tabbed_widget", {"name": "Main Window", "parent": "main_window"})
     tab = ET.SubElement(tabs, "Tab", tab_name="noise monitor", containers="1")
     splitter = ET.SubElement(ET.SubElement(tab, "Container"), "DockSplitter", orientation="-", count="3",
                              sizes="0.4;0.4;0.2")
-    band = ((f"{ns}/xi_threshold/data", BAND_COLOUR), (LOWER_EDGE, BAND_COLOUR))
-    plots = (("noise per source [DN]", [(f"{ns}/{k}/data", c) for k, _, c in SIGMA_SERIES]),
-             ("xi [DN] and the alarm threshold band", [(f"{ns}/{k}/data", c) for k, _, c in XI_SERIES] + list(band)),
-             ("xi alarm (1 = active)", [(f"{ns}/alarm/data", "#d62728")]))
+    band = ((f"{ns}/xi_threshold{field}", BAND_COLOUR), (LOWER_EDGE, BAND_COLOUR))
+    plots = (("noise per source [DN]", [(f"{ns}/{k}{field}", c) for k, _, c in SIGMA_SERIES]),
+             ("xi [DN] and the alarm threshold band", [(f"{ns}/{k}{field}", c) for k, _, c in XI_SERIES] + list(band)),
+             ("xi alarm (1 = active)", [(f"{ns}/alarm{field}", "#d62728")]))
     for title, curves in plots:
         plot = ET.SubElement(ET.SubElement(splitter, "DockArea", name=title), "plot", mode="TimeSeries",
                              style="Lines", flip_x="false", flip_y="false")
@@ -126,7 +153,7 @@ def plotjuggler_layout(namespace: str = DEFAULT_NAMESPACE) -> str:
     plugins = ET.SubElement(root, "Plugins")
     ET.SubElement(plugins, "plugin", ID="DataLoad MCAP")
     ros2 = ET.SubElement(plugins, "plugin", ID="ROS2 Topic Subscriber")
-    ET.SubElement(ros2, "use_header_stamp", value="false")
+    ET.SubElement(ros2, "use_header_stamp", value="true" if stamped(number_type) else "false")
     selected = ET.SubElement(ros2, "selected_topics")
     for topic in topics:
         ET.SubElement(selected, "topic", name=topic)
@@ -134,7 +161,7 @@ def plotjuggler_layout(namespace: str = DEFAULT_NAMESPACE) -> str:
     snippet = ET.SubElement(maths, "snippet", name=LOWER_EDGE, language="LUA")
     ET.SubElement(snippet, "global").text = ""
     ET.SubElement(snippet, "function").text = "return -value"
-    ET.SubElement(snippet, "linked_source").text = f"{ns}/xi_threshold/data"
+    ET.SubElement(snippet, "linked_source").text = f"{ns}/xi_threshold{field}"
     ET.indent(root, " ")
     return "<?xml version='1.0' encoding='UTF-8'?>\n" + ET.tostring(root, "unicode") + "\n"
 

@@ -44,13 +44,13 @@ from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchro
 from noise_monitor.monitor.runtime import MonitorRuntime, coerce, parameter_table
 
 NODE_NAME = "noise_monitor"
+J = TypeVar("J")
 
 
 def ros_type_name(msg_type: type) -> str:
     """``std_msgs/msg/Float32`` for an rclpy message class (module ``std_msgs.msg._float32``)."""
     package, kind = msg_type.__module__.split(".")[:2]
     return f"{package}/{kind}/{msg_type.__name__}"
-J = TypeVar("J")
 
 
 @dataclass
@@ -143,7 +143,8 @@ class NoiseMonitorNode(Node):
         self._pubs.update({t: self.create_publisher(Float32, t, 10) for t in output_topics(ns) if t != DIAGNOSTICS_TOPIC})
         self.namespace_out = ns
         image_type = CompressedImage if p["image_transport"] == "compressed" else Image
-        image_sub = self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
+        self._image_sub = self.create_subscription(image_type, p["image_topic"], self._on_image,
+                                                   qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
         src = self.metadata_source
         if src is not None:
@@ -155,7 +156,6 @@ class NoiseMonitorNode(Node):
             self.create_subscription(Temperature, p["temperature_topic"], self._on_temperature, relaxed)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._debug_pub = self.create_publisher(Image, f"{ns}/debug_image", 2)
-        self._image_sub = image_sub
         #: a :class:`msg_adapters.live_view.LiveView` (``--foxglove PORT``) mirrored every published message
         self.live: Any = None
         self._last_debug_ns = -(1 << 62)

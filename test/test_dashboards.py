@@ -76,7 +76,8 @@ def test_foxglove_layout_references_published_topics_and_fields(foxglove):
     script = foxglove["userScripts"]["xi_threshold_band"]["sourceCode"]
     (inputs,) = re.findall(r"export const inputs = \[(.*)\];", script)
     script_inputs = [json.loads(t) for t in inputs.split(",")]
-    assert script_inputs == ["/noise_monitor/xi_threshold"] and "event.message.data" in script
+    field = dashboards.number_field()
+    assert script_inputs == ["/noise_monitor/xi_threshold"] and f"event.message.{'.'.join(field)};" in script
     assert all(t in PUBLISHED for t in script_inputs)
     (output,) = re.findall(r'export const output = "(.*)";', script)
     script_fields = set(re.findall(r"(\w+): number", script))
@@ -90,7 +91,7 @@ def test_foxglove_layout_references_published_topics_and_fields(foxglove):
             assert script_fields == {"upper", "lower"} and fields[0] in script_fields, path
             continue
         assert topic in PUBLISHED, path
-        assert _field_type(PUBLISHED[topic], fields) in ("float32", "byte"), path  # numeric leaves
+        assert _field_type(PUBLISHED[topic], fields) in ("float32", "float64", "byte"), path  # numeric leaves
         for f in filters:
             _field_type(PUBLISHED[topic], fields[:-1] + [f])
     assert f'name=="noise_monitor: {CAMERA}"' in "".join(paths)  # the default node's status
@@ -105,13 +106,14 @@ def test_plotjuggler_layout_references_published_topics_and_fields():
     snippets = {s.get("name"): s.findtext("linked_source") for s in root.iter("snippet")}
     curves = [c.get("name") for c in root.iter("curve")]
     assert len(curves) == 10 and set(snippets) == {dashboards.LOWER_EDGE}
-    for name in curves + list(snippets.values()):
-        if name in snippets:
-            continue
-        topic, field = name.rsplit("/", 1)
-        assert topic in PUBLISHED and _field_type(PUBLISHED[topic], [field]) == "float32", name
+    field = "/" + "/".join(dashboards.number_field())
+    series = [c for c in curves if c not in snippets] + list(snippets.values())
+    for name in series:
+        assert name.endswith(field), name
+        topic = name.removesuffix(field)
+        assert topic in PUBLISHED and _field_type(PUBLISHED[topic], field[1:].split("/")) in ("float32", "float64")
     selected = [t.get("name") for t in root.iter("topic")]
-    assert set(selected) <= set(PUBLISHED) and {c.rsplit("/", 1)[0] for c in curves if c not in snippets} <= set(selected)
+    assert set(selected) <= set(PUBLISHED) and {c.removesuffix(field) for c in series} <= set(selected)
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +140,7 @@ def test_every_layout_series_has_data_in_a_replay_mcap(foxglove, replay_mcap):
     for path in _paths(foxglove):
         topic, fields, _ = _foxglove_path(path)
         if topic == dashboards.BAND_TOPIC:
-            topic, fields = "/noise_monitor/xi_threshold", ["data"]  # the script's input
+            topic, fields = "/noise_monitor/xi_threshold", dashboards.number_field()  # the script's input
         msg = first[topic]
         if topic == DIAGNOSTICS_TOPIC:  # the status the filter selects
             (msg,) = [s for s in msg.status if s.name == f"noise_monitor: {CAMERA}"]
@@ -146,11 +148,30 @@ def test_every_layout_series_has_data_in_a_replay_mcap(foxglove, replay_mcap):
         for f in fields:
             msg = getattr(msg, f)
         assert isinstance(msg, (float, int)), path
-    assert first["/noise_monitor/xi_threshold"].data == MonitorConfig().xi_threshold_dn
+    threshold = first["/noise_monitor/xi_threshold"]
+    for f in dashboards.number_field():
+        threshold = getattr(threshold, f)
+    assert threshold == MonitorConfig().xi_threshold_dn
     assert first[debug_image_topic()].encoding == "rgb8"
     root = ET.parse(CONFIG / dashboards.PLOTJUGGLER_FILE).getroot()
+    field = dashboards.number_field()
     for curve in root.iter("curve"):
         name = curve.get("name")
         if name != dashboards.LOWER_EDGE:
-            topic, field = name.rsplit("/", 1)
-            assert isinstance(getattr(first[topic], field), float), name
+            msg = first[name.removesuffix("/" + "/".join(field))]
+            for f in field:
+                msg = getattr(msg, f)
+            assert isinstance(msg, float), name
+
+
+def test_stamped_numbers_plot_at_the_header_stamp():
+    """Per-frame numbers as geometry_msgs/Vector3Stamped: the number's field and the image's stamp are used."""
+    pytest.importorskip("foxglove")
+    stamped = "geometry_msgs/msg/Vector3Stamped"
+    series = _walk(dashboards.foxglove_layout(number_type=stamped), "paths")
+    xi = [s for group in series for s in group if s["value"] == "/noise_monitor/xi.vector.x"]
+    assert len(xi) == 1 and xi[0]["timestampMethod"] == "headerStamp"
+    root = ET.fromstring(dashboards.plotjuggler_layout(number_type=stamped))
+    assert "/noise_monitor/sigma_rn/vector/x" in [c.get("name") for c in root.iter("curve")]
+    assert root.find("./Plugins/plugin/use_header_stamp").get("value") == "true"
+    assert root.findtext("./customMathEquations/snippet/linked_source") == "/noise_monitor/xi_threshold/vector/x"
