@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
+import json
+import re
 import threading
 from pathlib import Path
 
@@ -139,3 +141,12 @@ def test_cli_rejects_bad_live_options(bag, capsys):
     assert "--foxglove-wait needs --foxglove PORT" in capsys.readouterr().err
     assert main(["replay", str(bag), "--profile", "ev76c661", "--rate", "0"]) == 2
     assert "--rate must be > 0" in capsys.readouterr().err
+
+
+def test_cli_serves_and_paces(bag, tmp_path, capsys):
+    """`replay --foxglove 0 --rate 4`: the URL is printed, and 12 frames at 5 Hz take at least 11 / 5 / 4 s."""
+    assert main(["replay", str(bag), "--profile", "ev76c661", "--out", str(tmp_path / "o"), "--no-plot",
+                 "--foxglove", "0", "--rate", "4", "--json", str(tmp_path / "s.json")]) == 0
+    assert re.search(r"foxglove: serving ws://127\.0\.0\.1:\d+ ", capsys.readouterr().out)
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["frames_processed"] == 12 and summary["wall_time_s"] >= 11 / 5 / 4
