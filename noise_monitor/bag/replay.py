@@ -90,6 +90,18 @@ class _Pacer:
             time.sleep(delay)
 
 
+class _Tee:
+    """Writes each output message to the replay's MCAP (when there is one) and to a live view."""
+
+    def __init__(self, bag: BagWriter | None, live: Any) -> None:
+        self.bag, self.live = bag, live
+
+    def write(self, topic: str, msg: Any, stamp_ns: int) -> None:
+        if self.bag is not None:
+            self.bag.write(topic, msg, stamp_ns)
+        self.live.log({topic: msg}, stamp_ns)
+
+
 def _gray_image(image_dn: np.ndarray, bit_depth: int | None) -> np.ndarray:
     """The evaluated DN image as it would travel: uint8 up to 8 bits, uint16 above."""
     high = bit_depth is not None and bit_depth > 8
@@ -199,7 +211,9 @@ def run_replay(
         debug_hz = float(rt.params["debug_image_rate_hz"])
         debug_topic, last_debug = debug_image_topic(namespace), None
         input_topic = "/" + namespace.strip("/") + "/" + INPUT_IMAGE
-        writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
+        bag_writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
+        # everything written to the MCAP is also served to a live view, as it is produced
+        writer = _Tee(bag_writer, live) if live is not None else bag_writer
         t_wall = time.perf_counter()
         n_images, bag_duration = len(reader), reader.duration_s
         topics = {role: clip(t, 200) if t else t for role, t in (
@@ -220,27 +234,22 @@ def run_replay(
                 if (end - t) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
                     end, capped_gaps = t + MAX_IDLE_REPORTS_PER_GAP * diag_period_ns, capped_gaps + 1
                 while t < end:
-                    idle = rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
-                                            typestore=typestore())
-                    for topic, msg in idle.items():
+                    for topic, msg in rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
+                                                       typestore=typestore()).items():
                         writer.write(topic, msg, t)
-                    if live is not None:
-                        live.log(idle, t)
                     t += diag_period_ns
             pacer.wait(bf.log_time_ns)
             res = rt.process(bf)
             _record(table, bf, res)
-            out = rosbags_messages(res, namespace=namespace, typestore=typestore())
-            if (debug_hz > 0 and res.processed and res.patches is not None and bf.image_dn is not None
-                    and (last_debug is None or res.stamp_ns - last_debug >= 1e9 / debug_hz)):
-                last_debug = res.stamp_ns
-                rgb = debug_view(bf.image_dn, res.patches.corners, res.patches.size, res.patch_xi, cfg.xi_threshold_dn)
-                out[debug_topic] = rosbags_image(rgb, res.stamp_ns, typestore=typestore())
             if writer is not None:
-                for topic, msg in out.items():
+                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
                     writer.write(topic, msg, res.stamp_ns)
+            if (writer is not None and debug_hz > 0 and res.processed and res.patches is not None
+                    and bf.image_dn is not None and (last_debug is None or res.stamp_ns - last_debug >= 1e9 / debug_hz)):
+                last_debug = res.stamp_ns  # ~/debug_image at debug_image_rate_hz in bag time
+                rgb = debug_view(bf.image_dn, res.patches.corners, res.patches.size, res.patch_xi, cfg.xi_threshold_dn)
+                writer.write(debug_topic, rosbags_image(rgb, res.stamp_ns, typestore=typestore()), res.stamp_ns)
             if live is not None:
-                live.log(out, res.stamp_ns)
                 if bf.image_dn is not None and live.has_subscribers(input_topic):
                     live.log_image(input_topic, _gray_image(bf.image_dn, opts.bit_depth), res.stamp_ns)
                 live.broadcast_time(res.stamp_ns)
