@@ -10,6 +10,15 @@ from typing import Any
 from msg_adapters.diagnostics import jazzy_typestore
 
 TS = jazzy_typestore()
+
+
+def number(msg: Any) -> float:
+    """The value of a per-frame number message (whatever msg_adapters.outputs.NUMBER_TYPE is)."""
+    from noise_monitor.dashboards import number_field
+
+    for name in number_field():
+        msg = getattr(msg, name)
+    return float(msg)
 SUBPROTOCOL = "foxglove.sdk.v1"  # the sdk's WebSocket subprotocol (foxglove_bridge: foxglove.websocket.v1)
 MESSAGE_DATA, TIME = 0x01, 0x02  # binary opcodes server -> client
 

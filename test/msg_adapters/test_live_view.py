@@ -122,7 +122,7 @@ def test_replay_serves_every_frame_with_the_replays_numbers(bag, estimator, tmp_
     assert done.is_set() and len(table) == 12 and table.column("processed").all()
     stamps = [int(s) for s in table.column("stamp_ns")]
     for key in ("xi", "sigma_rn"):
-        served = {s: m.data for t, s, m in got if t == f"/noise_monitor/{key}"}
+        served = {s: foxglove_ws.number(m) for t, s, m in got if t == f"/noise_monitor/{key}"}
         assert sorted(served) == stamps  # every frame, at its own stamp
         np.testing.assert_array_equal(np.float32([served[s] for s in stamps]), np.float32(table.numbers(key)))
     diag = [m for t, _, m in got if t == "/diagnostics"]
