@@ -17,14 +17,14 @@ from noise_monitor import dashboards
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.monitor import MonitorConfig
-from noise_monitor.monitor.config import default_params_path, read_ros_params
 
 torch.set_num_threads(1)
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 TS = jazzy_typestore()
 #: what the node and the replay publish under the default namespace
 PUBLISHED = {**output_topics(), debug_image_topic(): IMAGE_TYPE}
-CAMERA = read_ros_params(default_params_path())["camera_name"]
+#: the status name the layouts select: the default node's and replay's (checked on a replay below)
+STATUS = re.compile(r'\{name=="([^"]+)"\}')
 
 
 def _field_type(type_name: str, fields: list[str]) -> str:
@@ -68,7 +68,7 @@ def foxglove() -> dict:
 
 def test_committed_layouts_are_the_generated_ones(foxglove):
     pytest.importorskip("foxglove")
-    assert foxglove == dashboards.foxglove_layout(camera_name=CAMERA)
+    assert foxglove == dashboards.foxglove_layout()
     assert (CONFIG / dashboards.PLOTJUGGLER_FILE).read_text() == dashboards.plotjuggler_layout()
 
 
@@ -94,7 +94,7 @@ def test_foxglove_layout_references_published_topics_and_fields(foxglove):
         assert _field_type(PUBLISHED[topic], fields) in ("float32", "float64", "byte"), path  # numeric leaves
         for f in filters:
             _field_type(PUBLISHED[topic], fields[:-1] + [f])
-    assert f'name=="noise_monitor: {CAMERA}"' in "".join(paths)  # the default node's status
+    assert set(STATUS.findall("".join(paths))) == {dashboards.status_name("camera")}
     (image,) = _walk(foxglove, "imageTopic")
     assert image == debug_image_topic() and PUBLISHED[image] == IMAGE_TYPE
     panels = {p for p in _walk(foxglove, "panelType")}
@@ -126,7 +126,7 @@ def replay_mcap(tmp_path_factory) -> Path:
                        width=3 * ps, height=2 * ps, seed=2, hold_s=0)
     out = tmp_path_factory.mktemp("out")
     replay(bag, "ev76c661", out, estimator=est, config=MonitorConfig(patches_per_frame=4), progress=False,
-           plot=False, camera_name=CAMERA)
+           plot=False)  # the default camera name
     return out / "replay.mcap"
 
 
@@ -142,8 +142,8 @@ def test_every_layout_series_has_data_in_a_replay_mcap(foxglove, replay_mcap):
         if topic == dashboards.BAND_TOPIC:
             topic, fields = "/noise_monitor/xi_threshold", dashboards.number_field()  # the script's input
         msg = first[topic]
-        if topic == DIAGNOSTICS_TOPIC:  # the status the filter selects
-            (msg,) = [s for s in msg.status if s.name == f"noise_monitor: {CAMERA}"]
+        if topic == DIAGNOSTICS_TOPIC:  # the status the filter selects: the replay's own
+            (msg,) = [s for s in msg.status if s.name == STATUS.search(path).group(1)]
             fields = fields[1:]
         for f in fields:
             msg = getattr(msg, f)
