@@ -22,6 +22,7 @@ from tqdm import tqdm
 from msg_adapters.keymap import keymap_entries
 from msg_adapters.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
 from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
+from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
 from noise_monitor.physics import CameraProfile
@@ -155,28 +156,42 @@ def run_replay(
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
                                color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
-        last_pub: int | None = None
+        period: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
+        next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
+
+        def report(t: int) -> None:
+            assert period is not None
+            status = period.report(monitor, t)
+            if writer is not None:
+                for topic, msg in rosbags_messages(status, stamp_ns=t, typestore=typestore()).items():
+                    writer.write(topic, msg, t)
+
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
-            if writer is not None and last_pub is not None:  # the node's timer fills gaps (STALE when long)
+            if period is None:
+                period, next_report = PeriodSummary(bf.stamp_ns), bf.stamp_ns + diag_period_ns
+            else:  # the node's timer: one summary per period, idle ones (STALE when long) over gaps
                 # only while time really passed in the recording: a header stamp jumping by years (out of
-                # order, bogus clock) must not produce years of idle reports
-                end = min(bf.stamp_ns, last_pub + bf.log_time_ns - last_log)
-                t = last_pub + diag_period_ns
-                if (end - t) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
-                    end, capped_gaps = t + MAX_IDLE_REPORTS_PER_GAP * diag_period_ns, capped_gaps + 1
-                while t < end:
-                    for topic, msg in rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
-                                                       typestore=typestore()).items():
-                        writer.write(topic, msg, t)
-                    t += diag_period_ns
+                # order, bogus clock) must not produce years of reports
+                end = min(bf.stamp_ns, last_stamp + bf.log_time_ns - last_log)
+                if (end - next_report) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
+                    end, capped_gaps = next_report + (MAX_IDLE_REPORTS_PER_GAP - 1) * diag_period_ns, capped_gaps + 1
+                while next_report <= end:
+                    report(next_report)
+                    next_report += diag_period_ns
+                if not next_report - diag_period_ns <= bf.stamp_ns < next_report:  # the stamps jumped: a new grid
+                    next_report = bf.stamp_ns + diag_period_ns
             res = rt.process(bf)
             _record(table, bf, res)
+            period.add(res)
             if writer is not None:
-                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
+                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore(),
+                                                   frame_id=bf.frame_id).items():
                     writer.write(topic, msg, res.stamp_ns)
-            last_pub, last_log = res.stamp_ns, bf.log_time_ns
+            last_stamp, last_log = res.stamp_ns, bf.log_time_ns
+        if period is not None and period.frames:  # the last, partial period ends with the last image
+            report(last_stamp)
     wall = time.perf_counter() - t_wall
     if len(table) != n_images:
         raise BagError(f"bag {bag}: read {len(table)} images but its index lists {n_images}")
