@@ -22,6 +22,8 @@ from .status import StatusReport
 
 #: Contract values taken from the latest evaluated frame's filtered estimates (``FrameResult.filtered``).
 FILTERED_KEYS = ("pn", "dcsn", "rn", "total")
+#: Counters reported as of the period's last frame (the others, e.g. frames_dropped, as of the report).
+FRAME_COUNTERS = ("frames_received", "frames_processed", "frames_skipped")
 _NUMBER = re.compile(r"\d+(?:\.\d+)?")
 
 
@@ -42,6 +44,7 @@ class PeriodSummary:
         self._lock = threading.Lock()
         self._latest_processed: FrameResult | None = None  # across periods: the contract's latest values
         self._counters: dict[str, int] | None = None  # monitor counters at the start of the period
+        self._frame_counters = dict.fromkeys(FRAME_COUNTERS, 0)  # the latest added result's counters
         self._start(start_ns)
 
     def _start(self, start_ns: int) -> None:
@@ -52,6 +55,7 @@ class PeriodSummary:
         """A frame result of this period (evaluated or skipped)."""
         with self._lock:
             self._results.append(result)
+            self._frame_counters = {k: result.counters[k] for k in FRAME_COUNTERS if k in result.counters}
             if result.processed:
                 self._latest_processed = result
 
@@ -67,7 +71,9 @@ class PeriodSummary:
             results, start = self._results, self.start_ns
             latest = self._latest_processed
             self._start(now_ns)
-            counters = dict(monitor.counters)
+            # frames counted as the added results count them: a frame being evaluated right now belongs to
+            # the next period in its counters too (frames_received of the period's last frame)
+            counters = {**monitor.counters, **self._frame_counters}
             before, self._counters = self._counters or {k: 0 for k in counters}, counters
         state = monitor.alarm.state
         values: dict[str, str] = {}
