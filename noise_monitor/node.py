@@ -115,6 +115,8 @@ class NoiseMonitorNode(Node):
         for name, (default, description) in parameter_table().items():
             desc = ParameterDescriptor(description=description, dynamic_typing=True)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
+        # a camera namespace names the camera: /cam1 and /cam2 report apart on /diagnostics
+        p["camera_name"] = p["camera_name"] or self.get_namespace().strip("/").replace("/", "_")
         source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],
                        "driver_node": p["metadata_driver_node"], "driver": p["metadata_driver"]}
         resolve_source(**source_args)  # a bad source, key map or missing driver package: fail before loading

@@ -3,10 +3,11 @@
 Every image is accounted for: processed, or skipped with the monitor's reason (image unusable, metadata
 missing/invalid/stale, too few usable patches, ...). The node's behaviour is reproduced on bag time:
 same model (profile effects included), same hardware id, same reject path for unusable images, and
-the periodic ``/diagnostics`` idle report (STALE after ``image_timeout_s``) in gaps between images.
-Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
-(``msg_adapters.outputs``), ``replay.csv`` (one line per frame), ``replay.png`` and
-``summary.json``.
+``/diagnostics`` at ``diagnostics_rate_hz`` of bag time summarising each period
+(``noise_monitor.monitor.period``; STALE after ``image_timeout_s`` in gaps between images, a last partial
+period at the last image). Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
+(``msg_adapters.outputs``: per frame ``<namespace>/frame`` and the stamped numbers, stamped with the
+image's header), ``replay.csv`` (one line per frame), ``replay.png`` and ``summary.json``.
 """
 from __future__ import annotations
 
@@ -156,21 +157,21 @@ def run_replay(
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
                                color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
-        period: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
+        periods: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
         next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
 
         def report(t: int) -> None:
-            assert period is not None
-            status = period.report(monitor, t)
+            assert periods is not None
+            status = periods.report(monitor, t)
             if writer is not None:
                 for topic, msg in rosbags_messages(status, stamp_ns=t, typestore=typestore()).items():
                     writer.write(topic, msg, t)
 
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
-            if period is None:
-                period, next_report = PeriodSummary(bf.stamp_ns), bf.stamp_ns + diag_period_ns
+            if periods is None:
+                periods, next_report = PeriodSummary(bf.stamp_ns), bf.stamp_ns + diag_period_ns
             else:  # the node's timer: one summary per period, idle ones (STALE when long) over gaps
                 # only while time really passed in the recording: a header stamp jumping by years (out of
                 # order, bogus clock) must not produce years of reports
@@ -184,13 +185,13 @@ def run_replay(
                     next_report = bf.stamp_ns + diag_period_ns
             res = rt.process(bf)
             _record(table, bf, res)
-            period.add(res)
+            periods.add(res)
             if writer is not None:
                 for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore(),
                                                    frame_id=bf.frame_id).items():
                     writer.write(topic, msg, res.stamp_ns)
             last_stamp, last_log = res.stamp_ns, bf.log_time_ns
-        if period is not None and period.frames:  # the last, partial period ends with the last image
+        if periods is not None and periods.frames:  # the last, partial period ends with the last image
             report(last_stamp)
     wall = time.perf_counter() - t_wall
     if len(table) != n_images:
