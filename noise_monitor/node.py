@@ -139,7 +139,7 @@ class NoiseMonitorNode(Node):
                       for t, kind in output_topics(ns).items()}
         self.namespace_out = ns
         image_type = CompressedImage if p["image_transport"] == "compressed" else Image
-        self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
+        image_sub = self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
         src = self.metadata_source
         if src is not None:
@@ -158,7 +158,7 @@ class NoiseMonitorNode(Node):
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
         est, cfg = self.runtime.estimator, self.runtime.config
         self.get_logger().info(
-            f"monitoring {p['image_topic']} with {est.name} (patch {self.monitor.patch_size}, "
+            f"monitoring {image_sub.topic_name} with {est.name} (patch {self.monitor.patch_size}, "
             f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics at "
             f"{p['diagnostics_rate_hz']:g} Hz, per frame {ns}/frame and {ns}/<sigma_*|xi*>"
         )
