@@ -3,12 +3,14 @@
 Every image is accounted for: processed, or skipped with the monitor's reason (image unusable, metadata
 missing/invalid/stale, too few usable patches, ...). The node's behaviour is reproduced on bag time:
 same model (profile effects included), same hardware id, same reject path for unusable images, and
-the periodic ``/diagnostics`` idle report (STALE after ``image_timeout_s``) in gaps between images.
-Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
-(``msg_adapters.outputs``, ``<namespace>/debug_image`` at ``debug_image_rate_hz`` in bag time),
-``replay.csv`` (one line per frame), ``replay.png`` and ``summary.json``. A live view
-(:class:`msg_adapters.live_view.LiveView`) is served the same messages plus the evaluated gray image
-(``<namespace>/input_image``) while the replay runs, paced to bag time with ``rate``.
+``/diagnostics`` at ``diagnostics_rate_hz`` of bag time summarising each period
+(``noise_monitor.monitor.period``; STALE after ``image_timeout_s`` in gaps between images, a last partial
+period at the last image). Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
+(``msg_adapters.outputs``: per frame ``<namespace>/frame`` and the stamped numbers, stamped with the
+image's header; ``<namespace>/debug_image`` at ``debug_image_rate_hz`` in bag time), ``replay.csv`` (one line per frame),
+``replay.png`` and ``summary.json``. A live view (:class:`msg_adapters.live_view.LiveView`) is served
+every message written plus the evaluated gray image (``<namespace>/input_image``) while the replay
+runs, paced to bag time with ``rate``.
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from msg_adapters.outputs import (
     rosbags_messages,
 )
 from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
+from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
 from noise_monitor.physics import CameraProfile
@@ -222,38 +225,52 @@ def run_replay(
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
                                color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
-        last_pub: int | None = None
+        periods: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
+        next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
+
+        def report(t: int) -> None:
+            assert periods is not None
+            status = periods.report(monitor, t)
+            if writer is not None:
+                for topic, msg in rosbags_messages(status, stamp_ns=t, typestore=typestore()).items():
+                    writer.write(topic, msg, t)
+
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
-            if writer is not None and last_pub is not None:  # the node's timer fills gaps (STALE when long)
+            if periods is None:
+                periods, next_report = PeriodSummary(bf.stamp_ns), bf.stamp_ns + diag_period_ns
+            else:  # the node's timer: one summary per period, idle ones (STALE when long) over gaps
                 # only while time really passed in the recording: a header stamp jumping by years (out of
-                # order, bogus clock) must not produce years of idle reports
-                end = min(bf.stamp_ns, last_pub + bf.log_time_ns - last_log)
-                t = last_pub + diag_period_ns
-                if (end - t) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
-                    end, capped_gaps = t + MAX_IDLE_REPORTS_PER_GAP * diag_period_ns, capped_gaps + 1
-                while t < end:
-                    for topic, msg in rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
-                                                       typestore=typestore()).items():
-                        writer.write(topic, msg, t)
-                    t += diag_period_ns
+                # order, bogus clock) must not produce years of reports
+                end = min(bf.stamp_ns, last_stamp + bf.log_time_ns - last_log)
+                if (end - next_report) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
+                    end, capped_gaps = next_report + (MAX_IDLE_REPORTS_PER_GAP - 1) * diag_period_ns, capped_gaps + 1
+                while next_report <= end:
+                    report(next_report)
+                    next_report += diag_period_ns
+                if not next_report - diag_period_ns <= bf.stamp_ns < next_report:  # the stamps jumped: a new grid
+                    next_report = bf.stamp_ns + diag_period_ns
             pacer.wait(bf.log_time_ns)
             res = rt.process(bf)
             _record(table, bf, res)
+            periods.add(res)
             if writer is not None:
-                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
+                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore(),
+                                                   frame_id=bf.frame_id).items():
                     writer.write(topic, msg, res.stamp_ns)
             if (writer is not None and debug_hz > 0 and res.processed and res.patches is not None
                     and bf.image_dn is not None and (last_debug is None or res.stamp_ns - last_debug >= 1e9 / debug_hz)):
                 last_debug = res.stamp_ns  # ~/debug_image at debug_image_rate_hz in bag time
                 rgb = debug_view(bf.image_dn, res.patches.corners, res.patches.size, res.patch_xi, cfg.xi_threshold_dn)
-                writer.write(debug_topic, rosbags_image(rgb, res.stamp_ns, typestore=typestore()), res.stamp_ns)
+                writer.write(debug_topic, rosbags_image(rgb, res.stamp_ns, bf.frame_id, typestore()), res.stamp_ns)
             if live is not None:
                 if bf.image_dn is not None and live.has_subscribers(input_topic):
                     live.log_image(input_topic, _gray_image(bf.image_dn, opts.bit_depth), res.stamp_ns)
                 live.broadcast_time(res.stamp_ns)
-            last_pub, last_log = res.stamp_ns, bf.log_time_ns
+            last_stamp, last_log = res.stamp_ns, bf.log_time_ns
+        if periods is not None and periods.frames:  # the last, partial period ends with the last image
+            report(last_stamp)
     wall = time.perf_counter() - t_wall
     if len(table) != n_images:
         raise BagError(f"bag {bag}: read {len(table)} images but its index lists {n_images}")
