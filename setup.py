@@ -13,7 +13,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.json")),
         (f"share/{PACKAGE}/config/cameras", glob("config/cameras/*.yaml")),
         (f"share/{PACKAGE}/config/datasheets", glob("config/datasheets/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
@@ -33,7 +33,9 @@ setup(
         "train": ["scikit-image>=0.22", "PyWavelets>=1.5"],
         # `noise-monitor campaign`: Ray tasks (optional: a local process pool otherwise) and Parquet tables
         "fleet": ["ray>=2.58", "pyarrow>=25"],
-        "dev": ["pytest>=8", "hypothesis>=6", "mcap>=1.1", "ruff>=0.15", "mypy>=1.10", "types-PyYAML", "build>=1.0"],
+        # `--foxglove PORT` on `node` and `replay`: a live view over the Foxglove WebSocket protocol
+        "live": ["foxglove-sdk>=0.30"],
+        "dev": ["pytest>=8", "hypothesis>=6", "mcap>=1.1", "ruff>=0.15", "mypy>=1.10", "types-PyYAML", "build>=1.0", "websockets>=13"],
     },
     zip_safe=True,
     maintainer="noise_monitor developers",

@@ -7,6 +7,7 @@ from typing import Any
 from noise_monitor.monitor.frame import Frame
 from noise_monitor.monitor.runtime import FrameOptions
 from noise_monitor.physics import MetadataError
+from noise_monitor.text import clip
 
 from .camera_info import CameraGeometry
 from .compressed import decompress, is_compressed
@@ -29,7 +30,9 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
     ``image_error`` / ``metadata_error`` / ``missing``, never as exceptions.
     """
     raw = metadata if isinstance(metadata, Mapping) else {}
+    header = getattr(image_msg, "header", None)
     frame = Frame(stamp_ns, None, None, index=index, log_time_ns=log_time_ns, raw_metadata=dict(raw),
+                  frame_id=clip(str(getattr(header, "frame_id", "") or ""), 200),
                   metadata_age_s=None if metadata_stamp_ns is None else (stamp_ns - metadata_stamp_ns) / 1e9)
     try:
         if image_error:

@@ -3,8 +3,9 @@
 Subscribes to an image (sensor-data QoS), its metadata (DiagnosticArray), optionally CameraInfo and
 Temperature; pairs image and metadata by header stamp; evaluates frames in a worker thread fed by a
 one-slot queue (a frame arriving while the worker is busy replaces the waiting one and is counted as
-dropped); publishes ``/diagnostics`` and numeric per-source topics under ``~/`` for every evaluated
-frame, and ``/diagnostics`` from a timer at least ``diagnostics_rate_hz`` even without input (STALE).
+dropped); publishes every frame's status (``~/frame``) and stamped numbers (``~/sigma_pn`` ...) with the
+image's header, and ``/diagnostics`` from a timer at ``diagnostics_rate_hz`` summarising the period
+(``noise_monitor.monitor.period``; STALE without input).
 Parameters, profile, model, estimator and monitor come from the shared runtime
 (:class:`noise_monitor.monitor.runtime.MonitorRuntime`), frames from ``msg_adapters.prepare_frame``:
 the replay and the lab run the same code.
@@ -22,12 +23,13 @@ from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Temperature
-from std_msgs.msg import Float32
 
 from msg_adapters import (
     AdapterError,
@@ -37,13 +39,22 @@ from msg_adapters import (
     prepare_frame,
 )
 from msg_adapters.debug_image import debug_view
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC, output_topics, rclpy_messages
+from msg_adapters.outputs import DIAGNOSTICS_TYPE, output_topics, rclpy_messages
 from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
+from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime, coerce, parameter_table
 
 NODE_NAME = "noise_monitor"
+#: How often images waiting for their metadata are checked (the synchroniser's wait, seconds).
+SYNC_POLL_S = 0.05
 J = TypeVar("J")
+
+
+def ros_type_name(msg_type: type) -> str:
+    """``std_msgs/msg/Float32`` for an rclpy message class (module ``std_msgs.msg._float32``)."""
+    package, kind = msg_type.__module__.split(".")[:2]
+    return f"{package}/{kind}/{msg_type.__name__}"
 
 
 @dataclass
@@ -111,6 +122,8 @@ class NoiseMonitorNode(Node):
         for name, (default, description) in parameter_table().items():
             desc = ParameterDescriptor(description=description, dynamic_typing=True)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
+        # a camera namespace names the camera: /cam1 and /cam2 report apart on /diagnostics
+        p["camera_name"] = p["camera_name"] or self.get_namespace().strip("/").replace("/", "_")
         source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],
                        "driver_node": p["metadata_driver_node"], "driver": p["metadata_driver"]}
         resolve_source(**source_args)  # a bad source, key map or missing driver package: fail before loading
@@ -126,17 +139,15 @@ class NoiseMonitorNode(Node):
         self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
         self._temperature_c: float | None = None
         self._geometry: CameraGeometry | None = None
-        self._lock = threading.Lock()
         self._last_accept_ns: int | None = None
-        self._last_publish_ns = 0
-        self.published = 0
 
         ns = self.get_fully_qualified_name()
-        self._pubs = {DIAGNOSTICS_TOPIC: self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)}
-        self._pubs.update({t: self.create_publisher(Float32, t, 10) for t in output_topics(ns) if t != DIAGNOSTICS_TOPIC})
+        self._pubs = {t: self.create_publisher(DiagnosticArray if kind == DIAGNOSTICS_TYPE else Vector3Stamped, t, 10)
+                      for t, kind in output_topics(ns).items()}
         self.namespace_out = ns
         image_type = CompressedImage if p["image_transport"] == "compressed" else Image
-        self.create_subscription(image_type, p["image_topic"], self._on_image, qos_profile_sensor_data)
+        self._image_sub = self.create_subscription(image_type, p["image_topic"], self._on_image,
+                                                   qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
         src = self.metadata_source
         if src is not None:
@@ -148,15 +159,30 @@ class NoiseMonitorNode(Node):
             self.create_subscription(Temperature, p["temperature_topic"], self._on_temperature, relaxed)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._debug_pub = self.create_publisher(Image, f"{ns}/debug_image", 2)
+        #: a :class:`msg_adapters.live_view.LiveView` (``--foxglove PORT``) mirrored every published message
+        self.live: Any = None
         self._last_debug_ns = -(1 << 62)
-        self._diag_period_ns = self.runtime.diagnostics_period_ns
-        self.create_timer(min(self._diag_period_ns / 1e9, 0.05), self._on_timer)
+        self.period = PeriodSummary(self._now())
+        self.create_timer(self.runtime.diagnostics_period_ns / 1e9, self._on_diagnostics_timer)
+        self.create_timer(SYNC_POLL_S, self._on_sync_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
         est, cfg = self.runtime.estimator, self.runtime.config
         self.get_logger().info(
-            f"monitoring {p['image_topic']} with {est.name} (patch {self.monitor.patch_size}, "
-            f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics and {ns}/<sigma_*|xi*>"
+            f"monitoring {self._image_sub.topic_name} with {est.name} (patch {self.monitor.patch_size}, "
+            f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics at "
+            f"{p['diagnostics_rate_hz']:g} Hz, per frame {ns}/frame and {ns}/<sigma_*|xi*>"
         )
+
+    def live_topics(self) -> dict[str, str]:
+        """Topic -> ROS 2 type name of what a live view mirrors: every output and the input image."""
+        ends: list[Any] = [*self._pubs.values(), self._debug_pub, self._image_sub]
+        return {e.topic_name: ros_type_name(e.msg_type) for e in ends}
+
+    def _mirror(self, topic: str, msg: Any, stamp_ns: int) -> None:
+        """Send a message to the live view, serialised as ROS does (only when a client subscribed to it)."""
+        live = self.live
+        if live is not None and live.has_subscribers(topic):
+            live.log_cdr(topic, serialize_message(msg), stamp_ns)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """``ros2 param set``: thresholds and alarm settings change at run time (validated, the alarm keeps
@@ -225,14 +251,14 @@ class NoiseMonitorNode(Node):
         if self._worker.submit(_Job(matched, self._temperature_c)):
             self.monitor.count_dropped()  # the worker is busy: keep the newest frame only
 
-    def _on_timer(self) -> None:
-        now = self._now()
-        for matched in self.sync.poll(now):
+    def _on_sync_timer(self) -> None:
+        for matched in self.sync.poll(self._now()):
             self._enqueue(matched)
-        with self._lock:
-            due = now - self._last_publish_ns >= self._diag_period_ns
-        if due:
-            self._publish(rclpy_messages(self.monitor.idle_report(now), stamp_ns=now, namespace=self.namespace_out), now)
+
+    def _on_diagnostics_timer(self) -> None:
+        """``/diagnostics`` at diagnostics_rate_hz: the summary of the period since the previous one."""
+        now = self._now()
+        self._publish(rclpy_messages(self.period.report(self.monitor, now), stamp_ns=now))
 
     # --- worker thread -------------------------------------------------------------------
     def _work(self, job: _Job) -> None:
@@ -241,7 +267,11 @@ class NoiseMonitorNode(Node):
         except Exception as exc:  # keep the node alive; the status names the failure
             self.get_logger().error(f"frame evaluation failed: {exc!r}")
             result = self.monitor.reject(job.matched.stamp_ns, f"evaluation failed: {exc}", job.matched.received_ns)
-        self._publish(rclpy_messages(result, namespace=self.namespace_out), self._now())
+        self.period.add(result)
+        self._publish(rclpy_messages(result, namespace=self.namespace_out, frame_id=job.matched.image.header.frame_id))
+        if self.live is not None:
+            self._mirror(self._image_sub.topic_name, job.matched.image, result.stamp_ns)
+            self.live.broadcast_time(result.stamp_ns)
 
     def _evaluate(self, job: _Job) -> FrameResult:
         m = job.matched
@@ -270,13 +300,13 @@ class NoiseMonitorNode(Node):
                     data=rgb.tobytes())
         msg.header = header  # stamped with the image it shows
         self._debug_pub.publish(msg)
+        self._mirror(self._debug_pub.topic_name, msg, result.stamp_ns)
 
-    def _publish(self, messages: dict[str, Any], now_ns: int) -> None:
+    def _publish(self, messages: dict[str, Any]) -> None:
         for topic, msg in messages.items():
-            self._pubs[topic].publish(msg)
-        with self._lock:
-            self._last_publish_ns = now_ns
-            self.published += 1
+            pub = self._pubs[topic]
+            pub.publish(msg)
+            self._mirror(pub.topic_name, msg, _stamp_ns(msg))  # every output is stamped
 
     @property
     def temperature_c(self) -> float | None:
@@ -307,10 +337,11 @@ def node_class() -> type[NoiseMonitorNode]:
 
 # --- running it ---------------------------------------------------------------------------------
 def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = None,
-         json_path: str | None = None) -> int:
+         json_path: str | None = None, foxglove_port: int | None = None, foxglove_host: str = "127.0.0.1") -> int:
     """Run the node until Ctrl-C (or ``duration_s``); optional JSON summary at exit.
 
-    ``argv``: process arguments as rclpy.init expects them (ROS arguments after ``--ros-args``)."""
+    ``argv``: process arguments as rclpy.init expects them (ROS arguments after ``--ros-args``).
+    ``foxglove_port``: also serve the node's topics over the Foxglove WebSocket protocol (0 = a free port)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -318,11 +349,18 @@ def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = 
     context = rclpy.Context()
     rclpy.init(args=argv, context=context)
     node = None
+    live = None
     stop = threading.Event()
     previous = _catch_signals(stop)
     try:
         params = [Parameter(k, value=v) for k, v in overrides.items()]
         node = node_class()(parameter_overrides=params, context=context)
+        if foxglove_port is not None:
+            from msg_adapters.live_view import LiveView
+
+            live = LiveView(node.live_topics(), foxglove_port, host=foxglove_host)
+            node.live = live
+            print(f"foxglove: serving {live.url} (Foxglove: Open connection > Foxglove WebSocket)", flush=True)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -341,6 +379,8 @@ def spin(argv: list[str], overrides: dict[str, Any], duration_s: float | None = 
             signal.signal(signum, handler)
         if node is not None:
             node.destroy_node()
+        if live is not None:  # after the worker stopped: nothing logs into a closed server
+            live.close()
         context.try_shutdown()
     return 0
 
@@ -368,6 +408,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help=f"{table[name][1]} (overrides the params file)")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--json", metavar="PATH", help="write counters, alarm episodes and the last status at exit")
+    parser.add_argument("--foxglove", type=int, metavar="PORT",
+                        help="also serve the outputs, ~/debug_image and the input image over the Foxglove WebSocket "
+                             "protocol on 127.0.0.1:PORT (0 = a free port; needs foxglove-sdk)")
+    parser.add_argument("--foxglove-host", default="127.0.0.1", metavar="HOST",
+                        help="address to serve on (0.0.0.0 for other machines; default 127.0.0.1)")
     parser.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=[],
                         help="remaining arguments are passed to ROS (remappings, -p name:=value)")
 
@@ -384,8 +429,10 @@ def run(args: argparse.Namespace) -> int:
     overrides = {k: getattr(args, k) for k in _CLI_OVERRIDES if getattr(args, k) is not None}
     if args.duration is not None and args.duration <= 0:
         raise ValueError("--duration must be > 0")
+    if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
+        raise ValueError(f"--foxglove port must be 0..65535, got {args.foxglove}")
     argv = ["noise-monitor", "--ros-args", "--params-file", str(params_file), *args.ros_args]
-    return spin(argv, overrides, args.duration, args.json)
+    return spin(argv, overrides, args.duration, args.json, args.foxglove, args.foxglove_host)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,6 +1,8 @@
 """The package as users install it: a wheel built from this tree into a fresh venv gives a working CLI."""
 from __future__ import annotations
 
+import ast
+import importlib.util
 import json
 import os
 import re
@@ -21,9 +23,46 @@ def _run(cmd: list[str], cwd: Path, **kw) -> subprocess.CompletedProcess:
 
 def test_package_xml_declares_what_the_code_imports() -> None:
     deps = {e.text for e in ElementTree.parse(ROOT / "package.xml").getroot() if e.tag.endswith("depend")}
-    for key in ("rclpy", "rcl_interfaces", "sensor_msgs", "diagnostic_msgs", "ament_index_python", "launch_ros",
+    for key in ("rclpy", "rcl_interfaces", "sensor_msgs", "diagnostic_msgs", "geometry_msgs", "ament_index_python", "launch_ros",
                 "python3-torch", "python3-rosbags-pip", "python3-onnxruntime-pip", "python3-opencv"):
         assert key in deps, key
+
+
+def _launch_file() -> ast.Module:
+    return ast.parse((ROOT / "launch" / "noise_monitor.launch.py").read_text())
+
+
+def _calls(tree: ast.AST, name: str) -> list[ast.Call]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", None) == name]
+
+
+def test_launch_file_takes_a_camera_namespace_a_params_file_and_remaps_the_relative_inputs() -> None:
+    """launch_ros is not installable here: the launch file is checked as source (it compiles, declares its
+    arguments and passes them to the node), and generated when launch_ros is importable."""
+    tree = _launch_file()
+    compile(tree, "noise_monitor.launch.py", "exec")
+    inputs = next(n.value for n in ast.walk(tree) if isinstance(n, ast.Assign)
+                  and getattr(n.targets[0], "id", None) == "INPUTS")
+    assert ast.literal_eval(inputs) == ("image", "metadata", "camera_info", "temperature")
+    declared = {c.args[0].value for c in _calls(tree, "DeclareLaunchArgument") if isinstance(c.args[0], ast.Constant)}
+    assert {"namespace", "params_file", "log_level"} <= declared  # the inputs' arguments come from INPUTS
+    (node,) = _calls(tree, "Node")
+    kw = {k.arg: ast.unparse(k.value) for k in node.keywords}
+    assert kw["namespace"] == "LaunchConfiguration('namespace')"
+    assert kw["parameters"] == "[LaunchConfiguration('params_file')]"
+    assert kw["remappings"] == "[(name, LaunchConfiguration(name)) for name in INPUTS]"
+    assert kw["executable"] == "'noise_monitor_node'"
+    # the relative defaults the remappings act on are the node's parameter defaults
+    from noise_monitor.monitor.runtime import parameter_table
+
+    table = parameter_table()
+    assert [table[f"{t}_topic"][0] for t in ("image", "metadata", "camera_info", "temperature")] == list(
+        ast.literal_eval(inputs))
+    if importlib.util.find_spec("launch_ros") is not None:  # with a ROS install: the real description
+        spec = importlib.util.spec_from_file_location("nm_launch", ROOT / "launch" / "noise_monitor.launch.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        assert len(module.generate_launch_description().entities) == 8
 
 
 @pytest.mark.skipif(os.environ.get("NOISE_MONITOR_SKIP_WHEEL") == "1", reason="wheel test disabled")

@@ -3,10 +3,14 @@
 Every image is accounted for: processed, or skipped with the monitor's reason (image unusable, metadata
 missing/invalid/stale, too few usable patches, ...). The node's behaviour is reproduced on bag time:
 same model (profile effects included), same hardware id, same reject path for unusable images, and
-the periodic ``/diagnostics`` idle report (STALE after ``image_timeout_s``) in gaps between images.
-Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
-(``msg_adapters.outputs``), ``replay.csv`` (one line per frame), ``replay.png`` and
-``summary.json``.
+``/diagnostics`` at ``diagnostics_rate_hz`` of bag time summarising each period
+(``noise_monitor.monitor.period``; STALE after ``image_timeout_s`` in gaps between images, a last partial
+period at the last image). Outputs in ``out_dir``: ``replay.mcap`` with exactly the node's topics
+(``msg_adapters.outputs``: per frame ``<namespace>/frame`` and the stamped numbers, stamped with the
+image's header; ``<namespace>/debug_image`` at ``debug_image_rate_hz`` in bag time), ``replay.csv`` (one line per frame),
+``replay.png`` and ``summary.json``. A live view (:class:`msg_adapters.live_view.LiveView`) is served
+every message written plus the evaluated gray image (``<namespace>/input_image``) while the replay
+runs, paced to bag time with ``rate``.
 """
 from __future__ import annotations
 
@@ -19,9 +23,18 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from msg_adapters.debug_image import debug_view
 from msg_adapters.keymap import keymap_entries
-from msg_adapters.outputs import DEFAULT_NAMESPACE, output_topics, rosbags_messages
+from msg_adapters.outputs import (
+    DEFAULT_NAMESPACE,
+    IMAGE_TYPE,
+    debug_image_topic,
+    output_topics,
+    rosbags_image,
+    rosbags_messages,
+)
 from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
+from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
 from noise_monitor.physics import CameraProfile
@@ -50,6 +63,52 @@ MAX_LISTED_SKIPS = 1000
 #: a real-time clock going from 1970 to today) must not mean 1.7e9 reports. One hour at 1 Hz.
 MAX_IDLE_REPORTS_PER_GAP = 3600
 OUTPUT_FILES = {"mcap": "replay.mcap", "csv": "replay.csv", "png": "replay.png", "json": "summary.json"}
+#: ``<namespace>/input_image`` in a live view: the gray image the monitor evaluated (mono8, mono16 above 8 bits).
+INPUT_IMAGE = "input_image"
+
+
+def live_topics(namespace: str = DEFAULT_NAMESPACE) -> dict[str, str]:
+    """Topics a replay serves to a live view: the outputs, the debug image and the evaluated gray image."""
+    return {**output_topics(namespace), debug_image_topic(namespace): IMAGE_TYPE,
+            "/" + namespace.strip("/") + "/" + INPUT_IMAGE: IMAGE_TYPE}
+
+
+class _Pacer:
+    """Sleeps so that frames leave at ``rate`` times their recording's pace (log time); None: no waiting."""
+
+    def __init__(self, rate: float | None) -> None:
+        if rate is not None and not (np.isfinite(rate) and rate > 0):
+            raise ValueError(f"rate must be > 0, got {rate}")
+        self.rate = rate
+        self._origin: tuple[float, int] | None = None
+
+    def wait(self, log_time_ns: int | None) -> None:
+        if self.rate is None or log_time_ns is None:
+            return
+        if self._origin is None:
+            self._origin = (time.monotonic(), log_time_ns)
+        wall0, log0 = self._origin
+        delay = wall0 + (log_time_ns - log0) / 1e9 / self.rate - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+
+
+class _Tee:
+    """Writes each output message to the replay's MCAP (when there is one) and to a live view."""
+
+    def __init__(self, bag: BagWriter | None, live: Any) -> None:
+        self.bag, self.live = bag, live
+
+    def write(self, topic: str, msg: Any, stamp_ns: int) -> None:
+        if self.bag is not None:
+            self.bag.write(topic, msg, stamp_ns)
+        self.live.log({topic: msg}, stamp_ns)
+
+
+def _gray_image(image_dn: np.ndarray, bit_depth: int | None) -> np.ndarray:
+    """The evaluated DN image as it would travel: uint8 up to 8 bits, uint16 above."""
+    high = bit_depth is not None and bit_depth > 8
+    return np.clip(np.rint(image_dn), 0, 65535 if high else 255).astype(np.uint16 if high else np.uint8)
 
 
 def _record(table: FrameTable, bf: Frame, res: FrameResult) -> None:
@@ -112,6 +171,8 @@ def run_replay(
     plot: bool = True,
     physics_tables: str | None = None,
     table: FrameTable | None = None,
+    live: Any = None,
+    rate: float | None = None,
 ) -> dict[str, Any]:
     """Run the monitor over every image of ``bag``; returns the JSON summary (outputs written to ``stage``).
 
@@ -124,7 +185,11 @@ def run_replay(
     ``physics_tables``: ``interpolated`` (default) or ``exact`` tables per metadata set (for comparisons).
     The params' ``metadata_keymap`` reads a DiagnosticArray with a driver's own key names.
     ``table``: an empty FrameTable to receive the per-frame results (a campaign keeps them).
+    ``live``: a :class:`msg_adapters.live_view.LiveView` advertising :func:`live_topics` (``namespace``),
+    served every message as it is produced; ``rate``: pace the frames to ``rate`` x their recording's
+    speed (default: as fast as processed).
     """
+    pacer = _Pacer(rate)
     overrides = {"model": model_name, "weights": str(weights) if weights else None, "device": device,
                  "camera_name": camera_name, "hardware_id": hardware_id, "bit_depth": bit_depth, "threads": threads,
                  "physics_tables": physics_tables}
@@ -146,7 +211,12 @@ def run_replay(
             rt = MonitorRuntime.from_params_file(config, overrides, profile=profile, estimator=estimator)
         prof, cfg, monitor, hw = rt.profile, rt.config, rt.monitor, rt.hardware_id
         diag_period_ns = rt.diagnostics_period_ns
-        writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
+        debug_hz = float(rt.params["debug_image_rate_hz"])
+        debug_topic, last_debug = debug_image_topic(namespace), None
+        input_topic = "/" + namespace.strip("/") + "/" + INPUT_IMAGE
+        bag_writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
+        # everything written to the MCAP is also served to a live view, as it is produced
+        writer = _Tee(bag_writer, live) if live is not None else bag_writer
         t_wall = time.perf_counter()
         n_images, bag_duration = len(reader), reader.duration_s
         topics = {role: clip(t, 200) if t else t for role, t in (
@@ -155,28 +225,52 @@ def run_replay(
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
                                color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
-        last_pub: int | None = None
+        periods: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
+        next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
+
+        def report(t: int) -> None:
+            assert periods is not None
+            status = periods.report(monitor, t)
+            if writer is not None:
+                for topic, msg in rosbags_messages(status, stamp_ns=t, typestore=typestore()).items():
+                    writer.write(topic, msg, t)
+
         for bf in tqdm(frames, total=n_images, unit="frame", desc=f"replay {Path(bag).name}", disable=not progress):
-            if writer is not None and last_pub is not None:  # the node's timer fills gaps (STALE when long)
+            if periods is None:
+                periods, next_report = PeriodSummary(bf.stamp_ns), bf.stamp_ns + diag_period_ns
+            else:  # the node's timer: one summary per period, idle ones (STALE when long) over gaps
                 # only while time really passed in the recording: a header stamp jumping by years (out of
-                # order, bogus clock) must not produce years of idle reports
-                end = min(bf.stamp_ns, last_pub + bf.log_time_ns - last_log)
-                t = last_pub + diag_period_ns
-                if (end - t) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
-                    end, capped_gaps = t + MAX_IDLE_REPORTS_PER_GAP * diag_period_ns, capped_gaps + 1
-                while t < end:
-                    for topic, msg in rosbags_messages(monitor.idle_report(t), stamp_ns=t, namespace=namespace,
-                                                       typestore=typestore()).items():
-                        writer.write(topic, msg, t)
-                    t += diag_period_ns
+                # order, bogus clock) must not produce years of reports
+                end = min(bf.stamp_ns, last_stamp + bf.log_time_ns - last_log)
+                if (end - next_report) // diag_period_ns >= MAX_IDLE_REPORTS_PER_GAP:  # a clock jump (1970 -> today)
+                    end, capped_gaps = next_report + (MAX_IDLE_REPORTS_PER_GAP - 1) * diag_period_ns, capped_gaps + 1
+                while next_report <= end:
+                    report(next_report)
+                    next_report += diag_period_ns
+                if not next_report - diag_period_ns <= bf.stamp_ns < next_report:  # the stamps jumped: a new grid
+                    next_report = bf.stamp_ns + diag_period_ns
+            pacer.wait(bf.log_time_ns)
             res = rt.process(bf)
             _record(table, bf, res)
+            periods.add(res)
             if writer is not None:
-                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore()).items():
+                for topic, msg in rosbags_messages(res, namespace=namespace, typestore=typestore(),
+                                                   frame_id=bf.frame_id).items():
                     writer.write(topic, msg, res.stamp_ns)
-            last_pub, last_log = res.stamp_ns, bf.log_time_ns
+            if (writer is not None and debug_hz > 0 and res.processed and res.patches is not None
+                    and bf.image_dn is not None and (last_debug is None or res.stamp_ns - last_debug >= 1e9 / debug_hz)):
+                last_debug = res.stamp_ns  # ~/debug_image at debug_image_rate_hz in bag time
+                rgb = debug_view(bf.image_dn, res.patches.corners, res.patches.size, res.patch_xi, cfg.xi_threshold_dn)
+                writer.write(debug_topic, rosbags_image(rgb, res.stamp_ns, bf.frame_id, typestore()), res.stamp_ns)
+            if live is not None:
+                if bf.image_dn is not None and live.has_subscribers(input_topic):
+                    live.log_image(input_topic, _gray_image(bf.image_dn, opts.bit_depth), res.stamp_ns)
+                live.broadcast_time(res.stamp_ns)
+            last_stamp, last_log = res.stamp_ns, bf.log_time_ns
+        if periods is not None and periods.frames:  # the last, partial period ends with the last image
+            report(last_stamp)
     wall = time.perf_counter() - t_wall
     if len(table) != n_images:
         raise BagError(f"bag {bag}: read {len(table)} images but its index lists {n_images}")
@@ -189,7 +283,7 @@ def run_replay(
         "estimator": getattr(rt.estimator, "name", str(rt.params["model"])),
         "hardware_id": hw,
         "topics_in": topics,
-        "topics_out": output_topics(namespace),
+        "topics_out": {**output_topics(namespace), **({debug_topic: IMAGE_TYPE} if last_debug is not None else {})},
         "frames_total": len(table),
         "frames_processed": processed,
         "frames_skipped": len(table) - processed,

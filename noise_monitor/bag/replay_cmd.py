@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .replay import replay
+from .replay import live_topics, replay
 from .staging import input_files, refuse_overwriting_inputs, write_text_atomic
 
 
@@ -31,6 +31,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, help="CPU threads for inference (default: the params file's; "
                                                     "0 = all cores but one)")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG plot")
+    parser.add_argument("--foxglove", type=int, metavar="PORT",
+                        help="serve the outputs, the debug image and the evaluated image over the Foxglove WebSocket "
+                             "protocol on 127.0.0.1:PORT while replaying (0 = a free port; needs foxglove-sdk)")
+    parser.add_argument("--foxglove-host", default="127.0.0.1", metavar="HOST",
+                        help="address to serve on (0.0.0.0 for other machines; default 127.0.0.1)")
+    parser.add_argument("--foxglove-wait", type=float, default=0.0, metavar="S",
+                        help="with --foxglove: wait up to S seconds for a client to subscribe before replaying")
+    parser.add_argument("--rate", type=float, default=None,
+                        help="pace the replay to RATE x the recording's speed (1 = real time; default: as fast as "
+                             "processed)")
 
 
 def _fmt(v: Any) -> str:
@@ -66,15 +76,40 @@ def print_summary(s: dict[str, Any]) -> None:
         print(f"  {kind:5s} {path}")
 
 
+def _live_view(args: argparse.Namespace) -> Any:
+    """The Foxglove server of ``--foxglove`` (None without it); waits ``--foxglove-wait`` for a client."""
+    if args.foxglove is None:
+        if args.foxglove_wait:
+            raise ValueError("--foxglove-wait needs --foxglove PORT")
+        return None
+    if not (args.foxglove_wait >= 0 and args.foxglove_wait < float("inf")):
+        raise ValueError(f"--foxglove-wait must be >= 0 seconds, got {args.foxglove_wait}")
+    from msg_adapters.live_view import LiveView
+
+    live = LiveView(live_topics(), args.foxglove, host=args.foxglove_host)
+    print(f"foxglove: serving {live.url} (Foxglove: Open connection > Foxglove WebSocket)", flush=True)
+    if args.foxglove_wait > 0 and not live.wait_for_subscriber(args.foxglove_wait):
+        print(f"foxglove: no client after {args.foxglove_wait:g} s, replaying anyway", flush=True)
+    return live
+
+
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
     if args.json:
         refuse_overwriting_inputs([Path(args.json)], input_files(args.bag))
-    summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights, device=args.device,
-                     config=args.params, camera_name=args.camera_name, image_topic=args.image_topic,
-                     metadata_topic=args.metadata_topic, camera_info_topic=args.camera_info_topic,
-                     temperature_topic=args.temperature_topic,
-                     bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot)
+    if args.rate is not None and not (0 < args.rate < float("inf")):
+        raise ValueError(f"--rate must be > 0, got {args.rate}")
+    live = _live_view(args)
+    try:
+        summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights,
+                         device=args.device, config=args.params, camera_name=args.camera_name,
+                         image_topic=args.image_topic, metadata_topic=args.metadata_topic,
+                         camera_info_topic=args.camera_info_topic, temperature_topic=args.temperature_topic,
+                         bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot, live=live,
+                         rate=args.rate)
+    finally:
+        if live is not None:
+            live.close()
     print_summary(summary)
     if args.json:
         write_text_atomic(args.json, json.dumps(summary, indent=2))

@@ -28,6 +28,7 @@ class Frame:
     index: int = 0
     log_time_ns: int | None = None  # when the recorder received the image (bags)
     raw_metadata: dict[str, Any] = field(default_factory=dict)
+    frame_id: str = ""  # the image header's frame_id (the per-frame outputs carry it)
 
     @property
     def skip_reason(self) -> str | None:

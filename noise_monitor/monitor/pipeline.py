@@ -75,6 +75,7 @@ class FrameResult:
     patches_measurable: int | None = None  # patches the estimator could measure (None: no confidence output)
     processing_ms: float = 0.0
     counters: dict[str, int] = field(default_factory=dict)
+    xi_threshold: float = 0.0  # the alarm threshold in force for this frame (DN; dashboards draw +-it around xi)
 
     def numeric(self) -> dict[str, float]:
         """Numbers of a processed frame (for plots, CSV and the numeric topics); empty when skipped."""
@@ -98,6 +99,7 @@ class FrameResult:
         out.update({f"sigma_model_{k}": v for k, v in self.model.items() if k != "total"})
         out.update({f"sigma_{k}_filtered": self.filtered[k] for k in SOURCES + ("total",)})
         out["alarm"] = float(self.alarm_active)
+        out["xi_threshold"] = float(self.xi_threshold)
         out["patches"] = float(len(self.patches.corners))
         if self.patches_measurable is not None:
             out["patches_measurable"] = float(self.patches_measurable)
@@ -174,7 +176,7 @@ class Monitor:
 
     def _result(self, frame: Frame, level: int, message: str, **kw: Any) -> FrameResult:
         res = FrameResult(frame.stamp_ns, self.name, self.hardware_id, level, message,
-                          counters=dict(self.counters), **kw)
+                          counters=dict(self.counters), xi_threshold=self.config.xi_threshold_dn, **kw)
         self.last_result = res
         return res
 

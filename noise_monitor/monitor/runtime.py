@@ -27,7 +27,8 @@ from .pipeline import Estimator, FrameResult, Monitor
 COLORS = ("luma", "green")
 #: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
 RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
-    "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS)"),
+    "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS); relative names resolve in the node's "
+                             "namespace and are remappable"),
     "image_transport": ("raw", "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on image_topic: "
                                "lossless PNG/TIFF/zstd decoded, lossy formats refused as skipped frames)"),
     "metadata_topic": ("metadata", "per-frame metadata (type per metadata_source); '' = none"),
@@ -41,8 +42,10 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "metadata_driver": ("v4l2_camera", "metadata_source parameters: parameter names of v4l2_camera or usb_cam "
                                        "(metadata_keymap overrides)"),
     "camera_info_topic": ("camera_info", "sensor_msgs/CameraInfo (image size/binning/ROI check); '' = none"),
-    "temperature_topic": ("", "sensor_msgs/Temperature with the sensor temperature in degC; '' = none"),
-    "camera_name": ("camera", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'"),
+    "temperature_topic": ("temperature", "sensor_msgs/Temperature with the sensor temperature in degC (optional: "
+                                         "without messages the metadata's or the profile's); '' = none"),
+    "camera_name": ("", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'; '' = the node's "
+                        "namespace (cam1 for /cam1, two cameras stay apart), else 'camera'"),
     "hardware_id": ("", "diagnostic hardware_id; '' = the driver's (its metadata status's hardware_id, e.g. the "
                         "serial), else '<profile name>/<camera_name>'"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
@@ -63,6 +66,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
                                        "temperature (metadata that changes every frame) or exact (recomputed per set)"),
 }
 PHYSICS_TABLES = ("interpolated", "exact")
+#: camera_name when neither the parameter nor a namespace names the camera.
+DEFAULT_CAMERA_NAME = "camera"
 #: Table requests per frame are 2-3 (monitor, estimator prior, temporal): metadata held for about 2 frames or
 #: more gets exact tables, metadata drifting every frame interpolated ones (see GridSpec.held_exact_requests).
 HELD_EXACT_REQUESTS = 4
@@ -177,6 +182,7 @@ class MonitorRuntime:
                              threads=threads)
         self.estimator = estimator
         profile_name = self.profile.name if self.profile else "unknown"
+        p["camera_name"] = p["camera_name"] or DEFAULT_CAMERA_NAME
         self.hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
         self.monitor = Monitor(self.config, estimator, self.model, p["camera_name"], self.hardware_id)
         depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)

@@ -19,7 +19,9 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC
+from msg_adapters import WARN, StatusReport, reports_from_msg
+from msg_adapters.diagnostics import jazzy_typestore
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, frame_topic
 from noise_monitor.bag import BagError
 from noise_monitor.bag.messages import camera_info_msg, header, image_msg, metadata_msg
 from noise_monitor.bag.reader import open_bag
@@ -126,6 +128,13 @@ def rewrite_with_checksums(src: Path, dst: Path) -> Path:
             w.add_message(channels[channel.id], m.log_time, m.data, m.publish_time)
         w.finish()
     return dst
+
+
+def summaries(path: Path, topic: str = DIAGNOSTICS_TOPIC) -> list[StatusReport]:
+    """The statuses on ``topic`` (default the /diagnostics period summaries) of a replay's MCAP."""
+    with open(path, "rb") as fh:
+        return [reports_from_msg(jazzy_typestore().deserialize_cdr(m.data, schema.name))[0]
+                for schema, _, m in make_reader(fh).iter_messages(topics=[topic])]
 
 
 def frames_of(bag: Path) -> list[tuple[int, bytes | None, str | None]]:
@@ -330,9 +339,11 @@ def test_replay_accounts_for_every_frame_of_a_bag_with_timing_problems(tmp_path,
     assert set(reasons) == {2, 9}
     assert reasons[2] == "metadata stale: 0.20 s between image and metadata (timeout 0.15 s)"
     assert "gain_db='nan' is not finite" in reasons[9]
-    with open(tmp_path / "out" / "replay.mcap", "rb") as fh:
-        statuses = [m for _, _, m in make_reader(fh).iter_messages(topics=[DIAGNOSTICS_TOPIC])]
-    assert len(statuses) == 10  # one per frame, no idle gap at 10 Hz
+    frame_statuses = summaries(tmp_path / "out" / "replay.mcap", frame_topic())
+    assert [r.level for r in frame_statuses].count(WARN) == 2 and len(frame_statuses) == 10  # one per frame
+    (period,) = summaries(tmp_path / "out" / "replay.mcap")  # 0.9 s of bag time: one (partial) 1 Hz period
+    assert (period.values["period_frames"], period.values["period_skipped"]) == ("10", "2")
+    assert period.values["skipped: metadata stale"] == period.values["skipped: metadata invalid"] == "1"
 
 
 def test_camera_info_disagreeing_with_every_image_skips_them_with_the_reason(tmp_path, estimator):
@@ -363,9 +374,10 @@ def test_image_stamps_out_of_order_or_bogus_do_not_hang_the_replay(tmp_path, est
             w.write("/camera/image_raw", image_msg(textured(size, i), stamp), log)
     s = replay(bag, PROFILE, tmp_path / "o", estimator=estimator, config=CONFIG, progress=False, plot=False)
     assert s["frames_total"] == 6 and s["frames_processed"] == 6
-    with open(tmp_path / "o" / "replay.mcap", "rb") as fh:
-        statuses = [m for _, _, m in make_reader(fh).iter_messages(topics=[DIAGNOSTICS_TOPIC])]
-    assert len(statuses) == 6 + 2  # the 1 Hz idle reports 1 s and 2 s into the 3 s pause, nothing else
+    statuses = summaries(tmp_path / "o" / "replay.mcap")
+    # the 1 Hz grid restarts where the stamps jump; reports fill only the 3 s pause that really passed
+    # (log time): the first five frames' period, two idle periods, the last frame's partial period
+    assert [r.values["period_frames"] for r in statuses] == ["5", "0", "0", "1"]
 
 
 # --- plug-in effects that fail ---------------------------------------------------------------------

@@ -10,7 +10,9 @@ import pytest
 import torch
 from mcap.reader import make_reader
 
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC, OUTPUT_TOPICS
+from msg_adapters import ERROR, STALE, WARN, reports_from_msg
+from msg_adapters.diagnostics import jazzy_typestore
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, IMAGE_TYPE, OUTPUT_TOPICS, debug_image_topic
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import truth_check
@@ -53,7 +55,7 @@ def test_summary_contract_and_accounting(replayed):
         st = s[key]
         assert st["p5"] <= st["mean"] <= st["p95"] and st["n"] == 20
     assert s["sigma_pn"]["mean"] > 0 and s["sigma_rn"]["mean"] > 0
-    assert s["topics_out"] == OUTPUT_TOPICS
+    assert s["topics_out"] == {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}
     assert s["realtime_factor"] > 0 and s["bag_duration_s"] == pytest.approx(19 / 5.0)
 
 
@@ -102,9 +104,52 @@ def test_mcap_has_exactly_the_node_topics_and_is_readable_by_the_mcap_library(re
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             schemas[channel.topic] = schema.name
         assert reader.get_header().profile == "ros2"
-    assert schemas == OUTPUT_TOPICS
-    assert counts[DIAGNOSTICS_TOPIC] == 20  # one status per frame (no gaps in this bag)
-    assert all(counts[t] == 20 for t in OUTPUT_TOPICS if t != DIAGNOSTICS_TOPIC)
+    assert schemas == {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}
+    assert counts[debug_image_topic()] == 4  # debug_image_rate_hz 1 in bag time: 20 frames at 5 Hz span 3.8 s
+    assert all(counts[t] == 20 for t in OUTPUT_TOPICS if t != DIAGNOSTICS_TOPIC)  # every frame evaluated
+    assert counts[DIAGNOSTICS_TOPIC] == 4  # 3.8 s at 1 Hz: 3 full periods and the last partial one
+
+
+def decoded(path: Path, topics: list[str]) -> list[tuple[str, int, object]]:
+    """(topic, header stamp ns, message) of ``topics`` in an MCAP, in file order."""
+    out = []
+    with open(path, "rb") as fh:
+        for schema, channel, m in make_reader(fh).iter_messages(topics=topics):
+            msg = jazzy_typestore().deserialize_cdr(m.data, schema.name)
+            out.append((channel.topic, msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, msg))
+    return out
+
+
+def test_diagnostics_summarise_each_second_of_bag_time(replayed):
+    """/diagnostics at 1 Hz of bag time: per period the worst level, the frames and xi min/mean/max of the
+    per-frame ~/frame statuses in it, the latest filtered values; per frame the image's header."""
+    s, out = replayed
+    per_frame = {}
+    for topic, stamp, msg in decoded(out / "replay.mcap", ["/noise_monitor/frame", "/noise_monitor/xi"]):
+        if topic.endswith("/xi"):
+            assert msg.header.frame_id == "camera" and stamp in per_frame  # the image's header
+            continue
+        (r,) = reports_from_msg(msg)
+        per_frame[stamp] = r
+    stamps = sorted(per_frame)
+    summaries = [(t, reports_from_msg(m)[0]) for _, t, m in decoded(out / "replay.mcap", [DIAGNOSTICS_TOPIC])]
+    assert [t - stamps[0] for t, _ in summaries] == [10**9, 2 * 10**9, 3 * 10**9, stamps[-1] - stamps[0]]
+    start, seen_error = stamps[0], False
+    for n, (t, rep) in enumerate(summaries):
+        last = n == len(summaries) - 1
+        inside = [per_frame[x] for x in stamps if start <= x < t or (last and x == t)]
+        xi = [float(r.values["xi"]) for r in inside]
+        v = rep.values
+        assert int(v["period_frames"]) == int(v["period_processed"]) == len(inside) == 5
+        assert float(v["xi_min"]) == pytest.approx(min(xi), rel=1e-4)
+        assert float(v["xi_max"]) == pytest.approx(max(xi), rel=1e-4)
+        assert float(v["xi_mean"]) == pytest.approx(np.mean(xi), rel=1e-4, abs=1e-5)
+        assert rep.level == max(r.level for r in inside)
+        assert v["xi"] == inside[-1].values["xi_filtered"] and v["sigma_rn"] == inside[-1].values["sigma_rn_filtered"]
+        assert v["alarm_raised"] == ("1" if any(r.values["alarm"] == "1" for r in inside) else "0")
+        seen_error |= rep.level == ERROR
+        start = t
+    assert seen_error and s["alarms"]  # the alarm episode shows in its periods
 
 
 def test_csv_png_and_json_files(replayed):
@@ -149,10 +194,12 @@ def test_every_frame_accounted_with_reasons_and_stale_gap(tmp_path, estimator):
     assert reasons[3].startswith("image unusable: unsupported image encoding")
     assert reasons[4].startswith("metadata stale: 5.00 s")
     assert sum(s["skip_reasons"].values()) == 4 and s["levels"]["WARN"] == 4
-    with open(tmp_path / "o" / "replay.mcap", "rb") as fh:
-        diag = [m for _, c, m in make_reader(fh).iter_messages(topics=[DIAGNOSTICS_TOPIC])]
-    # 6 frame statuses + the node's 1 Hz idle reports in the 5 s gap (STALE after image_timeout_s = 2 s)
-    assert len(diag) == 6 + 4
+    diag = [(t // 10**9, reports_from_msg(m)[0]) for _, t, m in decoded(tmp_path / "o" / "replay.mcap", [DIAGNOSTICS_TOPIC])]
+    # 1 Hz summaries over the frames at 1, 2, 3, 4, 9 and 10 s, STALE after image_timeout_s = 2 s in the gap
+    assert [t for t, _ in diag] == [2, 3, 4, 5, 6, 7, 8, 9, 10, 10]
+    assert [r.level for _, r in diag] == [WARN, 0, WARN, WARN, WARN, STALE, STALE, STALE, WARN, 0]
+    assert [r.values["period_frames"] for _, r in diag] == ["1", "1", "1", "1", "0", "0", "0", "0", "1", "1"]
+    assert diag[0][1].values["skipped: metadata missing"] == "1" and "no image for 3.0 s" in diag[5][1].message
 
 
 def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):

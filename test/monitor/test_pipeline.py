@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from msg_adapters import ERROR, OK, STALE, WARN, reports_from_msg
-from msg_adapters.outputs import OUTPUT_TOPICS, output_topics, rclpy_messages, rosbags_messages
+from msg_adapters.outputs import OUTPUT_TOPICS, number_of, output_topics, rclpy_messages, rosbags_messages
 from noise_monitor.monitor import (
     CAUSE_IMAGE_NOISIER,
     CAUSE_MODEL_NOISIER,
@@ -205,20 +205,27 @@ def test_idle_report_goes_stale(rng):
 # --- outputs -------------------------------------------------------------------------------
 def test_outputs_same_topics_and_values_for_rclpy_and_rosbags(rng):
     mon = make_monitor()
-    res = mon.process(next(frames(rng, 1))[0])
-    a, b = rclpy_messages(res), rosbags_messages(res)
-    assert set(a) == set(b) == set(OUTPUT_TOPICS)
-    for topic in OUTPUT_TOPICS:
-        if topic == "/diagnostics":
+    res = mon.process(next(frames(rng, 1, start=31))[0])
+    a, b = rclpy_messages(res, frame_id="cam_optical"), rosbags_messages(res, frame_id="cam_optical")
+    per_frame = set(OUTPUT_TOPICS) - {"/diagnostics"}  # /diagnostics is the period summary, not per frame
+    assert set(a) == set(b) == per_frame
+    for topic in per_frame:
+        for msg in (a[topic], b[topic]):  # stamped with the image's header
+            assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == divmod(res.stamp_ns, 10**9)
+            assert msg.header.frame_id == "cam_optical"
+        if topic == "/noise_monitor/frame":
             assert reports_from_msg(a[topic]) == reports_from_msg(b[topic]) == [res.report()]
         else:
-            assert a[topic].data == pytest.approx(b[topic].data)
-    assert a["/noise_monitor/sigma_rn"].data == pytest.approx(res.sigma["rn"], rel=1e-6)
+            assert number_of(a[topic]) == number_of(b[topic]) and a[topic].vector.y == b[topic].vector.z == 0.0
+    assert number_of(a["/noise_monitor/sigma_rn"]) == res.sigma["rn"]
+    assert number_of(a["/noise_monitor/sigma_image"]) == res.sigma["image"]
+    assert number_of(a["/noise_monitor/xi_threshold"]) == mon.config.xi_threshold_dn
     skipped = mon.process(Frame(5, np.zeros((256, 256), np.float32), None, missing=["gain_db"]))
-    assert set(rclpy_messages(skipped)) == {"/diagnostics"}
+    assert set(rclpy_messages(skipped)) == {"/noise_monitor/frame"}  # a skipped frame: its status, no numbers
+    assert reports_from_msg(rclpy_messages(skipped)["/noise_monitor/frame"])[0].level == WARN
     idle = rosbags_messages(mon.idle_report(10**12), stamp_ns=10**12)
-    assert reports_from_msg(idle["/diagnostics"])[0].level == STALE
-    assert "/cam_monitor/xi" in output_topics("cam_monitor")
+    assert set(idle) == {"/diagnostics"} and reports_from_msg(idle["/diagnostics"])[0].level == STALE
+    assert {"/cam_monitor/xi", "/cam_monitor/frame"} <= set(output_topics("cam_monitor"))
 
 
 @pytest.mark.parametrize("mode,extra", [("joint", ["prnu"]), ("sequential", None)])

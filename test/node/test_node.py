@@ -2,7 +2,7 @@
 
 A fake camera node publishes simulated frames (NoiseModel.simulate, joint mode, quantised to mono8)
 and their metadata; the test spins one executor with spin_once and timeouts (no sleeps) and reads
-/diagnostics and the numeric topics back.
+the per-frame statuses (~/frame), the stamped numbers and the /diagnostics period summaries back.
 """
 from __future__ import annotations
 
@@ -23,11 +23,11 @@ rclpy = pytest.importorskip("rclpy")
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
-from std_msgs.msg import Float32  # noqa: E402
 
 from noise_monitor.estimator import load  # noqa: E402
 from noise_monitor.node import node_class, parameter_table  # noqa: E402
@@ -37,6 +37,10 @@ MODEL = NoiseModel()
 PROFILE = load_profile("icx285")
 DYNAMIC = {"gain_db": 18.0, "exposure_time_s": 0.01, "sensor_temperature_c": 40.0}
 TIMEOUT_S = 30.0
+
+
+def _stamp(msg: Any) -> int:
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
 
 
 def scene(h: int = SIZE, w: int = SIZE) -> np.ndarray:
@@ -50,7 +54,7 @@ def estimator():
 
 
 class Rig:
-    """The node under test, a fake camera and a /diagnostics listener on one executor."""
+    """The node under test, a fake camera and listeners of ~/frame and /diagnostics on one executor."""
 
     def __init__(self, estimator: Any, topic: str, **params: Any) -> None:
         self.context = rclpy.Context()
@@ -69,13 +73,15 @@ class Rig:
         self.pub_img = self.cam.create_publisher(image_type, base["image_topic"], qos_profile_sensor_data)
         meta_topic = base["metadata_topic"] or f"/{topic}/unused_metadata"
         self.pub_meta = self.cam.create_publisher(DiagnosticArray, meta_topic, 10)
-        self.diagnostics: list[tuple[int, StatusReport]] = []
+        self.diagnostics: list[tuple[int, StatusReport]] = []  # /diagnostics: the period summaries
         self.cam.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
-        self.numbers: dict[str, list[float]] = {}
+        self.frames: list[tuple[int, StatusReport]] = []  # ~/frame: every frame's status, image stamp
         ns = self.node.get_fully_qualified_name()
+        self.cam.create_subscription(DiagnosticArray, f"{ns}/frame", self._on_frame, 50)
+        self.numbers: dict[str, list[tuple[int, float]]] = {}  # (header stamp, value) of stamped numbers
         for key in ("sigma_rn", "xi"):
-            self.cam.create_subscription(Float32, f"{ns}/{key}",
-                                         lambda m, k=key: self.numbers.setdefault(k, []).append(m.data), 50)
+            self.cam.create_subscription(Vector3Stamped, f"{ns}/{key}", lambda m, k=key: self.numbers.setdefault(
+                k, []).append((_stamp(m), m.vector.x)), 50)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.cam)
@@ -85,8 +91,11 @@ class Rig:
                                and self.cam.count_publishers("/diagnostics") > 0, TIMEOUT_S), "no discovery"
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
-        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-        self.diagnostics.extend((stamp, r) for r in reports_from_msg(msg) if r.name.endswith(self.node.params["camera_name"]))
+        self.diagnostics.extend((_stamp(msg), r) for r in reports_from_msg(msg)
+                                if r.name.endswith(self.node.params["camera_name"]))
+
+    def _on_frame(self, msg: DiagnosticArray) -> None:
+        self.frames.extend((_stamp(msg), r) for r in reports_from_msg(msg))
 
     def spin_until(self, done: Callable[[], bool], timeout: float) -> bool:
         end = time.monotonic() + timeout
@@ -125,10 +134,10 @@ class Rig:
         found: list[StatusReport] = []
 
         def done() -> bool:
-            found.extend(r for s, r in self.diagnostics if s == stamp_ns)
+            found.extend(r for s, r in self.frames if s == stamp_ns)
             return bool(found)
 
-        assert self.spin_until(done, TIMEOUT_S), f"no /diagnostics for image stamp {stamp_ns}"
+        assert self.spin_until(done, TIMEOUT_S), f"no ~/frame status for image stamp {stamp_ns}"
         return found[0]
 
     def step(self, i: int, **kw: Any) -> tuple[StatusReport, dict]:
@@ -158,9 +167,10 @@ def test_clean_frames_stay_ok_and_sources_match_truth(rig_factory):
         assert np.mean(est[k]) == pytest.approx(np.mean(truth[k]), abs=0.25, rel=0.1), k
     assert int(report.values["frames_processed"]) == 200 and report.values["alarm"] == "0"
     assert abs(float(report.values["xi_filtered"])) < 0.7
-    # the numeric topics carry the same numbers as /diagnostics
+    # the stamped numbers carry the same numbers as ~/frame, stamped with the image's header
     assert rig.spin_until(lambda: len(rig.numbers.get("sigma_rn", [])) >= 200, TIMEOUT_S)
-    assert rig.numbers["sigma_rn"][-1] == pytest.approx(float(report.values["sigma_rn"]), rel=1e-5)
+    stamp, value = rig.numbers["sigma_rn"][-1]
+    assert stamp == 1_000 * 10**9 + 199 * 33_333_333 and value == pytest.approx(float(report.values["sigma_rn"]), rel=1e-5)
 
 
 def test_extra_image_noise_raises_alarm_with_cause(rig_factory):
@@ -212,13 +222,50 @@ def test_stale_without_images_and_after_they_stop(rig_factory):
     assert "no image for" in stale.message and stale.hardware_id == "ICX285/stale"
 
 
-def test_diagnostics_published_at_least_at_the_configured_rate(rig_factory):
-    rig = rig_factory("rate", diagnostics_rate_hz=4.0)
-    rig.spin_until(lambda: len(rig.diagnostics) >= 2, TIMEOUT_S)
-    first_ns = rig.node.get_clock().now().nanoseconds
-    assert rig.spin_until(lambda: len(rig.diagnostics) >= 10, TIMEOUT_S)
-    elapsed = (rig.node.get_clock().now().nanoseconds - first_ns) / 1e9
-    assert elapsed < 8 / 4.0 * 1.5 + 1.0  # ~2 s for 8 statuses at 4 Hz (generous: shared CPU)
+@pytest.mark.parametrize("rate_hz,periods", [(1.0, 4), (5.0, 15)])
+def test_diagnostics_summarise_each_period_at_the_configured_rate_under_30_hz_input(rig_factory, rate_hz, periods):
+    """Frames at 30 Hz (node clock): /diagnostics comes at diagnostics_rate_hz (header stamps: the ROS clock
+    of the node's timer), one summary per period whose frames and xi min/max are those of the ~/frame
+    statuses it covers (by the frames_received counter, whatever the delivery order)."""
+    rig = rig_factory(f"rate{int(rate_hz)}", diagnostics_rate_hz=rate_hz)
+    clock = rig.node.get_clock()
+    n0 = len(rig.diagnostics)
+    next_ns, i = clock.now().nanoseconds, 0
+
+    def camera_at_30_hz() -> bool:
+        nonlocal next_ns, i
+        if clock.now().nanoseconds >= next_ns:
+            rig.publish(i)
+            i, next_ns = i + 1, next_ns + 33_333_333
+        return len(rig.diagnostics) - n0 >= periods + 2
+
+    assert rig.spin_until(camera_at_30_hz, TIMEOUT_S + periods / rate_hz)
+    summaries = rig.diagnostics[n0 + 1:]  # the first one may cover the start-up
+    stamps = np.array([t for t, _ in summaries], dtype=np.float64)
+    rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9)
+    assert rate == pytest.approx(rate_hz, rel=0.05), np.diff(stamps) / 1e9
+    assert rig.spin_until(lambda: len(rig.frames) >= int(summaries[-1][1].values["frames_received"]), TIMEOUT_S)
+    by_count = {int(r.values["frames_received"]): r for _, r in rig.frames}
+    received = checked = 0
+    for _, rep in summaries:
+        v = rep.values
+        before, received = received, int(v["frames_received"])
+        if not before:
+            continue
+        inside = [by_count[n] for n in range(before + 1, received + 1)]
+        assert int(v["period_frames"]) == int(v["period_processed"]) == len(inside)
+        if not inside:  # a period without a finished frame (a loaded CPU): the last status, no xi statistics
+            assert "xi_min" not in v
+            continue
+        checked += 1
+        xi = [float(r.values["xi"]) for r in inside]
+        assert float(v["xi_min"]) == pytest.approx(min(xi), rel=1e-4)
+        assert float(v["xi_max"]) == pytest.approx(max(xi), rel=1e-4)
+        assert v["xi"] == inside[-1].values["xi_filtered"] and v["sigma_pn"] == inside[-1].values["sigma_pn_filtered"]
+        assert rep.level == OK == max(r.level for r in inside)
+    assert checked >= periods // 2
+    frames_per_period = i / (len(rig.diagnostics) - n0)  # frames offered per period: about 30 / rate
+    assert frames_per_period == pytest.approx(30.0 / rate_hz, rel=0.3)
 
 
 def test_missing_metadata_is_a_warning_naming_the_fields(rig_factory):
