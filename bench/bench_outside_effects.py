@@ -65,6 +65,10 @@ def run(effect: str, cfg: dict, plugin: Path) -> dict:
         "claimed_with_plugin": [c["effect"] for c in with_plugin["candidates"] if c["significant"]],
         "fitted": fitted["fitted"], "fitted_errors": fitted["param_errors"],
         "rms_error_before_dn": before, "rms_error_after_dn": after, "error_cut": 1.0 - after / before,
+        "rms_error_before_raw_dn": with_plugin["rms_error_before_raw_dn"],
+        "rms_error_after_raw_dn": with_plugin["rms_error_after_raw_dn"],
+        "error_cut_raw": 1.0 - with_plugin["rms_error_after_raw_dn"] / with_plugin["rms_error_before_raw_dn"],
+        "contradicted_without_plugin": {c["effect"]: c["contradicted"] for c in bare["candidates"] if c["contradicted"]},
         "analysis_time_s": round(t_bare, 1),
     }
 
@@ -89,7 +93,8 @@ def main() -> int:
                   f"plug-in rank {r['plugin_rank']} significant {r['plugin_significant']}, claimed "
                   f"{r['claimed_with_plugin']}; fitted {r['fitted']} (truth {r['truth']}); rms "
                   f"{r['rms_error_before_dn']:.3f} -> {r['rms_error_after_dn']:.3f} DN "
-                  f"(cut {r['error_cut']:.0%}); {r['analysis_time_s']} s", flush=True)
+                  f"(cut {r['error_cut']:.0%}; raw {r['rms_error_before_raw_dn']:.3f} -> {r['rms_error_after_raw_dn']:.3f} DN, "
+                  f"cut {r['error_cut_raw']:.0%}); {r['analysis_time_s']} s", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
     return 0

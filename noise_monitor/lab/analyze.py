@@ -13,7 +13,7 @@ from tqdm import tqdm
 from ..physics import CameraProfile, Effect, NoiseModel, load_plugin_file, load_profile
 from ..physics.effects import effect_class
 from ..physics.metadata import profile_from_mapping
-from .compare import Comparison, baseline_effects, by_condition, region_table, rms_error
+from .compare import Comparison, baseline_effects, by_condition, measurement_scatter, region_table, rms_error, rms_error_raw
 from .diagnose import EffectSpec, candidate_names, diagnose, fit
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
@@ -94,11 +94,13 @@ def analyze(
 ) -> dict[str, Any]:
     """Measure, compare, diagnose and (with ``add_effects``) refit; returns the JSON summary.
 
-    Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma), ``by_condition``,
+    Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma per cell, net of the
+    measurement's own scatter: :func:`.compare.rms_error`), ``rms_error_raw_dn`` (the plain rms of the
+    residuals), ``measurement_scatter_dn`` (the rms of the cells' standard errors), ``by_condition``,
     ``candidates`` (ranked best first: ``effect``, ``significant``, ``explained_fraction``, ``params``,
     ...), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
     no candidate explains a significant residual), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
-    ``rms_error_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With
+    ``rms_error_after_dn`` (both net, as ``rms_error_dn``), ``rms_error_before_raw_dn``, ``rms_error_after_raw_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With
     ``estimator`` (None: skip), ``estimator``: the monitor's xi and sigma_image per model (``before``,
     ``after``) on the same frames (:func:`.estimate.estimator_views`; ``weights``: e.g. fine-tuned ones).
     """
@@ -125,6 +127,8 @@ def analyze(
         "model_effects": [e.name for e in base],
         "measurement": meas.summary(),
         "rms_error_dn": rms_error(rows),
+        "rms_error_raw_dn": rms_error_raw(rows),
+        "measurement_scatter_dn": measurement_scatter(rows),
         "by_condition": {**by_condition(rows), "region": region_table(comp)},
         "candidates": [c.as_dict() for c in cands],
         "unexplained": unexplained(comp, rows, cands),
@@ -147,6 +151,8 @@ def analyze(
             ],
             "rms_error_before_dn": out["rms_error_dn"],
             "rms_error_after_dn": rms_error(rows_after),
+            "rms_error_before_raw_dn": out["rms_error_raw_dn"],
+            "rms_error_after_raw_dn": rms_error_raw(rows_after),
             "by_condition_after": {**by_condition(rows_after), "region": region_table(comp_after)},
             "cells_after": _strip(rows_after),
         })

@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
         weights=args.weights,
         device=args.device,
     )
-    print(f"rms error (model vs measured total sigma): {summary['rms_error_dn']:.4f} DN "
+    print(f"rms error (model vs measured total sigma, net of the measurement's scatter): {summary['rms_error_dn']:.4f} DN "
+          f"(raw {summary['rms_error_raw_dn']:.4f} DN, measurement scatter {summary['measurement_scatter_dn']:.4f} DN) "
           f"over {summary['measurement']['cells']} cells, {summary['measurement']['frames_used']} frames")
     m = summary["measurement"]
     for reason, n in m["frames_skipped"].items():
@@ -66,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     if "plugin_skeleton_written" in summary:
         print(f"plug-in skeleton: {summary['plugin_skeleton_written']}")
     if "rms_error_after_dn" in summary:
-        print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN")
+        print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN "
+              f"(raw {summary['rms_error_before_raw_dn']:.4f} -> {summary['rms_error_after_raw_dn']:.4f} DN)")
     for name, view in summary.get("estimator", {}).items():
         xi = view["xi_dn"]
         if xi["mean"] is not None:

@@ -446,11 +446,19 @@ class Comparison:
                 res.append((seg.outlier_amplitude_dn - amp) / max(amp_err, 1e-6))
             else:
                 res.append(0.0)
-        if math.isfinite(self.meas.quant_step_dn):
-            step = predicted_step(effects, self.segments[0].seg.meta, self.meas.output_step_dn)
-            step_err = math.hypot(self.meas.quant_step_err_dn, STEP_SYSTEMATIC_DN)
-            res.append((self.meas.quant_step_dn - step) / step_err)
+        z = self.step_z(extra)
+        if z is not None:
+            res.append(z)
         return np.asarray(res)
+
+    def step_z(self, extra: Sequence[Effect] = ()) -> float | None:
+        """(measured - model) quantization step over its error, None when the step was not measured."""
+        if not math.isfinite(self.meas.quant_step_dn):
+            return None
+        effects = self.replaced(extra) if extra else self.effects
+        step = predicted_step(effects, self.segments[0].seg.meta, self.meas.output_step_dn)
+        step_err = math.hypot(self.meas.quant_step_err_dn, STEP_SYSTEMATIC_DN)
+        return (self.meas.quant_step_dn - step) / step_err
 
     # --- reporting ---------------------------------------------------------------------------
     def cell_table(self, extra: Sequence[Effect] = ()) -> list[dict[str, Any]]:
@@ -509,9 +517,30 @@ def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[st
     return rows
 
 
-def rms_error(rows: Iterable[dict[str, Any]]) -> float:
+def rms_error_raw(rows: Iterable[dict[str, Any]]) -> float:
+    """Raw rms over cells of measured - model total sigma (DN): the model's error plus the measurement's
+    own scatter (each cell's standard error)."""
     r = np.asarray([row["residual_dn"] for row in rows])
     return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+
+
+def measurement_scatter(rows: Iterable[dict[str, Any]]) -> float:
+    """rms of the cells' standard errors of the measured total sigma (DN): the raw rms error an exact
+    model would get."""
+    e = np.asarray([row["measured_sigma_err_dn"] for row in rows])
+    return float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+
+
+def rms_error(rows: Iterable[dict[str, Any]]) -> float:
+    """The model's rms error (DN), net of the measurement's expected scatter:
+    ``sqrt(max(0, mean(residual^2 - se^2)))`` over cells (``se``: the cell's standard error of the measured
+    total sigma). Unbiased for the model's mean square error when the standard errors are honest; 0 when
+    the residuals are within the measurement's scatter."""
+    rows = list(rows)
+    if not rows:
+        return float("nan")
+    excess = rms_error_raw(rows) ** 2 - measurement_scatter(rows) ** 2
+    return float(math.sqrt(max(excess, 0.0)))
 
 
 def _group_key(row: dict[str, Any], key: str, time_edges: np.ndarray) -> Any:
@@ -559,13 +588,21 @@ def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
         g = [r for r in rows if comp in r["measured_var_dn2"]]
         if not g:
             continue
-        ms = np.sqrt(np.maximum([r["measured_var_dn2"][comp] for r in g], 0.0))
-        mm = np.sqrt(np.maximum([r["model_var_dn2"][comp] for r in g], 0.0))
+        mv = np.asarray([r["measured_var_dn2"][comp] for r in g])
+        pv = np.asarray([r["model_var_dn2"][comp] for r in g])
+        ev = np.maximum([r["measured_var_err_dn2"][comp] for r in g], 1e-12)
+        ms = np.sign(mv) * np.sqrt(np.abs(mv))  # signed: a zero-mean noisy estimate of 0 stays near 0
+        mm = np.sqrt(np.maximum(pv, 0.0))
         comp_table.append({
             "component": comp,
             "cells": len(g),
-            "measured_sigma_dn": float(np.sqrt(np.mean(ms**2))),
-            "model_sigma_dn": float(np.sqrt(np.mean(mm**2))),
+            "measured_var_dn2": float(mv.mean()),
+            "model_var_dn2": float(pv.mean()),
+            # mean and spread of (measured - model) / standard error: (0, 1) when the model is right
+            "z_mean": float(np.mean((mv - pv) / ev)),
+            "z_std": float(np.std((mv - pv) / ev)),
+            "measured_sigma_dn": float(np.sign(mv.mean()) * math.sqrt(abs(mv.mean()))),
+            "model_sigma_dn": float(math.sqrt(max(pv.mean(), 0.0))),
             "mean_residual_dn": float(np.mean(ms - mm)),
             "rms_residual_dn": float(np.sqrt(np.mean((ms - mm) ** 2))),
         })

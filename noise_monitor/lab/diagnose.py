@@ -8,7 +8,8 @@ chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum e
 a minimum relative drop of the model error (DN) where the effect acts: in the measured components the
 effect changes (temporal, fixed, rows, columns, ...). A floor of scene texture in other components then
 cannot hide a correct fit, and an effect that only bends the model towards a residual it cannot shape
-(a uniform dark-current change for a glowing corner) is not claimed.
+(a uniform dark-current change for a glowing corner) is not claimed. Nor is a fit that a direct
+observation contradicts (a quantization step the output histogram does not show: ``contradicted``).
 
 Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain
 (only a product of parameters is identifiable: fraction x amplitude^2) the error is the parameter's
@@ -28,7 +29,7 @@ from scipy.stats import f as f_dist
 
 from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
-from .compare import Comparison, rms_error
+from .compare import Comparison, rms_error, rms_error_raw
 
 #: F-test p-value below which a candidate's improvement counts as real
 SIGNIFICANCE_P = 1e-6
@@ -38,6 +39,9 @@ MIN_EXPLAINED_FRACTION = 0.1
 #: explains its part of the residual removes most of it there; a wrong one bends the model a little
 #: towards it; scene texture leaking into the statistics gives statistically significant tiny drops)
 MIN_OWN_REDUCTION = 0.5
+#: a candidate whose fit puts the measured quantization step (output histogram) further than this many
+#: standard errors from the model's is contradicted by a direct observation and never claimed
+MAX_STEP_Z = 5.0
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
 #: a direction in parameter space is unidentified if crossing the whole allowed range along it changes
@@ -77,6 +81,9 @@ class Candidate:
     rms_error_after_dn: float
     degenerate: list[str] | None = None
     components: dict[str, dict[str, float]] | None = None
+    rms_error_after_raw_dn: float = float("nan")
+    #: why a candidate that passes the statistical tests is not claimed (empty: it is, or it fails them)
+    contradicted: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -89,6 +96,8 @@ class Candidate:
             "p_value": self.p_value,
             "chi2": round(self.chi2, 3),
             "rms_error_after_dn": round(self.rms_error_after_dn, 5),
+            "rms_error_after_raw_dn": round(self.rms_error_after_raw_dn, 5),
+            "contradicted": self.contradicted,
             "reading": self.reading,
             "degenerate": self.degenerate or [],
             "components": self.components or {},
@@ -271,6 +280,18 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     return bool(own) and all(e1[c] <= (1.0 - MIN_OWN_REDUCTION) * e0[c] for c in own), comps
 
 
+def _contradiction(comp: Comparison, effect: Effect) -> str:
+    """Why a fitted effect is contradicted by a direct observation ('' if it is not): the quantization
+    step it predicts against the output histogram's (e.g. 6-bit quantization standing for the temporal
+    excess of blinking pixels while every 8-bit level is occupied)."""
+    z0, z1 = comp.step_z(), comp.step_z([effect])
+    if z1 is None or z0 is None or abs(z1) <= MAX_STEP_Z or abs(z1) <= abs(z0):
+        return ""
+    return (f"the output histogram's quantization step ({comp.meas.quant_step_dn:.2f} +- "
+            f"{comp.meas.quant_step_err_dn:.2f} DN) disagrees with the one this fit predicts by {abs(z1):.0f} "
+            "standard errors")
+
+
 def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any = None) -> list[Candidate]:
     """Fit every candidate, rank by BIC gain (best first) and test significance."""
     r0 = comp.residuals()
@@ -295,6 +316,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
         rows1 = comp.cell_table(extra=[eff])
         rms1 = rms_error(rows1)
         cut, comps = cuts_error(rows0, rows1)
+        contradicted = _contradiction(comp, eff)
         out.append(Candidate(
             effect=name,
             params=res.values[name],
@@ -303,9 +325,11 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             explained_fraction=explained,
             delta_bic=drop - k * math.log(n),
             p_value=p,
-            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION and cut),
+            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION and cut and not contradicted),
             reading=eff.reading(),
             rms_error_after_dn=rms1,
+            rms_error_after_raw_dn=rms_error_raw(rows1),
+            contradicted=contradicted,
             degenerate=(res.degenerate or {}).get(name),
             components=comps,
         ))

@@ -108,11 +108,11 @@ def _residual_plot(summary: dict[str, Any]) -> str:
     cells = summary["cells"]
     ax.errorbar([r["intensity_dn"] for r in cells], [r["residual_dn"] for r in cells],
                 yerr=[r["measured_sigma_err_dn"] for r in cells], fmt="o", ms=3, alpha=0.7, color="tab:red",
-                label=f"before: rms {summary['rms_error_dn']:.3f} DN")
+                label=f"before: rms {summary['rms_error_raw_dn']:.3f} DN (net {summary['rms_error_dn']:.3f})")
     if "cells_after" in summary:
         after = summary["cells_after"]
         ax.plot([r["intensity_dn"] for r in after], [r["residual_dn"] for r in after], "^", ms=3,
-                color="tab:green", label=f"after: rms {summary['rms_error_after_dn']:.3f} DN")
+                color="tab:green", label=f"after: rms {summary['rms_error_after_raw_dn']:.3f} DN (net {summary['rms_error_after_dn']:.3f})")
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel("intensity [DN]")
     ax.set_ylabel("measured - model sigma [DN]")
@@ -129,7 +129,7 @@ def _component_plot(summary: dict[str, Any]) -> str:
     ax.bar(x - 0.2, [r["measured_sigma_dn"] for r in rows], 0.4, color="0.3", label="measured")
     ax.bar(x + 0.2, [r["model_sigma_dn"] for r in rows], 0.4, color="tab:red", label="model")
     ax.set_xticks(x, [r["component"] for r in rows])
-    ax.set_ylabel("rms sigma [DN]")
+    ax.set_ylabel("sigma [DN] (signed: sign(var) sqrt|var|)")
     ax.set_title("Temporal vs fixed-pattern (white, column, row) noise")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, axis="y")
@@ -236,7 +236,9 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         f"{html.escape(', '.join(summary['model_effects']))}. Frames used {summary['measurement']['frames_used']} of "
         f"{summary['measurement']['frames_total']}, {summary['measurement']['segments']} segments, "
         f"{summary['measurement']['cells']} cells. <b>rms error {summary['rms_error_dn']:.4f} DN</b> "
-        "(model vs measured total sigma per cell).</p>",
+        f"(model vs measured total sigma per cell, net of the measurement's own scatter; raw rms "
+        f"{summary['rms_error_raw_dn']:.4f} DN, of which the cells' standard errors explain "
+        f"{summary['measurement_scatter_dn']:.4f} DN).</p>",
     ]
     gaps = [f"{n} frame(s): {why}" for why, n in summary["measurement"].get("frames_skipped", {}).items()]
     gaps += [f"{what}: {why}" for what, why in summary["measurement"].get("not_measured", {}).items()]
@@ -245,7 +247,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     if "rms_error_after_dn" in summary:
         added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "
-                     f"after {summary['rms_error_after_dn']:.4f} DN</b></p>")
+                     f"after {summary['rms_error_after_dn']:.4f} DN</b> (raw {summary['rms_error_before_raw_dn']:.4f} -> "
+                     f"{summary['rms_error_after_raw_dn']:.4f} DN)</p>")
     sig = [c for c in candidates if c.significant]
     parts.append("<h2>Diagnosis</h2>")
     parts.append(

@@ -118,9 +118,12 @@ def test_unexplained_summary_and_plugin_skeleton_end_to_end(tmp_path: Path, caps
     assert load_plugin_file(skeleton) == ["unexplained_effect"]
     after = analyze(bag, "ev76c661", plugins=[skeleton], add_effects=["unexplained_effect=fit"], estimator=None)
     assert after["candidates"][0]["effect"] == "unexplained_effect" and after["candidates"][0]["significant"]
-    # cut >= 69 %: the floor left (0.18 DN, the lab scene's) is the same as before the merge with the
-    # static-hold measurement; that measurement reads the missing row noise as 0.60 DN instead of 0.66 DN
-    assert after["rms_error_after_dn"] <= 0.31 * after["rms_error_before_dn"]
+    # the model's error (net of the measurement's scatter) falls by >= 70 %; the raw rms falls by >= 69 %:
+    # its floor (0.18 DN) is the measurement's own scatter on this 48-frame lab bag
+    assert after["rms_error_after_dn"] <= 0.3 * after["rms_error_before_dn"]
+    assert after["rms_error_after_raw_dn"] <= 0.31 * after["rms_error_before_raw_dn"]
+    print(f"skeleton fit: net {after['rms_error_before_dn']:.4f} -> {after['rms_error_after_dn']:.4f} DN, raw "
+          f"{after['rms_error_before_raw_dn']:.4f} -> {after['rms_error_after_raw_dn']:.4f} DN")
     assert after["added_effects"][0]["fitted"]["amplitude"] == pytest.approx(2.0, rel=0.1)
 
 
