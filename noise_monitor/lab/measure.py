@@ -70,6 +70,8 @@ MAX_PARTNERS = 8
 CROSS_SE_MAX = 0.5
 #: an outlier pixel is confirmed when a partner view shows it beyond this many robust sigmas, same sign
 CONFIRM_SIGMAS = 3.0
+#: ... in this many partner views (fewer when the block has fewer valid partners)
+CONFIRM_VIEWS = 2
 #: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
 #: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
 SPIKE_FACTOR = 5.0
@@ -476,12 +478,15 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         for j, comp in enumerate(("fixed", "column", "row")):
             f.values[comp] = np.sum(np.stack([p[j] for p in parts], axis=1) * weight, axis=1)
         # an outlier pixel (hot pixel, defect) stays where it is on the sensor; a scene detail moves:
-        # keep the outliers that stand out with the same sign (> CONFIRM_SIGMAS) in a partner view
-        stays = np.zeros_like(f.is_out)
+        # keep the outliers that stand out with the same sign (> CONFIRM_SIGMAS) in CONFIRM_VIEWS partner
+        # views (all of them when fewer are valid): one view confirms a scene speck by chance (texture
+        # beyond 3 sigma somewhere in a flat block), two rarely do
+        confirmed = np.zeros(f.is_out.shape, dtype=np.int16)
         for j, g in enumerate(cands):
             same = (np.sign(g.centred) == np.sign(f.centred)) & (np.abs(g.centred) > CONFIRM_SIGMAS * g.robust[:, None])
-            stays |= same & (valid[:, j] > 0)[:, None]
-        f.is_out = f.is_out & stays
+            confirmed += same & (valid[:, j] > 0)[:, None]
+        need = np.maximum(np.minimum(CONFIRM_VIEWS, count), 1)
+        f.is_out = f.is_out & (confirmed >= need[:, None])
         f.values["outlier"] = np.sum(np.where(f.is_out, f.centred**2, 0.0), axis=1) / (b * b)
         # noise of the cross estimate (Gaussian): white_s / (d * sum(1 / white_p)); a block whose scene
         # texture (white_s) or partners' noise make it large against its own temporal noise is left out

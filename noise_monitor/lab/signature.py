@@ -180,6 +180,12 @@ def _law_text(law: dict[str, Any], pooled: bool) -> str:
     return "variance " + ", ".join(parts)
 
 
+def _rss(design: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
+    """(residual sum of squares, coefficients) of the least-squares fit of x on design's columns."""
+    coef = np.linalg.lstsq(design, x, rcond=None)[0]
+    return float(np.sum((x - design @ coef) ** 2)), coef
+
+
 def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
     """Best corner or gradient shape for the block excess of component ``name`` (scaled per segment).
 
@@ -197,21 +203,21 @@ def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
         return None
     x, seg, p, v = np.concatenate(xs), np.concatenate(segs), np.concatenate(pos), np.concatenate(vs)
     ids = np.unique(seg)
-    onehot = (seg[:, None] == ids[None, :]).astype(float)
-    # per segment: a level and an intensity law (v, v^2), so intensity-driven excess is not read as position
-    nuisance = np.concatenate([onehot, onehot * v[:, None], onehot * v[:, None] ** 2], axis=1)
-    base = np.linalg.lstsq(nuisance, x, rcond=None)
-    rss0 = float(np.sum((x - nuisance @ base[0]) ** 2))
+    rows = [np.flatnonzero(seg == i) for i in ids]
+    # per segment: a level and an intensity law (v, v^2), so intensity-driven excess is not read as position;
+    # the design is block-diagonal over segments, so each segment is fitted on its own (same least squares)
+    nuisance = np.stack([np.ones_like(v), v, v**2], axis=1)
+    rss0 = sum(_rss(nuisance[r], x[r])[0] for r in rows)
     shapes = {k: np.exp(-np.hypot(p[:, 0] - y0, p[:, 1] - x0) / CORNER_SCALE) for k, (y0, x0) in REGIONS.items()}
     shapes["gradient from top to bottom"] = p[:, 0] - 0.5
     shapes["gradient from left to right"] = p[:, 1] - 0.5
     best = None
     for label, h in shapes.items():
-        design = np.concatenate([nuisance, onehot * h[:, None]], axis=1)
-        coef = np.linalg.lstsq(design, x, rcond=None)[0]
-        rss = float(np.sum((x - design @ coef) ** 2))
+        design = np.concatenate([nuisance, h[:, None]], axis=1)
+        fits = [_rss(design[r], x[r]) for r in rows]
+        rss = float(sum(f[0] for f in fits))
         if best is None or rss < best[1]:
-            best = (label, rss, coef[nuisance.shape[1]:])
+            best = (label, rss, np.array([f[1][-1] for f in fits]))
     assert best is not None
     label, rss1, scale = best
     k, dof = len(ids), max(x.size - 4 * len(ids), 1)
