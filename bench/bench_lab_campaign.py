@@ -8,7 +8,7 @@ Prints per bag: rms_error_dn (net of the measurement's scatter) and the raw rms,
 values and the error cut (net and raw); then the summary (clean floor, ranks, median and minimum cut) per variant.
 
 Usage: .venv/bin/python bench/bench_lab_campaign.py [--variants campaign campaign_heldout]
-       [--frames 120] [--width 320] [--height 256] [--seed 11] [--json out.json]
+       [--frames 120] [--width 320] [--height 256] [--seed 11] [--effects ...] [--skip-clean] [--json out.json]
 Prints figures; asserts nothing.
 """
 from __future__ import annotations
@@ -72,6 +72,7 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=320)
     ap.add_argument("--height", type=int, default=256)
     ap.add_argument("--seed", type=int, default=11)
+    ap.add_argument("--skip-clean", action="store_true", help="leave out the clean bag (no floor in the summary)")
     ap.add_argument("--json", help="write the results here")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -79,7 +80,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for scenario in args.variants:
             rows = results.setdefault(scenario, [])
-            for effect in [None, *args.effects]:
+            for effect in ([] if args.skip_clean else [None]) + list(args.effects):
                 row = run_bag(Path(tmp), scenario, effect, args)
                 rows.append(row)
                 if effect:
@@ -93,7 +94,7 @@ def main() -> None:
                           f"scatter {row['measurement_scatter_dn']:.3f} DN, claimed {row['claimed'] or 'nothing'}, "
                           f"{row['cells']} cells, {row['analysis_s']:.0f} s", flush=True)
             hidden = [r for r in rows if r["effect"]]
-            if hidden:
+            if hidden and not args.skip_clean:
                 cuts = [r["cut"] for r in hidden]
                 raw = [r["cut_raw"] for r in hidden]
                 print(f"== {scenario}: clean floor {rows[0]['rms_error_dn']:.3f} DN net, {rows[0]['rms_error_raw_dn']:.3f} DN raw (claimed: "

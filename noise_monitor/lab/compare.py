@@ -102,10 +102,21 @@ def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarra
 Partner = tuple[CameraMetadata, np.ndarray, np.ndarray]
 
 
+class EffectCache:
+    """Per-effect contributions of a fixed set of effects (a comparison's baseline) to one segment's
+    components, computed once: a fit re-evaluates only the effect it varies. Used only while no modifier
+    or response effect is in the set (they would change every effect's conditions or signal)."""
+
+    def __init__(self, effects: Sequence[Effect]) -> None:
+        self.effects = list(effects)  # keeps the objects alive, so their ids stay theirs
+        self.ids = {id(e) for e in effects}
+        self.parts: dict[int, tuple[dict[str, np.ndarray], dict[str, np.ndarray]]] = {}
+
+
 def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray,
                          sigma: np.ndarray, span: np.ndarray | None = None,
                          position: np.ndarray | None = None,
-                         partners: Sequence[Partner] = ()) -> dict[str, np.ndarray]:
+                         partners: Sequence[Partner] = (), cache: EffectCache | None = None) -> dict[str, np.ndarray]:
     """Unclipped variance (DN^2) per measured component at block intensities ``v`` (block centres at
     ``position``, (B, 2) normalised y, x: what spatial effects see; None: sensor averages).
 
@@ -119,6 +130,8 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
     (fixed, column, row) are the weighted products of each effect's fixed sigma (slope included) here and
     in the partner views, which see the same sensor blocks (same ``position``) at other intensities; the
     quantization's fixed part, a pattern of the scene's levels, moves with the scene and cancels.
+    ``cache``: contributions of the cache's effects for this segment and these arguments (see
+    :class:`EffectCache`).
     """
     cond = _conditions(effects, meta, position)
     pconds = [_conditions(effects, pm, position) for pm, _, _ in partners]
@@ -128,33 +141,22 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
     cross = {c: np.zeros(v.shape) for c in MEASURED}  # cross-view parts, slopes already applied
     lin = _linear(effects, cond, v)
     slope = _slope(effects, cond, v)
+    if cache is not None and any(e.distribution in ("modifier", "response") for e in effects):
+        cache = None
     for e in effects:
         if component_of(e) is None or e.distribution == "quantization":
             continue
-        share = np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0)
-        comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
-        if e.distribution == "mixture":
-            frac, off = e.mixture(lin, cond)
-            off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
-            var = frac * (1.0 - frac) * off**2
-            _, _, p = _detection(e, cond, v, sigma)
-            fixed_var = (1.0 - share) * var
-            out["outlier"] = out["outlier"] + fixed_var * p
-            core = fixed_var * (1.0 - p)
+        cached = cache is not None and id(e) in cache.ids
+        if cached and id(e) in cache.parts:  # type: ignore[union-attr]
+            part, part_cross = cache.parts[id(e)]  # type: ignore[union-attr]
         else:
-            var = np.asarray(e.variance_dn2(lin, cond), dtype=float)
-            core = (1.0 - share) * var
-        out[comp_t] = out[comp_t] + share * var
-        if not partners:
-            out[comp_f] = out[comp_f] + core
-            continue
-        here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
-        for (_, pv, w), pc, pl, ps in zip(partners, pconds, plins, pslopes):
-            p_share = np.clip(np.asarray(e.temporal_share(pl, pc), dtype=float), 0.0, 1.0)
-            p_var = _mixture_var(e, pc, pl, pv) if e.distribution == "mixture" else \
-                np.asarray(e.variance_dn2(pl, pc), dtype=float)
-            there = np.sqrt(np.maximum((1.0 - p_share) * p_var, 0.0)) * (1.0 if ps is None else ps)
-            cross[comp_f] = cross[comp_f] + w * here * there
+            part, part_cross = _effect_parts(e, cond, lin, slope, v, sigma, partners, pconds, plins, pslopes)
+            if cached:
+                cache.parts[id(e)] = (part, part_cross)  # type: ignore[union-attr]
+        for c, a in part.items():
+            out[c] = out[c] + a
+        for c, a in part_cross.items():
+            cross[c] = cross[c] + a
     if slope is not None:
         out = {c: a * slope**2 for c, a in out.items()}
     out = {c: out[c] + cross[c] for c in MEASURED}
@@ -165,6 +167,44 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
         out["fixed"] = out["fixed"] + fixed
     out[QUANT_SPREAD] = spread
     return out
+
+
+def _effect_parts(e: Effect, cond: Conditions, lin: np.ndarray, slope: np.ndarray | None, v: np.ndarray,
+                  sigma: np.ndarray, partners: Sequence[Partner], pconds: list[Conditions], plins: list[np.ndarray],
+                  pslopes: list[np.ndarray | None]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """One effect's (single-view, cross-view) variance contributions per component, see
+    :func:`unclipped_components` (single-view parts before the response slope)."""
+    out: dict[str, np.ndarray] = {}
+    cross: dict[str, np.ndarray] = {}
+
+    def add(d: dict[str, np.ndarray], c: str, a: np.ndarray) -> None:
+        d[c] = d[c] + a if c in d else a
+
+    share = np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0)
+    comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
+    if e.distribution == "mixture":
+        frac, off = e.mixture(lin, cond)
+        off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
+        var = frac * (1.0 - frac) * off**2
+        _, _, p = _detection(e, cond, v, sigma)
+        fixed_var = (1.0 - share) * var
+        add(out, "outlier", fixed_var * p)
+        core = fixed_var * (1.0 - p)
+    else:
+        var = np.asarray(e.variance_dn2(lin, cond), dtype=float)
+        core = (1.0 - share) * var
+    add(out, comp_t, np.broadcast_to(share * var, v.shape))
+    if not partners:
+        add(out, comp_f, np.broadcast_to(core, v.shape))
+        return out, cross
+    here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
+    for (_, pv, w), pc, pl, ps in zip(partners, pconds, plins, pslopes):
+        p_share = np.clip(np.asarray(e.temporal_share(pl, pc), dtype=float), 0.0, 1.0)
+        p_var = _mixture_var(e, pc, pl, pv) if e.distribution == "mixture" else \
+            np.asarray(e.variance_dn2(pl, pc), dtype=float)
+        there = np.sqrt(np.maximum((1.0 - p_share) * p_var, 0.0)) * (1.0 if ps is None else ps)
+        add(cross, comp_f, np.broadcast_to(w * here * there, v.shape))
+    return out, cross
 
 
 def _mixture_var(effect: Effect, cond: Conditions, lin: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -283,6 +323,7 @@ class _SegmentBase:
 
         self.region_errors: dict[str, list[float]] = {}
         self.partners: list[Partner] = []
+        self.cache: EffectCache | None = None  # the comparison's baseline effects, evaluated here once
 
     def set_region_errors(self, comps: dict[str, np.ndarray]) -> None:
         """Standard errors of the regional contrasts: the spread of the blocks' excess over the baseline
@@ -393,7 +434,9 @@ class Comparison:
                 comps["fixed"] = comps["fixed"] + fixed
             sb.clip_aware = comps
             sb.set_region_errors(comps)
-            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners)
+            sb.cache = EffectCache(self.effects)
+            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners,
+                                                cache=sb.cache)
             self.segments.append(sb)
             if progress is not None:
                 progress.update(1)
@@ -414,7 +457,8 @@ class Comparison:
         names = ", ".join(e.name for e in extra)
         for sb in self.segments:
             try:
-                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners)
+                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners,
+                                           cache=sb.cache)
             except EffectError:
                 raise
             except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
