@@ -146,13 +146,13 @@ def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.
     for e in effects:
         if component_of(e) is None or e.distribution == "quantization":
             continue
-        cached = cache is not None and id(e) in cache.ids
-        if cached and id(e) in cache.parts:  # type: ignore[union-attr]
-            part, part_cross = cache.parts[id(e)]  # type: ignore[union-attr]
+        store = cache.parts if cache is not None and id(e) in cache.ids else None
+        if store is not None and id(e) in store:
+            part, part_cross = store[id(e)]
         else:
             part, part_cross = _effect_parts(e, cond, lin, slope, v, sigma, partners, pconds, plins, pslopes)
-            if cached:
-                cache.parts[id(e)] = (part, part_cross)  # type: ignore[union-attr]
+            if store is not None:
+                store[id(e)] = (part, part_cross)
         for c, a in part.items():
             out[c] = out[c] + a
         for c, a in part_cross.items():
