@@ -13,7 +13,15 @@ from tqdm import tqdm
 from ..physics import CameraProfile, Effect, NoiseModel, load_plugin_file, load_profile
 from ..physics.effects import effect_class
 from ..physics.metadata import profile_from_mapping
-from .compare import Comparison, baseline_effects, by_condition, measurement_scatter, region_table, rms_error, rms_error_raw
+from .compare import (
+    Comparison,
+    baseline_effects,
+    by_condition,
+    measurement_scatter,
+    region_table,
+    rms_error,
+    rms_error_raw,
+)
 from .diagnose import EffectSpec, candidate_names, diagnose, fit
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
