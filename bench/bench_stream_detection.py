@@ -106,6 +106,8 @@ def measure_bag(bag: Path, low: Path, params: str | None, threads: int) -> dict[
         "false_alarm_episodes": len(alarm_episodes(clean)),
         "need": len(need), "hits": int(sum(hits)), "alarmed_at_frame": at_frame,
         "missed_frames": [int(i) for i, h in zip(need, hits) if not h],
+        "not_alarmed_at_frame": [int(i) for i in need if not alarm[i]],
+        "need_true_xi": [round(float(true_xi[i]), 3) for i in need],
         "low_xi_error": (xi_l[both] - true_xi[both]).tolist(),
         "low_alarm_episodes": len(alarm_episodes(lowt)),
         "view_of_need": [int(view[i]) for i in need],
@@ -152,7 +154,10 @@ def main() -> None:
                 per_bag[label].append(row)
                 print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
                       f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "
-                      f"(missed frames {row['missed_frames']}), alarm on at the frame {row['alarmed_at_frame']}", flush=True)
+                      f"(missed frames {row['missed_frames']}), alarm on at the frame {row['alarmed_at_frame']} (not at "
+                      f"{row['not_alarmed_at_frame']}); true |xi| of these frames "
+                      f"{min(map(abs, row['need_true_xi']), default=float('nan')):.2f}.."
+                      f"{max(map(abs, row['need_true_xi']), default=float('nan')):.2f} DN", flush=True)
     summary = {k: summarize(v) for k, v in per_bag.items()}
     t, h = summary["tuned"], summary["held-out"]
     print(f"\n{'':44s} {'tuned':>16s} {'held-out':>16s}")

@@ -279,7 +279,7 @@ class Monitor:
         xi_f = filtered.pop("xi")
         state = self.alarm.update(xi_f, xi, xi_err)
         self.counters["frames_processed"] += 1
-        level, message = self._status(xi_f, meta)
+        level, message = self._status(xi, xi_f, meta)
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
@@ -316,9 +316,9 @@ class Monitor:
         sigma["temporal"] = float(np.median(tm.sigma_dn[ok]))
         return float(np.median(d)), err
 
-    def _status(self, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
+    def _status(self, xi: float, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
         cfg, state = self.config, self.alarm.state
-        detail = f"xi {xi_f:+.2f} DN, threshold {cfg.xi_threshold_dn:g} DN"
+        detail = f"xi {xi:+.2f} DN, filtered {xi_f:+.2f} DN, threshold {cfg.xi_threshold_dn:g} DN"
         if state.active:
             return self._alarm_level(), f"xi alarm: {state.cause} ({detail})"
         outside = meta.outside_paper_ranges()
