@@ -1,4 +1,4 @@
-"""Temporal filter and the xi alarm state machine (threshold, hysteresis, minimum durations)."""
+"""Temporal filter and the xi alarm state machine (threshold, hysteresis, evidence, minimum durations)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -36,39 +36,76 @@ class AlarmState:
     active: bool = False
     cause: str | None = None
     sign: int = 0
-    above: int = 0  # consecutive frames with |xi| > threshold (while inactive)
-    below: int = 0  # consecutive frames with |xi| < threshold - hysteresis (while active)
+    above: int = 0  # consecutive frames with |filtered xi| > threshold (while inactive)
+    below: int = 0  # consecutive frames with |filtered xi| < threshold - hysteresis (while active)
     episodes: int = 0
+    # one-sided CUSUMs of (xi - threshold) / error and (-xi - threshold) / error (while inactive)
+    evidence_pos: float = 0.0
+    evidence_neg: float = 0.0
+
+    @property
+    def evidence(self) -> float:
+        """The larger of the two sides' accumulated evidence (standard errors beyond the threshold)."""
+        return max(self.evidence_pos, self.evidence_neg)
 
     @property
     def name(self) -> str:
         if self.active:
             return "clearing" if self.below else "alarm"
-        return "pending" if self.above else "ok"
+        return "pending" if self.above or self.evidence > 0 else "ok"
 
 
 class XiAlarm:
-    """Raises after ``min_frames`` consecutive frames with |xi| > threshold, clears after ``clear_frames``
-    consecutive frames with |xi| < threshold - hysteresis. The cause follows the sign of xi."""
+    """The xi alarm. Raises on whichever comes first:
 
-    def __init__(self, threshold: float, hysteresis: float, min_frames: int, clear_frames: int) -> None:
+    - evidence: a one-sided CUSUM per sign on the per-frame xi in units of its standard error,
+      S+ = max(0, S+ + (xi - threshold) / error) (S- likewise for -xi), reaching ``evidence``: a xi far
+      beyond the threshold raises on one frame, one just beyond it after a few, and a xi inside the
+      threshold drains the sum (0 = off);
+    - count: ``min_frames`` consecutive frames with |filtered xi| > threshold.
+
+    :meth:`restart` (a metadata step: a new view) restarts both, so a view is judged on its own frames.
+    Clears after ``clear_frames`` consecutive frames with |filtered xi| < threshold - hysteresis. The cause
+    follows the sign of xi.
+    """
+
+    def __init__(self, threshold: float, hysteresis: float, min_frames: int, clear_frames: int,
+                 evidence: float = 0.0) -> None:
         self.threshold = threshold
         self.clear_level = threshold - hysteresis
         self.min_frames = min_frames
         self.clear_frames = clear_frames
+        self.evidence = evidence
         self.state = AlarmState()
 
-    def update(self, xi: float) -> AlarmState:
+    def restart(self) -> None:
+        """A new view (metadata step): the evidence and the count towards raising start again."""
+        s = self.state
+        s.above, s.evidence_pos, s.evidence_neg = 0, 0.0, 0.0
+
+    def _raise(self, xi: float) -> None:
+        s = self.state
+        s.active, s.above, s.below, s.episodes = True, 0, 0, s.episodes + 1
+        s.evidence_pos = s.evidence_neg = 0.0
+        s.sign, s.cause = (-1 if xi < 0 else 1), cause_of(xi)
+
+    def update(self, xi_filtered: float, xi: float | None = None, error: float | None = None) -> AlarmState:
+        """One processed frame: its filtered xi and, for the evidence, its own xi with standard error (DN)."""
         s = self.state
         if not s.active:
-            s.above = s.above + 1 if abs(xi) > self.threshold else 0
+            s.above = s.above + 1 if abs(xi_filtered) > self.threshold else 0
+            if self.evidence > 0 and xi is not None and error is not None and error > 0:
+                s.evidence_pos = max(0.0, s.evidence_pos + (xi - self.threshold) / error)
+                s.evidence_neg = max(0.0, s.evidence_neg + (-xi - self.threshold) / error)
+                if s.evidence >= self.evidence:
+                    self._raise(1.0 if s.evidence_pos >= s.evidence_neg else -1.0)
+                    return s
             if s.above >= self.min_frames:
-                s.active, s.above, s.below, s.episodes = True, 0, 0, s.episodes + 1
-                s.sign, s.cause = (-1 if xi < 0 else 1), cause_of(xi)
+                self._raise(xi_filtered)
         else:
-            if abs(xi) > self.threshold:
-                s.sign, s.cause = (-1 if xi < 0 else 1), cause_of(xi)
-            s.below = s.below + 1 if abs(xi) < self.clear_level else 0
+            if abs(xi_filtered) > self.threshold:
+                s.sign, s.cause = (-1 if xi_filtered < 0 else 1), cause_of(xi_filtered)
+            s.below = s.below + 1 if abs(xi_filtered) < self.clear_level else 0
             if s.below >= self.clear_frames:
                 s.active, s.cause, s.sign, s.below = False, None, 0, 0
         return s

@@ -31,7 +31,9 @@ DESCRIPTIONS: dict[str, str] = {
                  "effects - the estimated image noise) or auto (model when the profile adds effects, else estimator)",
     "xi_threshold_dn": "alarm when |filtered xi| exceeds this (DN)",
     "xi_hysteresis_dn": "alarm clears only below threshold - hysteresis (DN)",
-    "alarm_min_frames": "consecutive processed frames beyond the threshold before the alarm rises",
+    "alarm_min_frames": "consecutive processed frames with |filtered xi| beyond the threshold that raise the alarm",
+    "alarm_evidence": "the alarm also rises when a CUSUM of (|xi| - threshold) / (xi's standard error) over the "
+                      "current view's frames reaches this (standard errors); 0 = off (count rule only)",
     "clear_min_frames": "consecutive processed frames below the clear level before the alarm clears",
     "filter_alpha": "exponential filter weight of a new frame (0..1] for xi and the per-source sigmas",
     "image_timeout_s": "no image for this long -> STALE",
@@ -61,6 +63,7 @@ class MonitorConfig:
     xi_threshold_dn: float = 1.0
     xi_hysteresis_dn: float = 0.3
     alarm_min_frames: int = 5
+    alarm_evidence: float = 3.0
     clear_min_frames: int = 10
     filter_alpha: float = 0.3
     image_timeout_s: float = 2.0
@@ -95,6 +98,7 @@ class MonitorConfig:
             (self.xi_threshold_dn > 0, "xi_threshold_dn must be > 0"),
             (0 <= self.xi_hysteresis_dn < self.xi_threshold_dn, "xi_hysteresis_dn must be in [0, xi_threshold_dn)"),
             (self.alarm_min_frames >= 1 and self.clear_min_frames >= 1, "alarm/clear_min_frames must be >= 1"),
+            (self.alarm_evidence >= 0, "alarm_evidence must be >= 0 (0 = off)"),
             (0 < self.filter_alpha <= 1, "filter_alpha must be in (0, 1]"),
             (self.image_timeout_s > 0 and self.metadata_timeout_s > 0, "timeouts must be > 0"),
             (1 <= self.min_patches <= self.patches_per_frame, "min_patches must be in [1, patches_per_frame]"),

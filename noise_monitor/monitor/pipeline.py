@@ -1,7 +1,8 @@
 """The per-frame pipeline shared by the live node and the bag replay.
 
 patches -> estimator (batched) -> physics model for the same patches -> median per frame ->
-exponential filter -> xi alarm state machine -> StatusReport / numeric outputs.
+exponential filter -> xi alarm state machine -> StatusReport / numeric outputs. A metadata step (gain or
+exposure: a new view) restarts the filter and the alarm's evidence, so each view is judged on its own frames.
 """
 from __future__ import annotations
 
@@ -27,8 +28,14 @@ from .status import ERROR, OK, STALE, WARN, StatusReport
 from .temporal import TemporalMeasurement, TemporalNoise
 
 #: MonitorConfig fields that may change while the monitor runs (thresholds, alarm and filter settings).
-RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "clear_min_frames", "filter_alpha",
-                    "alarm_level")
+RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "alarm_evidence", "clear_min_frames",
+                    "filter_alpha", "alarm_level")
+#: A new view starts when the gain moves by more than this (dB) or the exposure by more than this fraction
+#: from one processed frame to the next (an auto-exposure step; slow drifts stay one view).
+VIEW_STEP_GAIN_DB, VIEW_STEP_EXPOSURE_REL = 0.5, 0.05
+#: Floor of a frame's xi standard error (DN): the model's own approximation of the simulated or real sensor
+#: (the temporal measurement's statistical error alone can be a few hundredths of a DN).
+XI_ERROR_FLOOR_DN = 0.05
 
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
 
@@ -66,6 +73,9 @@ class FrameResult:
     xi_temporal: float | None = None  # the model's temporal noise - the frame differences' (static holds)
     temporal_weight: float = 0.0  # share of xi_temporal in xi (inverse-variance weights)
     temporal_frames: int = 0  # frames of the current static hold measured
+    xi_error: float | None = None  # standard error of this frame's xi (DN): image, or fused with the temporal one
+    alarm_evidence: float = 0.0  # the alarm's accumulated evidence (standard errors beyond the threshold)
+    view_frames: int = 0  # processed frames of the current view (since the last gain / exposure step)
     filtered: dict[str, float] = field(default_factory=dict)
     alarm_active: bool = False
     alarm_state: str = "ok"
@@ -95,6 +105,10 @@ class FrameResult:
             out["sigma_temporal"] = self.sigma["temporal"]
         out["temporal_weight"] = self.temporal_weight
         out["temporal_frames"] = float(self.temporal_frames)
+        if self.xi_error is not None:
+            out["xi_error"] = float(self.xi_error)
+        out["alarm_evidence"] = float(self.alarm_evidence)
+        out["view_frames"] = float(self.view_frames)
         out["sigma_model"] = self.model["total"]
         out.update({f"sigma_model_{k}": v for k, v in self.model.items() if k != "total"})
         out.update({f"sigma_{k}_filtered": self.filtered[k] for k in SOURCES + ("total",)})
@@ -143,7 +157,9 @@ class Monitor:
         fixed = [e for e in model.effects if not e.temporal]
         self.temporal_model = NoiseModel([e for e in model.effects if e.temporal], interpolate=model.interpolate) if fixed else model
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
-                             config.clear_min_frames)
+                             config.clear_min_frames, config.alarm_evidence)
+        self._view_meta: CameraMetadata | None = None  # the previous processed frame's metadata
+        self.view_frames = 0
         self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
                          "frames_lost": 0, "stamp_intervals_implausible": 0}
         self.last_received_ns: int | None = None
@@ -161,6 +177,7 @@ class Monitor:
         self.alarm.threshold = cfg.xi_threshold_dn
         self.alarm.clear_level = cfg.xi_threshold_dn - cfg.xi_hysteresis_dn
         self.alarm.min_frames, self.alarm.clear_frames = cfg.alarm_min_frames, cfg.clear_min_frames
+        self.alarm.evidence = cfg.alarm_evidence
         return cfg
 
     # --- bookkeeping -----------------------------------------------------------------------
@@ -242,7 +259,7 @@ class Monitor:
         sigma["image"] = float(np.median(image_pp[use]))
         xi_model = float(np.median((model_pp["total"] - image_pp)[use]))
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
-        xi, xi_t, weight, held = xi_image, None, 0.0, 0
+        xi, xi_t, weight, held, xi_err = xi_image, None, 0.0, 0, cfg.image_xi_error_dn
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         if tm is not None:
             held = tm.frames
@@ -252,20 +269,35 @@ class Monitor:
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
+                xi_err = 1.0 / np.sqrt(w_t + w_i)
+        xi_err = max(float(xi_err), XI_ERROR_FLOOR_DN)
         patch_xi = per_patch["xi"] if self.xi_source == "estimator" else model_pp["total"] - image_pp
+        if self._new_view(meta):
+            self.filter.reset()
+            self.alarm.restart()
         filtered = self.filter.update({**{k: sigma[k] for k in SOURCES + ("total",)}, "xi": xi})
         xi_f = filtered.pop("xi")
-        state = self.alarm.update(xi_f)
+        state = self.alarm.update(xi_f, xi, xi_err)
         self.counters["frames_processed"] += 1
-        level, message = self._status(xi_f, meta)
+        level, message = self._status(xi, xi_f, meta)
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
+            xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],
             patches_measurable=int(ok.sum()) if "measurable" in est else None,
             processing_ms=(time.perf_counter() - t0) * 1e3,
         )
+
+    def _new_view(self, meta: CameraMetadata) -> bool:
+        """Whether this processed frame starts a new view: a gain or exposure step from the previous one."""
+        prev, self._view_meta = self._view_meta, meta
+        step = prev is None or (abs(meta.gain_db - prev.gain_db) > VIEW_STEP_GAIN_DB
+                                or abs(meta.exposure_time_s - prev.exposure_time_s)
+                                > VIEW_STEP_EXPOSURE_REL * prev.exposure_time_s)
+        self.view_frames = 1 if step else self.view_frames + 1
+        return step
 
     def _xi_temporal(self, tm: TemporalMeasurement, meta: CameraMetadata,
                      sigma: dict[str, float]) -> tuple[float, float] | None:
@@ -284,16 +316,17 @@ class Monitor:
         sigma["temporal"] = float(np.median(tm.sigma_dn[ok]))
         return float(np.median(d)), err
 
-    def _status(self, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
+    def _status(self, xi: float, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
         cfg, state = self.config, self.alarm.state
-        detail = f"xi {xi_f:+.2f} DN, threshold {cfg.xi_threshold_dn:g} DN"
+        detail = f"xi {xi:+.2f} DN, filtered {xi_f:+.2f} DN, threshold {cfg.xi_threshold_dn:g} DN"
         if state.active:
             return self._alarm_level(), f"xi alarm: {state.cause} ({detail})"
         outside = meta.outside_paper_ranges()
         if outside:
             return WARN, f"metadata outside the estimator's training ranges: {', '.join(outside)} ({detail})"
         if state.name == "pending":
-            return OK, f"noise matches the model so far; |xi| above threshold for {state.above} frame(s) ({detail})"
+            return OK, (f"noise matches the model so far; |xi| above threshold for {state.above} frame(s), evidence "
+                        f"{state.evidence:.1f} of {cfg.alarm_evidence:g} ({detail})")
         return OK, f"noise matches the model ({detail})"
 
     def idle_report(self, now_ns: int) -> StatusReport:

@@ -138,6 +138,50 @@ def test_alarm_does_not_flap_on_noisy_xi_near_threshold(rng):
     assert sum(np.diff(np.asarray(active, int)) != 0) <= 2
 
 
+def test_alarm_evidence_raises_a_short_view_and_ignores_a_bias_inside_the_threshold(rng):
+    """The CUSUM raises where the count rule (5 frames) cannot: a 2-frame view far beyond the threshold, a
+    3-frame view just beyond it; a xi biased to 0.9 DN with per-frame scatter never raises."""
+    far = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
+    assert [far.update(-1.5, xi=-2.1, error=0.3).active for _ in range(2)] == [True, True]  # (2.1 - 1) / 0.3 >= 3
+    assert far.state.cause == CAUSE_IMAGE_NOISIER
+    near = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
+    assert [near.update(-1.1, xi=-1.35, error=0.3).name for _ in range(3)] == ["pending", "pending", "alarm"]
+    count_only = XiAlarm(1.0, 0.3, 5, 10)  # the old rule: 5 consecutive filtered frames
+    assert not any(count_only.update(-1.1, xi=-1.35, error=0.3).active for _ in range(4))
+    biased = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
+    xi = 0.9 + rng.normal(0.0, 0.1, 2000)
+    xf = 0.9
+    for v in xi:
+        xf += 0.3 * (v - xf)
+        assert not biased.update(xf, xi=float(v), error=0.3).active
+    restarted = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
+    for _ in range(2):
+        restarted.update(1.2, xi=1.4, error=0.3)  # 2 x 1.33: pending
+    restarted.restart()  # a new view: its own frames decide
+    assert restarted.update(1.2, xi=1.4, error=0.3).name == "pending" and restarted.state.evidence < 3.0
+
+
+def test_a_metadata_step_starts_a_new_view_judged_on_its_own_frames(rng):
+    """Clean view at 12 dB, then a view at true 24 dB stated 18 dB (6 dB low): the filter restarts at the step
+    (no carry-over of the previous view's xi) and the alarm rises within 2 frames of the new view; the count
+    rule alone (alarm_evidence 0) needs 5."""
+    low = META.replace(gain_db=12.0)
+    for cfg, within in (({}, 2), ({"alarm_evidence": 0.0}, 5)):
+        mon = make_monitor(**cfg)
+        for frame, _ in frames(rng, 6, meta=low):
+            assert not mon.process(frame).alarm_active
+        true_meta = META.replace(gain_db=24.0)
+        for n, (frame, _) in enumerate(frames(rng, 8, meta=true_meta, start=6), 1):
+            frame.metadata = META.replace(gain_db=18.0)
+            res = mon.process(frame)
+            assert res.view_frames == n
+            if n == 1:
+                assert res.xi_filtered == res.xi < -1.5  # restarted: the previous view's xi ~0 is not carried
+            if res.alarm_active:
+                break
+        assert res.alarm_active and n <= within and res.cause == CAUSE_IMAGE_NOISIER, (cfg, n)
+
+
 # --- the pipeline on simulated frames ------------------------------------------------------
 def test_clean_frames_stay_ok_and_sigmas_track_truth(rng):
     mon = make_monitor()
@@ -164,7 +208,7 @@ def test_extra_image_noise_raises_image_noisier_alarm(rng):
     assert res.alarm_active and n <= 10 and res.level == ERROR
     assert res.cause == CAUSE_IMAGE_NOISIER and CAUSE_IMAGE_NOISIER in res.message
     expected = res.model["total"] - np.sqrt(res.model["total"] ** 2 + 25.0)
-    assert res.xi_filtered == pytest.approx(expected, abs=0.6)
+    assert res.xi == pytest.approx(expected, abs=0.6)  # the frame's xi (the evidence raises before the filter settles)
 
 
 def test_doubled_thermal_white_noise_metadata_raises_model_noisier_alarm(rng):
