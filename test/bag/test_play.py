@@ -118,8 +118,8 @@ def test_live_node_on_played_bag_agrees_with_offline_replay(tmp_path, ros):
     node.monitor.model.predict(np.full((8, 8), 100.0), meta)  # warm the node's model tables like the replay's
     live: dict[int, dict[str, str]] = {}
     listener = ros(rclpy.create_node("diag_listener"))
-    listener.create_subscription(DiagnosticArray, "/diagnostics", lambda m: live.update(
-        {_stamp(m): {kv.key: kv.value for kv in m.status[0].values}}), 50)
+    listener.create_subscription(DiagnosticArray, f"{node.get_fully_qualified_name()}/frame", lambda m: live.update(
+        {_stamp(m): {kv.key: kv.value for kv in m.status[0].values}}), 50)  # every frame's status
     stats = play(bag, rate=0.5, wait_subscribers_s=20.0, progress=False)
     assert stats.published["/camera/image_raw"] == 12
     stamps = [r["stamp_ns"] for r in _csv_rows(tmp_path / "replay" / "replay.csv")]

@@ -106,16 +106,19 @@ class Rig:
         return False
 
     def publish(self, i: int, extra_sigma: float = 0.0, metadata: dict | None = None,
-                dynamic: dict | None = None, hardware_id: str = "") -> tuple[int, dict]:
-        """Publish frame i simulated with ``dynamic`` conditions, and ``metadata`` (default: the same
-        conditions; its status's ``hardware_id``) first with the same header stamp; returns (stamp ns,
-        simulator truth)."""
+                dynamic: dict | None = None, hardware_id: str = "", pixels: np.ndarray | None = None
+                ) -> tuple[int, dict]:
+        """Publish frame i simulated with ``dynamic`` conditions (or the given mono8 ``pixels``), and
+        ``metadata`` (default: the same conditions; its status's ``hardware_id``) first with the same header
+        stamp; returns (stamp ns, simulator truth)."""
         dynamic = DYNAMIC if dynamic is None else dynamic
-        meta = PROFILE.metadata(**dynamic)
-        noisy, truth = MODEL.simulate(self.clean, meta, self.rng)
-        if extra_sigma:
-            noisy = noisy + self.rng.normal(0.0, extra_sigma, noisy.shape).astype(np.float32)
-        img = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        truth: dict = {}
+        if pixels is None:
+            noisy, truth = MODEL.simulate(self.clean, PROFILE.metadata(**dynamic), self.rng)
+            if extra_sigma:
+                noisy = noisy + self.rng.normal(0.0, extra_sigma, noisy.shape).astype(np.float32)
+            pixels = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        img = pixels
         stamp_ns = 1_000 * 10**9 + i * 33_333_333
         stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
         values = dynamic if metadata is None else metadata
@@ -230,13 +233,15 @@ def test_diagnostics_summarise_each_period_at_the_configured_rate_under_30_hz_in
     statuses it covers (by the frames_received counter, whatever the delivery order)."""
     rig = rig_factory(f"rate{int(rate_hz)}", diagnostics_rate_hz=rate_hz)
     clock = rig.node.get_clock()
+    meta = PROFILE.metadata(**DYNAMIC)  # frames simulated before: the loop only publishes and spins
+    images = [np.clip(np.rint(MODEL.simulate(rig.clean, meta, rig.rng)[0]), 0, 255).astype(np.uint8) for _ in range(8)]
     n0 = len(rig.diagnostics)
     next_ns, i = clock.now().nanoseconds, 0
 
     def camera_at_30_hz() -> bool:
         nonlocal next_ns, i
         if clock.now().nanoseconds >= next_ns:
-            rig.publish(i)
+            rig.publish(i, pixels=images[i % len(images)])
             i, next_ns = i + 1, next_ns + 33_333_333
         return len(rig.diagnostics) - n0 >= periods + 2
 
