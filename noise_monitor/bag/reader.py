@@ -27,6 +27,7 @@ from msg_adapters.metadata import (
     metadata_from_mapping,
     metadata_from_temperature,
 )
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, FRAME
 from msg_adapters.vendor import VENDOR_TYPES, metadata_from_vendor, register_vendor_types
 from noise_monitor import safe_yaml
 from noise_monitor.monitor.frame import Frame
@@ -141,7 +142,8 @@ class BagReader:
                          and m in fielddefs and _METADATA_NAMES & {f[0] for f in fielddefs[m][1]})
         if generic:
             return generic
-        return [t for t in self._typed(DIAGNOSTIC_TYPE) if t != "/diagnostics"]
+        return [t for t in self._typed(DIAGNOSTIC_TYPE)  # not the monitor's own outputs (a recorded node)
+                if t != DIAGNOSTICS_TOPIC and not t.endswith(f"/{FRAME}")]
 
     def _pick(self, role: str, override: str | None, candidates: list[str], required: bool = False) -> str | None:
         if override:

@@ -221,3 +221,25 @@ def test_flir_vendor_metadata_temperature_topic_and_invalid_values(tmp_path):
     assert ok.metadata.exposure_time_s == pytest.approx(0.0025)
     assert bad.metadata is None and "gain_db" in bad.metadata_error
     assert bad.skip_reason.startswith("metadata invalid")
+
+
+def test_the_monitors_own_outputs_are_not_taken_for_metadata(tmp_path):
+    """A recording of a running monitor holds /diagnostics and <ns>/frame (DiagnosticArray): neither is the
+    camera's metadata; a plain DiagnosticArray topic of the camera still is."""
+    from msg_adapters.diagnostics import to_rosbags
+    from noise_monitor.monitor.status import OK, StatusReport
+
+    report = StatusReport(level=OK, name="noise_monitor: camera", message="ok", hardware_id="", values={"xi": "0.1"})
+    path = tmp_path / "recorded.mcap"
+    with BagWriter(path) as w:
+        w.write("/camera/image_raw", image_msg(np.full((8, 8), 50, np.uint8), 5), 5)
+        for topic in ("/diagnostics", "/noise_monitor/frame"):
+            w.write(topic, to_rosbags([report], 5, typestore()), 5)
+    with open_bag(path) as reader:
+        assert reader.metadata_topic is None
+    with BagWriter(path2 := tmp_path / "camera_status.mcap") as w:
+        w.write("/camera/image_raw", image_msg(np.full((8, 8), 50, np.uint8), 5), 5)
+        for topic in ("/noise_monitor/frame", "/camera/status"):
+            w.write(topic, to_rosbags([report], 5, typestore()), 5)
+    with open_bag(path2) as reader:
+        assert reader.metadata_topic == "/camera/status"
