@@ -44,7 +44,7 @@ def estimator() -> Any:
 
 
 def test_live_view_mirrors_the_nodes_topics(rig_factory):
-    rig = rig_factory("live", debug_image_rate_hz=100.0)
+    rig = rig_factory("live", debug_image_rate_hz=100.0, diagnostics_rate_hz=20.0)
     node = rig.node
     ns = node.get_fully_qualified_name()
     topics = node.live_topics()
@@ -76,6 +76,7 @@ def test_live_view_mirrors_the_nodes_topics(rig_factory):
         while not all(live.has_subscribers(t) for t in wanted) and time.monotonic() < end:
             time.sleep(0.01)
         reports = [rig.step(i) for i in range(3)]
+        rig.spin_until(lambda: False, 0.5)  # a few /diagnostics period summaries (20 Hz) reach the client
         done.set()
         thread.join(30)
         node.live = None
