@@ -6,6 +6,7 @@ from typing import Any
 import numpy as np
 
 from msg_adapters.diagnostics import OK, StatusReport, to_rosbags
+from msg_adapters.outputs import rosbags_image
 from noise_monitor.physics import CameraMetadata
 
 from .writer import typestore
@@ -21,14 +22,7 @@ def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str = "camera") -> Any:
     """sensor_msgs/Image mono8 (uint8 image) or mono16 (uint16 image)."""
     if img.ndim != 2 or img.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"image must be a 2-D uint8 or uint16 array, got {img.dtype} {img.shape}")
-    h, w = img.shape
-    data = np.ascontiguousarray(img)
-    enc = "mono8" if img.dtype == np.uint8 else "mono16"
-    return typestore().types["sensor_msgs/msg/Image"](
-        header=header(stamp_ns, frame_id), height=h, width=w, encoding=enc,
-        is_bigendian=0 if data.dtype.byteorder != ">" else 1, step=w * data.itemsize,
-        data=data.reshape(-1).view(np.uint8),
-    )
+    return rosbags_image(img, stamp_ns, frame_id, typestore())
 
 
 def camera_info_msg(height: int, width: int, stamp_ns: int, frame_id: str = "camera",
