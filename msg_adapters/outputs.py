@@ -40,18 +40,19 @@ NUMERIC_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_total", "sigma_mode
                 "xi_filtered", "xi_model", "alarm", "xi_threshold")
 
 
-def _ns(namespace: str) -> str:
+def namespace_prefix(namespace: str) -> str:
+    """A monitor namespace as an absolute topic prefix (``noise_monitor/`` -> ``/noise_monitor``)."""
     return "/" + namespace.strip("/")
 
 
 def frame_topic(namespace: str = DEFAULT_NAMESPACE) -> str:
     """``<namespace>/frame``."""
-    return f"{_ns(namespace)}/{FRAME}"
+    return f"{namespace_prefix(namespace)}/{FRAME}"
 
 
 def output_topics(namespace: str = DEFAULT_NAMESPACE) -> dict[str, str]:
     """Topic name -> message type name for a monitor namespace (``/diagnostics`` first)."""
-    ns = _ns(namespace)
+    ns = namespace_prefix(namespace)
     return {DIAGNOSTICS_TOPIC: DIAGNOSTICS_TYPE, frame_topic(ns): DIAGNOSTICS_TYPE,
             **{f"{ns}/{k}": NUMBER_TYPE for k in NUMERIC_KEYS}}
 
@@ -61,12 +62,12 @@ OUTPUT_TOPICS: dict[str, str] = output_topics()
 
 def debug_image_topic(namespace: str = DEFAULT_NAMESPACE) -> str:
     """``<namespace>/debug_image`` (sensor_msgs/Image rgb8, at most debug_image_rate_hz)."""
-    return f"{_ns(namespace)}/{DEBUG_IMAGE}"
+    return f"{namespace_prefix(namespace)}/{DEBUG_IMAGE}"
 
 
 def _numbers(result: FrameResult, namespace: str) -> dict[str, float]:
     values = result.numeric()
-    ns = _ns(namespace)
+    ns = namespace_prefix(namespace)
     return {f"{ns}/{k}": float(values[k]) for k in NUMERIC_KEYS if k in values}
 
 

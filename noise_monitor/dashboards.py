@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Literal
 
 from msg_adapters.diagnostics import jazzy_typestore
-from msg_adapters.outputs import DEFAULT_NAMESPACE, DIAGNOSTICS_TOPIC, NUMBER_TYPE, debug_image_topic
+from msg_adapters.outputs import DEFAULT_NAMESPACE, DIAGNOSTICS_TOPIC, NUMBER_TYPE, debug_image_topic, namespace_prefix
 
 FOXGLOVE_FILE = "foxglove_layout.json"
 PLOTJUGGLER_FILE = "plotjuggler_layout.xml"
@@ -33,10 +33,6 @@ BAND_TOPIC = "/foxglove_script/xi_threshold_band"
 LOWER_EDGE = "-xi_threshold"
 #: diagnostic_msgs/DiagnosticStatus levels.
 LEVELS = ((0, "OK", "#2ca02c"), (1, "WARN", "#ff7f0e"), (2, "ERROR", "#d62728"), (3, "STALE", "#7f7f7f"))
-
-
-def _ns(namespace: str) -> str:
-    return "/" + namespace.strip("/")
 
 
 def number_field(type_name: str = NUMBER_TYPE) -> list[str]:
@@ -70,7 +66,7 @@ def foxglove_layout(namespace: str = DEFAULT_NAMESPACE, camera_name: str = "came
     topics' message type."""
     import foxglove.layouts as fl
 
-    ns = _ns(namespace)
+    ns = namespace_prefix(namespace)
     field = "." + ".".join(number_field(number_type))
     # stamped numbers plot at the image's header stamp; Float32 ones at the log time (= the image stamp in the
     # replay's MCAP and over --foxglove; the receive time through foxglove_bridge), like the band script's output
@@ -129,7 +125,7 @@ export default function script(event: Input<"{ns}/xi_threshold">): Output {{
 
 def plotjuggler_layout(namespace: str = DEFAULT_NAMESPACE, number_type: str = NUMBER_TYPE) -> str:
     """The PlotJuggler layout XML (curves ``<topic>/<field>``; loads an MCAP or subscribes to ROS 2 topics)."""
-    ns = _ns(namespace)
+    ns = namespace_prefix(namespace)
     field = "/" + "/".join(number_field(number_type))
     root = ET.Element("root")
     tabs = ET.SubElement(root, "tabbed_widget", {"name": "Main Window", "parent": "main_window"})
