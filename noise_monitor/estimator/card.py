@@ -36,18 +36,20 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
     if train:
         lines += [f"- Training command: `{train.get('command', '?')}`",
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
-                  f"(scikit-image bundled photos{_variants(train)} + dead leaves, sequential simulator, xi scheme; data seed "
+                  f"(scikit-image bundled photos{_variants(train)} + dead leaves{_procedural(train)}, sequential simulator, xi scheme; data seed "
                   f"{train.get('data_seed', '?')}" + (f", corruption scheme {json.dumps(train['scheme'])}" if "scheme" in train else "")
                   + ")" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
                            " (pre-generated dataset file; the same command without --data regenerates it identically "
                            "from the data seed)"),
                   f"- Training settings: {json.dumps(train['settings'])}"]
     if ck["config"].get("confidence"):
-        from .inference import MEASURABLE_ERROR_DN
+        from .inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR
 
-        lines += [f"- Confidence head {ck['config']['confidence']} (predicted error of sigma_image): trained alone with the "
-                  "measurement frozen (`--confidence`, Gaussian NLL of the log residual); a patch whose predicted error "
-                  f"exceeds {MEASURABLE_ERROR_DN} DN is declined as not measurable"]
+        evidence = " and the patch's texture evidence (`evidence.py`)" if ck["config"].get("evidence") else ""
+        lines += [f"- Confidence head {ck['config']['confidence']} (predicted error of sigma_image from the measurement's "
+                  f"features{evidence}): trained alone with the measurement frozen (`--confidence`, Gaussian NLL of the log "
+                  f"residual); a patch whose predicted error exceeds {MEASURABLE_ERROR_DN} DN or "
+                  f"{MEASURABLE_RELATIVE_ERROR:.0%} of sigma_image is declined as not measurable"]
     lines += ["", f"Benchmark command: `{command}`"]
     for label, results in runs.items():
         lines += _benchmark(name, label, results)
@@ -59,6 +61,11 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
 def _variants(train: dict) -> str:
     n = train.get("photo_variants", 0)
     return f" (each {n}x at a random {PHOTO_DOWNSCALE[0]}-{PHOTO_DOWNSCALE[1]:g}x downscale and gamma)" if n else ""
+
+
+def _procedural(train: dict) -> str:
+    n = train.get("procedural", 0)
+    return f" + {n} procedural images of pixel-scale structure (hillshades, gratings, fabric, halftone, text)" if n else ""
 
 
 def _stages(train: dict) -> list[dict]:
@@ -99,9 +106,12 @@ def _benchmark(name: str, label: str, results: dict) -> list[str]:
     declined = {part: rows[name]["declined"] for part, rows in results["parts"].items() if "declined" in rows.get(name, {})}
     if declined:
         lines += ["", "Unmeasurable patches declined (confidence head; a declined patch is never a false alarm nor a hit):", "",
-                  "| part | coverage | xi RMS on accepted | alarms (all candidates / accepted) |", "|---|---|---|---|"]
+                  "| part | coverage | xi RMS on accepted | alarms (all candidates / accepted) | with clear decisions: "
+                  "coverage, alarms |", "|---|---|---|---|---|"]
         for part, d in declined.items():
-            lines.append(f"| ({part}) | {100 * d['coverage']:.1f} % | {rms_cell(d['xi'])} | {declined_alarms(d)} |")
+            c = results["parts"][part][name].get("decided")
+            clear = "-" if c is None else f"{100 * c['coverage']:.1f} %, {declined_alarms(c)}"
+            lines.append(f"| ({part}) | {100 * d['coverage']:.1f} % | {rms_cell(d['xi'])} | {declined_alarms(d)} | {clear} |")
     sens = results.get("sensitivity_full_meta")
     if sens and name == "full_meta":
         lines += ["", f"Metadata sensitivity sweep (paper's protocol, sequential model reference): max |estimator - model| = "

@@ -92,18 +92,19 @@ def _metadata(rng: np.random.Generator, sensor: Mapping[str, Any] | None) -> Cam
 
 def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: Scheme = Scheme(),
              group: int = 8, progress: bool = True, effects: EffectSpecs | None = None,
-             sensor: Mapping[str, Any] | None = None, photo_variants: int = 0) -> dict[str, np.ndarray]:
+             sensor: Mapping[str, Any] | None = None, photo_variants: int = 0,
+             procedural: int = 0) -> dict[str, np.ndarray]:
     """A seeded dataset of ``n`` noisy patches with truths, metadata and the analytic tables per group.
 
     ``effects``: effect specs beyond the paper's sources (name -> parameters); ``sensor``: static
     metadata fields that replace the random sensor (operating conditions stay random);
-    ``photo_variants``: see ``images.source_images``.
+    ``photo_variants``, ``procedural``: see ``images.source_images``.
     """
     if n < 1 or patch_size < 8:
         raise ValueError("need n >= 1 patches of at least 8x8 px")
     rng = np.random.default_rng(seed)
     prior = PhysicsPrior(camera_model(effects))  # validates the specs before any work
-    images = source_images(split, rng, variants=photo_variants)
+    images = source_images(split, rng, variants=photo_variants, procedural=procedural)
     n_groups = -(-n // group)
     clean = sample_clean_patches(images, rng, n, patch_size)
     noisy = np.empty_like(clean)
@@ -144,6 +145,7 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
         "tables": np.stack(tables), "overridden": overridden, "unexpected": unexpected,
         "effects_json": np.array(json.dumps(_plain(effects), sort_keys=True)),
         "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)), "photo_variants": np.array(photo_variants),
+        "procedural": np.array(procedural),
         **{f"truth_{k}": v for k, v in truth.items()},
     }
 
@@ -160,6 +162,11 @@ def camera_of(data: dict[str, np.ndarray]) -> tuple[dict, dict]:
 def photo_variants_of(data: dict[str, np.ndarray]) -> int:
     """Photo variants a dataset was generated with (0 for datasets older than the option)."""
     return int(data["photo_variants"]) if "photo_variants" in data else 0
+
+
+def procedural_of(data: dict[str, np.ndarray]) -> int:
+    """Procedural images a dataset was generated with (0 for datasets older than the option)."""
+    return int(data["procedural"]) if "procedural" in data else 0
 
 
 def save(data: dict[str, np.ndarray], path: Path) -> None:

@@ -103,6 +103,9 @@ def _table(results: dict) -> str:
             if d is not None:
                 lines.append(f"  {'  declined unmeasurable':<28} coverage {100 * d['coverage']:.1f} %, xi RMS on accepted "
                              f"{rms_cell(d['xi'])}, {declined_alarms(d)}")
+            c = r.get("decided")
+            if c is not None:
+                lines.append(f"  {'  + clear decisions':<28} coverage {100 * c['coverage']:.1f} %, {declined_alarms(c)}")
     sens = results.get("sensitivity_full_meta")
     if sens:
         lines.append(f"sensitivity sweep (full_meta): max |estimator - model| = {sens['max_abs_diff_dn']} DN, "

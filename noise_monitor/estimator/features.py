@@ -10,32 +10,21 @@ from __future__ import annotations
 
 from functools import cache
 
-import cv2
 import numpy as np
 
+from .evidence import texture_evidence
 from .physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
+from .residuals import BLOCK, block_energies, immerkaer, laplacian
 
 #: Floor of the reference scale and of sigma_model (DN).
 SIGMA_MODEL_FLOOR = 0.05
 #: Block size and quantiles of the block-wise residual energy (texture-robust noise cues).
-BLOCK = 8
 BLOCK_QUANTILES = (0.1, 0.25, 0.5)
 #: Quantile of the block energies of the Immerkaer residual that sets the reference scale (tuned on
 #: crops of the training photographs: 0.05-0.25 and 4 / 8 px blocks, Immerkaer and Laplacian compared).
 REFERENCE_QUANTILE = 0.05
-#: Immerkaer's mask (Immerkaer 1996): outer([1, -2, 1], [1, -2, 1]) / 6, unit gain on white noise. It
-#: annihilates every image that is linear along rows or columns, so edges along either axis leave none.
-IMMERKAER = (np.outer([1.0, -2.0, 1.0], [1.0, -2.0, 1.0]) / 6.0).astype(np.float32)
 #: Variance of the 4-neighbour Laplacian of unit white noise (16 + 4 x 1).
 LAPLACIAN_GAIN = 20.0
-
-
-def block_energies(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
-    """Mean squared residual per ``block`` x ``block`` block, (N, blocks), float64."""
-    n, h, w = resid.shape
-    hb, wb = h // block, w // block
-    e = (resid[:, :hb * block, :wb * block].astype(np.float64) ** 2).reshape(n, hb, block, wb, block).mean(axis=(2, 4))
-    return e.reshape(n, -1)
 
 
 def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
@@ -45,22 +34,6 @@ def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
     quantiles measure noise where the whole-patch energy would read texture as noise.
     """
     return np.log(np.quantile(block_energies(resid, block), BLOCK_QUANTILES, axis=1).T + 1e-6)
-
-
-def laplacian(patches: np.ndarray) -> np.ndarray:
-    """4-neighbour Laplacian of every patch of an (N, H, W) float32 batch (cv2, reflect-101 border)."""
-    out = np.empty_like(patches, dtype=np.float32)
-    for i, p in enumerate(patches):
-        out[i] = cv2.Laplacian(np.asarray(p, dtype=np.float32), cv2.CV_32F, ksize=1)
-    return out
-
-
-def immerkaer(patches: np.ndarray) -> np.ndarray:
-    """Immerkaer residual of every patch of an (N, H, W) float32 batch (cv2, reflect-101 border)."""
-    out = np.empty_like(patches, dtype=np.float32)
-    for i, p in enumerate(patches):
-        out[i] = cv2.filter2D(np.asarray(p, dtype=np.float32), cv2.CV_32F, IMMERKAER)
-    return out
 
 
 @cache
@@ -79,8 +52,8 @@ def reference_sigma(noisy: np.ndarray, shape: np.ndarray) -> np.ndarray:
     return np.maximum(np.sqrt(q / unit_noise_quantile(h, w)), SIGMA_MODEL_FLOOR)
 
 
-def compact_inputs(noisy: np.ndarray, tables: np.ndarray,
-                   group_of: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
+                   evidence: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(maps (N, 3, H, W), scalars (N, 12), physics prediction + ``reference``) for noisy patches in DN.
 
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
@@ -88,6 +61,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray,
     and the image's reference scale (:func:`reference_sigma`), and the intensity / 255 - 0.5.
     scalars: log reference, the sources' shares of sigma_model^2 (3), per residual the log mean
     square and its block quantiles (2 x 4). No metadata scale: see the module docstring.
+    ``evidence``: also the texture evidence of the confidence head (``evidence.texture_evidence``).
     """
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
@@ -104,4 +78,6 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray,
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
                               energy[1], block_energy_quantiles(lap)], axis=1).astype(np.float32)
     phys["reference"] = ref
+    if evidence:
+        phys["evidence"] = texture_evidence(noisy, shape)
     return maps, scalars, phys

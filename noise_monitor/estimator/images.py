@@ -115,21 +115,26 @@ def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) ->
 
 
 def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
-                  variants: int = 0) -> list[np.ndarray]:
+                  variants: int = 0, procedural: int = 0) -> list[np.ndarray]:
     """Clean images of a split (see ``SPLITS``): its photographs plus ``n_dead_leaves`` dead-leaves images
     from ``rng`` (none for ``photos``). ``variants`` > 0 (train only): the training photographs as
-    ``photo_variants(rng, variants)`` instead of once at 2x."""
+    ``photo_variants(rng, variants)`` instead of once at 2x; ``procedural`` > 0 (train only): that many
+    images of pixel-scale structure from ``procedural.procedural_images`` besides."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     if variants < 0 or (variants and split != "train"):
         raise ValueError(f"photo variants must be >= 0 and only for the train split, got {variants} for {split!r}")
+    if procedural < 0 or (procedural and split != "train"):
+        raise ValueError(f"procedural images must be >= 0 and only for the train split, got {procedural} for {split!r}")
     if split == "photos":
         return matplotlib_photos() + pywavelets_photos()
     if variants:
         photos = photo_variants(rng, variants)
     else:
         photos = skimage_photos() if split == "train" else matplotlib_photos()
-    return photos + [dead_leaves(rng) for _ in range(n_dead_leaves)]
+    from .procedural import procedural_images
+
+    return photos + [dead_leaves(rng) for _ in range(n_dead_leaves)] + procedural_images(rng, procedural)
 
 
 def sample_clean_patches(images: list[np.ndarray], rng: np.random.Generator, n: int, size: int,

@@ -5,8 +5,9 @@
 sigma_image = the compact network's measurement of the noise actually in the patch; xi = sigma_model -
 sigma_image; total = sigma_model (the paper's total without xi). Weights with a confidence head also give
 ``sigma_image_error`` (the measurement's predicted error, DN) and ``measurable`` (that error <=
-``MEASURABLE_ERROR_DN``: a patch whose noise the image cannot reveal, e.g. under dense pixel-scale
-texture, is declined rather than read). With a camera model of more effects
+``MEASURABLE_ERROR_DN`` and <= ``MEASURABLE_RELATIVE_ERROR`` of sigma_image: a patch whose noise the image
+cannot reveal, e.g. under dense pixel-scale texture, is declined rather than read). The head of the
+shipped weights also sees the patch's texture evidence (:mod:`.evidence`). With a camera model of more effects
 (``model``, or the effects a network was fine-tuned with), ``extra`` is their joint sigma and sigma_model
 includes it. The paper-family variants return their branch outputs (``drne``: total only).
 
@@ -32,10 +33,12 @@ from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")
 MIN_PATCH = 16
-#: A patch is measurable when the predicted error of its sigma_image is at most this (DN). Chosen on crops of
-#: the training photographs at 64 px (0.3 / 0.4 / 0.5 / 0.7 DN compared): xi RMS on the accepted patches
-#: 0.31 / 0.28 / 0.44 DN on parts (a) / (b) / (c) at ~60 % coverage, 1.0 % false alarms (README).
-MEASURABLE_ERROR_DN = 0.4
+#: A patch is measurable when the predicted error of its sigma_image is at most this (DN) and at most
+#: ``MEASURABLE_RELATIVE_ERROR`` of it (a reading of almost no noise under texture has a small error in DN
+#: but is no measurement). Chosen on crops of the training photographs and procedural images at 64 px
+#: (README, "Declining what one image cannot measure").
+MEASURABLE_ERROR_DN = 0.3
+MEASURABLE_RELATIVE_ERROR = 0.3
 
 
 def validate_patches(patches_dn, min_size: int = MIN_PATCH) -> np.ndarray:
@@ -125,12 +128,13 @@ def onnx_session(net: Any, example: tuple[Any, ...], threads: int | None = None)
     return onnx_weights.session(data, threads or default_threads()), names
 
 
-def _compact_example(patch_size: int) -> tuple[Any, Any]:
+def _compact_example(patch_size: int, evidence: int = 0) -> tuple[Any, ...]:
     import torch
 
     from .networks import N_MAPS, N_SCALARS
 
-    return torch.zeros(2, N_MAPS, patch_size, patch_size), torch.zeros(2, N_SCALARS)
+    example = (torch.zeros(2, N_MAPS, patch_size, patch_size), torch.zeros(2, N_SCALARS))
+    return example + ((torch.zeros(2, evidence),) if evidence else ())
 
 
 class FullMetaEstimator(_Base):
@@ -149,7 +153,7 @@ class FullMetaEstimator(_Base):
         self.backend = "onnx" if backend == "onnx" or (backend == "auto" and device.type == "cpu") else "torch"
         self._session = None
         if self.backend == "onnx":
-            self._session, self._inputs = onnx_session(self.net, _compact_example(self.patch_size), threads)
+            self._session, self._inputs = onnx_session(self.net, self._example(), threads)
 
     @classmethod
     def from_onnx(cls, session: Any, meta: dict[str, Any], model: NoiseModel | None = None) -> FullMetaEstimator:
@@ -171,20 +175,27 @@ class FullMetaEstimator(_Base):
                           "noise model lacks: sigma_model and xi will be biased (use the profile the weights were "
                           "fine-tuned for)", stacklevel=4)
 
+    def _example(self) -> tuple[Any, ...]:
+        return _compact_example(self.patch_size, self.net.cfg.evidence)
+
     def companion(self, source_sha256: str) -> bytes:
         """This network as an ONNX companion of the checkpoint with that SHA-256 (torch backend objects)."""
-        data, _ = export_onnx(self.net, _compact_example(self.patch_size))
+        data, _ = export_onnx(self.net, self._example())
         return onnx_weights.with_metadata(data, {
             "source_sha256": source_sha256, "variant": self.name, "patch_size": self.patch_size,
             "effects": self.trained_effects, "info": self.info})
 
-    def _run_net(self, maps: np.ndarray, scalars: np.ndarray) -> np.ndarray:
+    @property
+    def _wants_evidence(self) -> bool:
+        return len(self._inputs) > 2 if self._session is not None else bool(self.net.cfg.evidence)
+
+    def _run_net(self, *inputs: np.ndarray) -> np.ndarray:
         if self._session is not None:
-            return self._session.run(None, {self._inputs[0]: maps, self._inputs[1]: scalars})[0]
+            return self._session.run(None, dict(zip(self._inputs, inputs)))[0]
         import torch
 
         with torch.inference_mode():
-            r = self.net(torch.from_numpy(maps).to(self.device), torch.from_numpy(scalars).to(self.device))
+            r = self.net(*(torch.from_numpy(a).to(self.device) for a in inputs))
         return r.cpu().numpy()
 
     def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | Sequence[CameraMetadata]) -> dict[str, np.ndarray]:
@@ -195,16 +206,18 @@ class FullMetaEstimator(_Base):
         group_of = np.empty(len(x), dtype=np.int64)
         for g, idx in enumerate(groups.values()):
             group_of[idx] = g
-        maps, scalars, phys = compact_inputs(x, tables, group_of)
-        raw = self._run_net(maps, scalars).astype(np.float64)
+        maps, scalars, phys = compact_inputs(x, tables, group_of, evidence=self._wants_evidence)
+        inputs = (maps, scalars) + ((phys.pop("evidence"),) if self._wants_evidence else ())
+        raw = self._run_net(*inputs).astype(np.float64)
         r = np.clip(raw[:, 0] if raw.ndim == 2 else raw, -6.0, 6.0)
         sigma_image = phys.pop("reference") * np.exp(r)
         out = {s: phys[s] for s in SOURCES + ((EXTRA,) if EXTRA in phys else ())}
         out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
                    total=phys["total"].copy())
         if raw.ndim == 2:  # confidence head: log-space error std -> DN (first order)
-            out["sigma_image_error"] = sigma_image * np.exp(np.clip(raw[:, 1], -8.0, 4.0))
-            out["measurable"] = out["sigma_image_error"] <= MEASURABLE_ERROR_DN
+            relative = np.exp(np.clip(raw[:, 1], -8.0, 4.0))
+            out["sigma_image_error"] = sigma_image * relative
+            out["measurable"] = (out["sigma_image_error"] <= MEASURABLE_ERROR_DN) & (relative <= MEASURABLE_RELATIVE_ERROR)
         return out
 
 

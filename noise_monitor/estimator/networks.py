@@ -131,6 +131,8 @@ class CompactConfig:
     patch_size: int = 64
     #: hidden sizes of the confidence head (empty: none; see ``ImageNoiseNet``)
     confidence: tuple[int, ...] = field(default=())
+    #: texture-evidence inputs of the confidence head (0: none; ``evidence.N_EVIDENCE``)
+    evidence: int = 0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -159,8 +161,10 @@ class ImageNoiseNet(nn.Module):
 
     With ``cfg.confidence`` a second head predicts the log standard deviation of the measurement's own
     error (in log space, trained by Gaussian NLL on the residual of the detached measurement) from the
-    pooled features, the scalars, the MLP's last hidden layer and the measurement; the output is then
-    (N, 2) = [log(sigma_image / reference), log error std] instead of (N,).
+    pooled features, the scalars, the MLP's last hidden layer, the measurement and, with ``cfg.evidence``,
+    the patch's texture evidence (third input ``evidence`` (N, cfg.evidence), ``evidence.texture_evidence``:
+    how far its fine-scale content departs from white noise); the output is then (N, 2) =
+    [log(sigma_image / reference), log error std] instead of (N,).
     """
 
     conf_mean: torch.Tensor
@@ -184,7 +188,7 @@ class ImageNoiseNet(nn.Module):
         mlp.append(nn.Linear(n_in, 1))
         self.mlp = nn.Sequential(*mlp)
         if cfg.confidence:
-            n_conf = 2 * cfg.width + cfg.heads + N_SCALARS + n_in + 1
+            n_conf = 2 * cfg.width + cfg.heads + N_SCALARS + n_in + 1 + cfg.evidence
             self.confidence = dense_block(n_conf, cfg.confidence)
             # standardisation of the head's inputs, set from the training data (train.fit_confidence_inputs)
             self.register_buffer("conf_mean", torch.zeros(n_conf))
@@ -203,12 +207,19 @@ class ImageNoiseNet(nn.Module):
         mu = self.mlp[-1](h).squeeze(1)
         return mu, torch.cat([z, h, mu[:, None]], dim=1)
 
-    def forward(self, maps: torch.Tensor, scalars: torch.Tensor) -> torch.Tensor:
+    def forward(self, maps: torch.Tensor, scalars: torch.Tensor, evidence: torch.Tensor | None = None) -> torch.Tensor:
         mu, z = self.confidence_inputs(maps, scalars)
         if not self.cfg.confidence:
             return mu
-        log_err = self.confidence((z.detach() - self.conf_mean) / self.conf_std).squeeze(1)
-        return torch.stack([mu, log_err], dim=1)
+        return torch.stack([mu, self.log_error(z, evidence)], dim=1)
+
+    def log_error(self, z: torch.Tensor, evidence: torch.Tensor | None) -> torch.Tensor:
+        """The confidence head on its raw inputs ``z`` (:meth:`confidence_inputs`) and the evidence."""
+        if self.cfg.evidence:
+            if evidence is None:
+                raise ValueError("this network's confidence head needs the texture evidence as third input")
+            z = torch.cat([z, evidence], dim=1)
+        return self.confidence((z.detach() - self.conf_mean) / self.conf_std).squeeze(1)
 
 
 def count_parameters(net: nn.Module) -> int:

@@ -11,6 +11,7 @@ import torch
 from tqdm import tqdm
 
 from .device import resolve_device
+from .evidence import N_EVIDENCE
 from .features import compact_inputs
 from .networks import SIGMA_SCALE, ImageNoiseNet, build_network
 
@@ -44,8 +45,9 @@ def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
 def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
     """Network inputs and targets of a dataset for a variant."""
     if variant == "full_meta":
-        maps, scalars, phys = compact_inputs(data["noisy"], data["tables"], data["group_of"])
+        maps, scalars, phys = compact_inputs(data["noisy"], data["tables"], data["group_of"], evidence=True)
         return {"maps": torch.from_numpy(maps), "scalars": torch.from_numpy(scalars),
+                "evidence": torch.from_numpy(phys["evidence"]),
                 "reference": torch.from_numpy(phys["reference"]).float(),
                 "target": torch.from_numpy(data["truth_sigma_image"]).float()}
     meta_norm = meta_norm_of(data)
@@ -56,19 +58,22 @@ def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Te
     return t
 
 
-def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor], measure: bool = True) -> torch.Tensor:
-    """Training loss. full_meta: Huber on sigma_image (``measure``) plus, with a confidence head, the
-    Gaussian NLL of the measurement's log-space residual under the head's predicted error."""
+def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+    """Training loss. full_meta: Huber on sigma_image plus, with a confidence head, the Gaussian NLL of
+    the measurement's log-space residual under the head's predicted error; a batch of the frozen
+    measurement's cached outputs (``z``, ``mu``: :func:`head_tensors`) trains the head alone."""
     if variant == "full_meta":
-        out = net(batch["maps"], batch["scalars"])
-        r = out[:, 0] if out.ndim == 2 else out
-        loss = torch.zeros((), device=r.device)
-        if measure:
+        if "z" in batch:  # the confidence head alone on the frozen measurement's cached outputs
+            r, log_err = batch["mu"], net.log_error(batch["z"], batch["evidence"])
+            loss = torch.zeros((), device=r.device)
+        else:
+            out = net(batch["maps"], batch["scalars"], batch["evidence"])
+            r, log_err = (out[:, 0], out[:, 1]) if out.ndim == 2 else (out, None)
             est = batch["reference"] * torch.exp(r.clamp(-6.0, 6.0))
             loss = torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
-        if out.ndim == 2:
+        if log_err is not None:
             resid = torch.log(batch["target"] / batch["reference"]) - r.detach()
-            log_err = out[:, 1].clamp(-8.0, 4.0)
+            log_err = log_err.clamp(-8.0, 4.0)
             loss = loss + (0.5 * (resid / log_err.exp()) ** 2 + log_err).mean()
         return loss
     out = net(batch["patch"], batch["meta"])
@@ -100,10 +105,16 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
             raise FileNotFoundError(f"--init: {init} not found")
         ck_init = torch.load(init, map_location=dev, weights_only=True)
     net: Any = build_network(settings.variant, patch_size, settings.width, settings.depth)
-    # a head of the init weights is kept (and trained along: its loss sees the detached measurement)
-    head = tuple((ck_init or {}).get("config", {}).get("confidence") or ()) or (CONFIDENCE_HIDDEN if settings.confidence else ())
+    # a head of the init weights is kept (and trained along: its loss sees the detached measurement);
+    # --confidence trains a new head with the texture evidence in its place
+    init_cfg = (ck_init or {}).get("config", {})
+    head, evidence = tuple(init_cfg.get("confidence") or ()), int(init_cfg.get("evidence", 0))
+    if settings.confidence:
+        head, evidence = CONFIDENCE_HIDDEN, N_EVIDENCE
+        ck_init = {**ck_init, "state_dict": {k: v for k, v in ck_init["state_dict"].items()  # type: ignore[index]
+                                              if not k.startswith(("confidence.", "conf_"))}}
     if head and settings.variant == "full_meta":
-        net = ImageNoiseNet(replace(net.cfg, confidence=head))
+        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence))
     net = net.to(dev)
     trainable = [p for name, p in net.named_parameters() if not settings.confidence or name.startswith("confidence.")]
     for p in net.parameters():
@@ -139,6 +150,8 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
 
     effects, sensor = camera_of(data)
     tensors = tensors_for(settings.variant, data)
+    if settings.confidence:
+        tensors = head_tensors(net, tensors, dev)
     n = len(data["noisy"])
     net.train()
     t0 = time.time() - elapsed
@@ -147,7 +160,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     while step < settings.steps:
         idx = torch.from_numpy(rng.integers(0, n, settings.batch))
         batch = {k: v[idx].to(dev) for k, v in tensors.items()}
-        loss = loss_of(settings.variant, net, batch, measure=not settings.confidence)
+        loss = loss_of(settings.variant, net, batch)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -171,16 +184,30 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
 def _layers(config: dict) -> dict:
     """A network configuration without its operating patch size and confidence head (the measurement's
     weight shapes depend on the rest)."""
-    return {k: v for k, v in config.items() if k not in ("patch_size", "confidence")}
+    return {k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence")}
+
+
+@torch.no_grad()
+def head_tensors(net: ImageNoiseNet, tensors: dict[str, torch.Tensor], dev: Any, chunk: int = 512) -> dict[str, torch.Tensor]:
+    """The frozen measurement's outputs on every patch, computed once: the confidence head's raw inputs
+    ``z``, the measurement ``mu``, with the evidence, reference and target (what training the head alone needs)."""
+    net.eval()
+    parts = [net.confidence_inputs(tensors["maps"][i:i + chunk].to(dev), tensors["scalars"][i:i + chunk].to(dev))
+             for i in range(0, len(tensors["maps"]), chunk)]
+    net.train()
+    return {"z": torch.cat([p[1] for p in parts]).cpu(), "mu": torch.cat([p[0] for p in parts]).cpu(),
+            **{k: tensors[k] for k in ("evidence", "reference", "target")}}
 
 
 @torch.no_grad()
 def fit_confidence_inputs(net: ImageNoiseNet, data: dict[str, np.ndarray], dev: Any, n: int = 4096) -> None:
     """Set the confidence head's input standardisation from the first ``n`` patches of the data."""
-    maps, scalars, _ = compact_inputs(data["noisy"][:n], data["tables"], data["group_of"][:n])
+    maps, scalars, phys = compact_inputs(data["noisy"][:n], data["tables"], data["group_of"][:n], evidence=True)
     z = torch.cat([net.confidence_inputs(torch.from_numpy(maps[i:i + 256]).to(dev),
                                          torch.from_numpy(scalars[i:i + 256]).to(dev))[1]
                    for i in range(0, len(maps), 256)])
+    if net.cfg.evidence:
+        z = torch.cat([z, torch.from_numpy(phys["evidence"]).to(dev)], dim=1)
     net.conf_mean.copy_(z.mean(dim=0))
     net.conf_std.copy_(z.std(dim=0) + 1e-6)
 

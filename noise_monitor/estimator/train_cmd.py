@@ -9,7 +9,7 @@ from pathlib import Path
 from ..physics import load_profile
 from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
-from .data import Scheme, camera_of, generate, load, photo_variants_of, save
+from .data import Scheme, camera_of, generate, load, photo_variants_of, procedural_of, save
 from .images import PHOTO_DOWNSCALE
 from .networks import VARIANTS
 from .train import TrainSettings, train
@@ -31,6 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"use each training photo N times at a random {PHOTO_DOWNSCALE[0]}-{PHOTO_DOWNSCALE[1]:g}x "
                         "downscale and gamma instead of once at 2x (the shipped full_meta's last stages use 3; "
                         "0 = the paper-style recipe)")
+    p.add_argument("--procedural", type=int, default=0,
+                   help="add N procedural images of pixel-scale structure to the training images (fractal hillshades, "
+                        "gratings, fabric, halftone, text; the shipped confidence head uses 40)")
     p.add_argument("--width", type=int, default=None, help="conv features (default: 16)")
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -55,8 +58,8 @@ def _check(args: argparse.Namespace) -> None:
     for name in ("steps", "batch", "patches", "threads"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1")
-    if args.photo_variants < 0:
-        raise ValueError("--photo-variants must be >= 0")
+    if args.photo_variants < 0 or args.procedural < 0:
+        raise ValueError("--photo-variants and --procedural must be >= 0")
     if args.patch_size < 16:
         raise ValueError("--patch-size must be >= 16")
     if args.lr <= 0:
@@ -101,9 +104,12 @@ def run(args: argparse.Namespace) -> int:
         if photo_variants_of(data) != args.photo_variants:
             raise ValueError(f"dataset {data_path} was generated with --photo-variants {photo_variants_of(data)}, not "
                              f"{args.photo_variants}; give a new --data path")
+        if procedural_of(data) != args.procedural:
+            raise ValueError(f"dataset {data_path} was generated with --procedural {procedural_of(data)}, not "
+                             f"{args.procedural}; give a new --data path")
     else:
         data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme(), effects=effects, sensor=sensor,
-                        photo_variants=args.photo_variants)
+                        photo_variants=args.photo_variants, procedural=args.procedural)
         save(data, data_path)
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
@@ -111,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),
-               "photo_variants": args.photo_variants,
+               "photo_variants": args.photo_variants, "procedural": args.procedural,
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
                "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
                "settings": vars(settings)}

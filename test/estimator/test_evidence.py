@@ -1,0 +1,53 @@
+"""Texture evidence (white noise reads zero at any level) and the procedural training images."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from noise_monitor.estimator.evidence import N_EVIDENCE, texture_evidence
+from noise_monitor.estimator.procedural import KINDS, procedural_images
+
+
+def _grating(period: float, amp: float, angle: float, size: int = 64) -> np.ndarray:
+    yy, xx = np.mgrid[0:size, 0:size]
+    return (100.0 + amp * np.sin(2 * np.pi * (np.cos(angle) * xx + np.sin(angle) * yy) / period)).astype(np.float32)
+
+
+def test_white_noise_reads_zero_at_any_level_and_shape():
+    rng = np.random.default_rng(0)
+    noise = rng.standard_normal((64, 64, 64)).astype(np.float32)
+    ramp = np.linspace(20.0, 220.0, 64, dtype=np.float32)[None, None, :].repeat(64, axis=1)
+    shape = np.sqrt(ramp / ramp.mean())  # photon noise: sigma grows with the intensity
+    for level in (0.5, 3.0, 12.0):
+        ev = texture_evidence(np.clip(ramp + level * shape * noise, 0, 255), np.broadcast_to(shape, noise.shape))
+        assert ev.shape == (64, N_EVIDENCE) and ev.dtype == np.float32
+        assert np.all(np.abs(ev.mean(axis=0)) < 0.05), (level, ev.mean(axis=0))
+
+
+def test_pixel_scale_texture_departs_from_white_noise():
+    rng = np.random.default_rng(1)
+    noisy = np.stack([_grating(p, 20.0, a) + 2.0 * rng.standard_normal((64, 64)).astype(np.float32)
+                      for p, a in [(2.2, 0.3), (3.0, 1.1), (4.0, 2.0), (5.5, 0.7)]])
+    ev = texture_evidence(noisy)
+    white = texture_evidence(100.0 + 2.0 * rng.standard_normal((32, 64, 64)).astype(np.float32))
+    z = np.abs(ev - white.mean(axis=0)) / white.std(axis=0)  # in units of white noise's spread
+    assert np.all(z.max(axis=1) > 20.0)  # every grating: far outside white noise on some statistic
+    assert np.all(z[:3, 0] > 20.0)  # periods < 4 px: the high band's flatness alone
+
+
+def test_texture_evidence_rejects_bad_input():
+    with pytest.raises(ValueError, match="at least"):
+        texture_evidence(np.zeros((2, 8, 8), np.float32))
+    with pytest.raises(ValueError, match=r"\(N, H, W\)"):
+        texture_evidence(np.zeros((64, 64), np.float32))
+
+
+def test_procedural_images_are_seeded_and_on_the_dn_scale():
+    a = procedural_images(np.random.default_rng(5), 2 * len(KINDS), size=96)
+    b = procedural_images(np.random.default_rng(5), 2 * len(KINDS), size=96)
+    assert len(a) == 2 * len(KINDS) and all(np.array_equal(x, y) for x, y in zip(a, b))
+    for im in a:
+        assert im.shape == (96, 96) and im.dtype == np.float32 and 0.0 <= im.min() and im.max() <= 255.0
+        assert im.std() > 3.0  # every kind has structure
+    # each kind has content at the noise's scale: its fine-scale power departs from white noise
+    assert np.all(texture_evidence(np.stack([im[:64, :64] for im in a]))[:, 0] > 0.1)
