@@ -50,6 +50,9 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
                   f"features{evidence}): trained alone with the measurement frozen (`--confidence`, Gaussian NLL of the log "
                   f"residual); a patch whose predicted error exceeds {MEASURABLE_ERROR_DN} DN or "
                   f"{MEASURABLE_RELATIVE_ERROR:.0%} of sigma_image is declined as not measurable"]
+    if train.get("selection_note"):
+        lines += [f"- Chosen on the tuning sets (the held-out sets below were run once, with the design fixed): "
+                  f"{train['selection_note']}"]
     lines += ["", f"Benchmark command: `{command}`"]
     for label, results in runs.items():
         lines += _benchmark(name, label, results)
