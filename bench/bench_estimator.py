@@ -69,15 +69,17 @@ def main() -> None:
     for b in BATCHES:
         x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
         tables = fm.prior.tables(meta)[None]
-        maps, scalars, _ = compact_inputs(x, tables, np.zeros(b, np.int64))
-        tm, ts = torch.from_numpy(maps), torch.from_numpy(scalars)
+        evidence = bool(fm.net.cfg.evidence)  # the confidence head's texture evidence (third input)
+        maps, scalars, phys = compact_inputs(x, tables, np.zeros(b, np.int64), evidence=evidence)
+        arrays = (maps, scalars) + ((phys["evidence"],) if evidence else ())
+        tensors = tuple(torch.from_numpy(a) for a in arrays)
         with torch.inference_mode():
-            rows.append(row("full_meta net only (torch eager)", size, b, timeit(lambda: fm.net(tm, ts), args.reps)))
-        sess, names = onnx_session(fm.net, (tm, ts), args.threads)
-        feed = {names[0]: maps, names[1]: scalars}
+            rows.append(row("full_meta net only (torch eager)", size, b, timeit(lambda: fm.net(*tensors), args.reps)))
+        sess, names = onnx_session(fm.net, tensors, args.threads)
+        feed = dict(zip(names, arrays))
         rows.append(row("full_meta net only (onnxruntime)", size, b, timeit(lambda: sess.run(None, feed), args.reps)))
         rows.append(row("full_meta physics+features only", size, b, timeit(
-            lambda: compact_inputs(x, tables, np.zeros(b, np.int64)), args.reps)))
+            lambda: compact_inputs(x, tables, np.zeros(b, np.int64), evidence=evidence), args.reps)))
 
     for name in NAMES[1:]:
         if not (WEIGHTS_DIR / f"{name}.pt").is_file():
