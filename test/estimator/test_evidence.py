@@ -51,3 +51,24 @@ def test_procedural_images_are_seeded_and_on_the_dn_scale():
         assert im.std() > 3.0  # every kind has structure
     # each kind has content at the noise's scale: its fine-scale power departs from white noise
     assert np.all(texture_evidence(np.stack([im[:64, :64] for im in a]))[:, 0] > 0.1)
+
+
+def test_procedural_training_images_only_for_the_train_split(tmp_path, capsys):
+    """``--procedural N`` adds N procedural images to the training images (recorded in the dataset); the
+    held-out splits never get them; a dataset file cannot silently serve another --procedural."""
+    import json
+
+    from noise_monitor.cli import main as cli_main
+    from noise_monitor.estimator.data import generate, procedural_of
+    from noise_monitor.estimator.images import SKIMAGE_PHOTOS, source_images
+
+    imgs = source_images("train", np.random.default_rng(2), n_dead_leaves=0, procedural=3)
+    assert len(imgs) == len(SKIMAGE_PHOTOS) + 3
+    with pytest.raises(ValueError, match="train split"):
+        source_images("photos", np.random.default_rng(0), procedural=1)
+    assert procedural_of(generate(8, 32, seed=3, progress=False, procedural=2)) == 2 and procedural_of({}) == 0
+    args = ["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "1", "--batch", "2",
+            "--patches", "8", "--patch-size", "32", "--threads", "1"]
+    assert cli_main(args + ["--procedural", "2"]) == 0
+    assert json.loads(capsys.readouterr().out)["procedural"] == 2
+    assert cli_main(args) == 2 and "--procedural 2" in capsys.readouterr().err
