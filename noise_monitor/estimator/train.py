@@ -4,7 +4,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -63,8 +63,9 @@ def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) 
     the measurement's log-space residual under the head's predicted error; a batch of the frozen
     measurement's cached outputs (``z``, ``mu``: :func:`head_tensors`) trains the head alone."""
     if variant == "full_meta":
+        log_err: torch.Tensor | None
         if "z" in batch:  # the confidence head alone on the frozen measurement's cached outputs
-            r, log_err = batch["mu"], net.log_error(batch["z"], batch["evidence"])
+            r, log_err = batch["mu"], cast(ImageNoiseNet, net).log_error(batch["z"], batch["evidence"])
             loss = torch.zeros((), device=r.device)
         else:
             out = net(batch["maps"], batch["scalars"], batch["evidence"])
@@ -109,9 +110,9 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     # --confidence trains a new head with the texture evidence in its place
     init_cfg = (ck_init or {}).get("config", {})
     head, evidence = tuple(init_cfg.get("confidence") or ()), int(init_cfg.get("evidence", 0))
-    if settings.confidence:
+    if settings.confidence and ck_init is not None:  # (--confidence needs --init: checked above)
         head, evidence = CONFIDENCE_HIDDEN, N_EVIDENCE
-        ck_init = {**ck_init, "state_dict": {k: v for k, v in ck_init["state_dict"].items()  # type: ignore[index]
+        ck_init = {**ck_init, "state_dict": {k: v for k, v in ck_init["state_dict"].items()
                                               if not k.startswith(("confidence.", "conf_"))}}
     if head and settings.variant == "full_meta":
         net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence))
