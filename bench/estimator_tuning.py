@@ -1,0 +1,74 @@
+"""The estimator's tuning sets and their scores: what the confidence head and its limits were chosen on.
+
+Two sets, 600 patches per part (a) / (b) / (c) (``data.PARTS``), never the held-out ones:
+- ``tune``: new crops of the training photographs (scikit-image, at their fixed 2x), seeds 3001-3003;
+- ``proc``: procedural images of pixel-scale structure only (``procedural.procedural_images``, 30 images),
+  seeds 3101-3103.
+Generated once into ``--cache`` (``<set>_<part>_p<size>_n600.npz``), then scored with a weights file: xi RMS
+and alarm rates over every patch, over the measurable ones, and with clear decisions (``evaluate.score``).
+
+Usage: .venv/bin/python bench/estimator_tuning.py [--weights W.pt] [--sets tune proc] [--patch-size 64]
+       [--cache out/estimator_eval]
+Prints figures; asserts nothing.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+
+from noise_monitor.estimator import data as D
+from noise_monitor.estimator.evaluate import score
+from noise_monitor.estimator.images import skimage_photos
+from noise_monitor.estimator.inference import load
+from noise_monitor.estimator.procedural import procedural_images
+
+SETS = {"tune": ((3001, 3002, 3003), lambda rng: skimage_photos()),
+        "proc": ((3101, 3102, 3103), lambda rng: procedural_images(rng, 30))}
+N = 600
+
+
+def tuning_set(name: str, part: str, size: int, cache: Path) -> dict[str, np.ndarray]:
+    path = cache / f"{name}_{part}_p{size}_n{N}.npz"
+    if path.is_file():
+        return D.load(path)
+    seeds, images = SETS[name]
+    with mock.patch.object(D, "source_images", lambda split, rng, variants=0, procedural=0: images(rng)):
+        d = D.generate(N, size, seeds["abc".index(part)], "train", D.PARTS[part], progress=False)
+    D.save(d, path)
+    return d
+
+
+def _rate(r: dict) -> str:
+    if "false_alarm_rate" in r:
+        return f"false alarms {100 * r['false_alarm_rate']:.1f} %"
+    acc = r.get("hit_rate_accepted")
+    return f"hits {100 * r['hit_rate']:.1f} %" + ("" if acc is None else f" (accepted {100 * acc:.0f} %)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--weights", default=None, help="full_meta weights (default: the shipped ones)")
+    ap.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS))
+    ap.add_argument("--patch-size", type=int, default=64)
+    ap.add_argument("--cache", type=Path, default=Path("out/estimator_eval"))
+    args = ap.parse_args()
+    args.cache.mkdir(parents=True, exist_ok=True)
+    est = load("full_meta", device="cpu", weights=args.weights, threads=1)
+    for name in args.sets:
+        for part in "abc":
+            d = tuning_set(name, part, args.patch_size, args.cache)
+            sc = score(est.predict(d["noisy"], D.metas_of(d)), d, part)
+            line = f"{name} ({part}) {args.patch_size} px: all xi RMS {sc['xi']['rms']:.3f} DN, {_rate(sc)}"
+            for key, label in (("declined", "measurable"), ("decided", "+ clear decisions")):
+                r = sc.get(key)
+                if r is not None:
+                    xi = "-" if r["xi"] is None else f"{r['xi']['rms']:.3f} DN"
+                    line += f" | {label}: coverage {100 * r['coverage']:.0f} %, xi RMS {xi}, {_rate(r)}"
+            print(line, flush=True)
+
+
+if __name__ == "__main__":
+    main()
