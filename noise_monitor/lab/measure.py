@@ -256,6 +256,20 @@ def _line_ratio(r: np.ndarray, b: int, robust: np.ndarray) -> np.ndarray:
     return spread / np.maximum(robust, 1e-6)
 
 
+def _typical(values: np.ndarray, bins: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Per block, the median of ``values`` over the ``use`` blocks of its intensity bin (interpolated
+    between bins with fewer than 3 such blocks; the block's own value when no bin has 3)."""
+    centres, medians = [], []
+    for k in np.unique(bins[use]):
+        sel = use & (bins == k)
+        if sel.sum() >= 3:
+            centres.append(float(k))
+            medians.append(float(np.median(values[sel])))
+    if not centres:
+        return values
+    return np.interp(bins.astype(float), centres, medians)
+
+
 def _bin_outliers(values: np.ndarray, bins: np.ndarray, keep: np.ndarray, factor: float) -> np.ndarray:
     """Blocks whose value exceeds ``factor`` x the median of their bin (among ``keep``)."""
     out = np.zeros(values.shape, dtype=bool)
@@ -284,7 +298,6 @@ class _SegmentAccumulator:
         self.s2_pixel: Any = None
         self.mean: Any = None
         self.slope: Any = None
-        self.pixels: Any = None
 
     def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
         self.images.append(img.astype(np.float32))
@@ -297,9 +310,7 @@ class _SegmentAccumulator:
             self.s2_row = np.zeros(r.shape[0])
             self.s2_pixel = np.zeros_like(r)
             self.mean = np.zeros(r.shape[0])
-            self.pixels = np.zeros_like(r)
             self.slope = np.zeros((r.shape[0], 2))
-        self.pixels += blocks
         self.slope += blocks @ self.slopes
         self.s1 += r
         self.s2_pixel += r * r
@@ -348,23 +359,26 @@ class _SegmentAccumulator:
         bins = np.floor(v / BIN_WIDTH_DN).astype(int)
         lo, hi = INTENSITY_RANGE_DN
         excluded: dict[str, int] = {}
-        # blocks whose noise reaches the clipping limits are left out (their statistics are distorted)
-        white = values["temporal"] + values["fixed"] if k >= 2 else values["single"]
-        reach = CLIP_SIGMAS * np.sqrt(np.maximum(white, 0.0))
-        # every pixel of the hold mean, not just the block mean: a dark detail in a block clips too
-        # (outlier pixels, e.g. hot pixels, are measured apart and do not exclude their block)
-        px = np.where(is_out, v[:, None], self.pixels / k)
-        darkest, brightest = px.min(axis=1), px.max(axis=1)
-        keep = (v >= lo) & (v <= hi) & (darkest - reach >= 0.0) & (brightest + reach <= 255.0)
-        excluded["near_clipping"] = int(np.sum(~keep))
+        in_range = (v >= lo) & (v <= hi)
         flat = _without_line_pattern(rm, b, grid)  # real column/row offsets removed: edges stand out
         rho_x, rho_y = _lag1(flat, b)
         lines = _line_ratio(flat, b, robust)
-        tex = keep & (
+        tex = in_range & (
             (np.minimum(rho_x, rho_y) > TEXTURE_CORRELATION)
-            | _bin_outliers(robust, bins, keep, OUTLIER_BLOCK_FACTOR)
-            | (lines > OUTLIER_BLOCK_FACTOR * np.median(lines[keep]) if keep.any() else False)
+            | _bin_outliers(robust, bins, in_range, OUTLIER_BLOCK_FACTOR)
+            | (lines > OUTLIER_BLOCK_FACTOR * np.median(lines[in_range]) if in_range.any() else False)
         )
+        # blocks whose noise reaches the clipping limits are left out (their statistics are distorted):
+        # the block's clean level range (its fitted plane) within CLIP_SIGMAS x the typical noise of its
+        # intensity, both independent of the block's own noise realization (a test on the noisy hold
+        # mean's darkest pixel or on the block's own variance keeps the blocks whose noise came out small
+        # and biases short, high-gain holds low by up to 5 %)
+        white = values["temporal"] + values["fixed"] if k >= 2 else values["single"]
+        span = (b - 1) * np.abs(self.slope / k).sum(axis=1)
+        reach = CLIP_SIGMAS * np.sqrt(np.maximum(_typical(white, bins, in_range & ~tex), 0.0))
+        keep = in_range & (v - span / 2 - reach >= 0.0) & (v + span / 2 + reach <= 255.0)
+        excluded["near_clipping"] = int(np.sum(~keep))
+        tex &= keep
         excluded["texture"] = int(np.sum(tex))
         keep &= ~tex
         flat_mask = keep.copy()
@@ -382,7 +396,7 @@ class _SegmentAccumulator:
         h, w = shape if shape is not None else (gy * b, gx * b)
         position = np.stack([(iy + 0.5) * b / h, (ix + 0.5) * b / w], axis=1)
         return _Full(self.index, self.metas[len(self.metas) // 2], self.stamp_ns, list(self.frames), self.pose,
-                     v, region, values, robust, (b - 1) * np.abs(self.slope / k).sum(axis=1), is_out, centred,
+                     v, region, values, robust, span, is_out, centred,
                      keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes)
 
 
