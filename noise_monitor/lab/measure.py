@@ -72,6 +72,9 @@ CROSS_SE_MAX = 0.5
 CONFIRM_SIGMAS = 3.0
 #: ... in this many partner views (fewer when the block has fewer valid partners)
 CONFIRM_VIEWS = 2
+#: ... whose block has at most this many other pixels beyond CONFIRM_SIGMAS (white noise: 2 or more in
+#: 1.3 % of 8 x 8 blocks; a speckled scene texture has many and would confirm a speck by chance)
+CONFIRM_MAX_OTHERS = 1
 #: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
 #: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
 SPIKE_FACTOR = 5.0
@@ -494,10 +497,14 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         # an outlier pixel (hot pixel, defect) stays where it is on the sensor; a scene detail moves:
         # keep the outliers that stand out with the same sign (> CONFIRM_SIGMAS) in CONFIRM_VIEWS partner
         # views (all of them when fewer are valid): one view confirms a scene speck by chance (texture
-        # beyond 3 sigma somewhere in a flat block), two rarely do
+        # beyond 3 sigma somewhere in a flat block), two rarely do; a partner block with other pixels
+        # beyond CONFIRM_SIGMAS (a speckled texture: bright specks on a flat background pass the flat
+        # tests) would confirm by chance and does not count
         confirmed = np.zeros(f.is_out.shape, dtype=np.int16)
         for j, g in enumerate(cands):
-            same = (np.sign(g.centred) == np.sign(f.centred)) & (np.abs(g.centred) > CONFIRM_SIGMAS * g.robust[:, None])
+            beyond = np.abs(g.centred) > CONFIRM_SIGMAS * g.robust[:, None]
+            others = beyond.sum(axis=1, keepdims=True) - beyond
+            same = (np.sign(g.centred) == np.sign(f.centred)) & beyond & (others <= CONFIRM_MAX_OTHERS)
             confirmed += same & (valid[:, j] > 0)[:, None]
         need = np.maximum(np.minimum(CONFIRM_VIEWS, count), 1)
         f.is_out = f.is_out & (confirmed >= need[:, None])
