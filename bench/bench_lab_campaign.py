@@ -5,7 +5,7 @@ Bags: `simulate-bag --scenario campaign` (the variant the lab was developed on) 
 tuned on), EV76C661, 120 frames 320x256 at 10 Hz, one hidden effect per bag at a field-realistic
 strength (plus a clean bag). Each bag is analysed with `--add-effect NAME=fit` for its hidden effect.
 Prints per bag: rms_error_dn (net of the measurement's scatter) and the raw rms, the best candidate, the true effect's rank and significance, the fitted
-values and the error cut (net and raw); then the summary (clean floor, ranks, median and minimum cut) per variant.
+values and the error cut (net and raw), the signed net mean-square error and its standard error; then the summary (clean floor, ranks, median and minimum cut) per variant.
 
 Usage: .venv/bin/python bench/bench_lab_campaign.py [--variants campaign campaign_heldout]
        [--frames 120] [--width 320] [--height 256] [--seed 11] [--effects ...] [--skip-clean] [--json out.json]
@@ -41,6 +41,21 @@ EFFECTS = {
 }
 
 
+def net_mse(cells: list[dict]) -> tuple[float, float]:
+    """(mean(residual^2 - se^2) over cells, signed, in DN^2; its standard error, sqrt(sum 2 se^4) / n):
+    rms_error_dn is the square root of the first clipped at 0, so a figure below its standard error's
+    square root is within the measurement's noise."""
+    r = [c["residual_dn"] for c in cells]
+    se = [c["measured_sigma_err_dn"] for c in cells]
+    n = max(len(r), 1)
+    return (sum(a * a - e * e for a, e in zip(r, se)) / n, (2.0 * sum(e**4 for e in se)) ** 0.5 / n)
+
+
+def _cut(before: float, after: float) -> float:
+    """Relative error cut (NaN when there was no error to cut)."""
+    return round(1.0 - after / before, 4) if before > 0 else float("nan")
+
+
 def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespace) -> dict:
     name = f"{scenario}-{effect or 'clean'}"
     bag = simulate_bag(tmp / f"{name}.mcap", PROFILE, scenario, effects=[EFFECTS[effect]] if effect else [],
@@ -54,13 +69,15 @@ def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespa
            "rms_error_dn": round(s["rms_error_dn"], 4), "rms_error_raw_dn": round(s["rms_error_raw_dn"], 4),
            "measurement_scatter_dn": round(s["measurement_scatter_dn"], 4), "best": names[0], "claimed": claimed,
            "cells": s["measurement"]["cells"], "not_measured": s["measurement"]["not_measured"]}
+    row["net_mse_dn2"], row["net_mse_se_dn2"] = (round(x, 5) for x in net_mse(s["cells"]))
     if effect:
         cand = s["candidates"][names.index(effect)]
         row.update(rank=names.index(effect) + 1, significant=cand["significant"], fitted=s["added_effects"][0]["fitted"],
                    rms_error_after_dn=round(s["rms_error_after_dn"], 4),
                    rms_error_after_raw_dn=round(s["rms_error_after_raw_dn"], 4),
-                   cut=round(1.0 - s["rms_error_after_dn"] / s["rms_error_before_dn"], 4),
-                   cut_raw=round(1.0 - s["rms_error_after_raw_dn"] / s["rms_error_before_raw_dn"], 4))
+                   cut=_cut(s["rms_error_before_dn"], s["rms_error_after_dn"]),
+                   cut_raw=_cut(s["rms_error_before_raw_dn"], s["rms_error_after_raw_dn"]))
+        row["net_mse_after_dn2"], row["net_mse_after_se_dn2"] = (round(x, 5) for x in net_mse(s["cells_after"]))
     return row
 
 
@@ -87,11 +104,13 @@ def main() -> None:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} -> {row['rms_error_after_dn']:.3f} DN "
                           f"(cut {100 * row['cut']:.0f} %), raw {row['rms_error_raw_dn']:.3f} -> "
                           f"{row['rms_error_after_raw_dn']:.3f} DN (cut {100 * row['cut_raw']:.0f} %), scatter "
-                          f"{row['measurement_scatter_dn']:.3f} DN, rank {row['rank']}, significant {row['significant']}, "
+                          f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} -> "
+                          f"{row['net_mse_after_dn2']:+.4f} +- {row['net_mse_after_se_dn2']:.4f} DN^2, rank {row['rank']}, significant {row['significant']}, "
                           f"fitted {row['fitted']}, best {row['best']}, {row['analysis_s']:.0f} s", flush=True)
                 else:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} DN, raw {row['rms_error_raw_dn']:.3f} DN, "
-                          f"scatter {row['measurement_scatter_dn']:.3f} DN, claimed {row['claimed'] or 'nothing'}, "
+                          f"scatter {row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- "
+                          f"{row['net_mse_se_dn2']:.4f} DN^2, claimed {row['claimed'] or 'nothing'}, "
                           f"{row['cells']} cells, {row['analysis_s']:.0f} s", flush=True)
             hidden = [r for r in rows if r["effect"]]
             if hidden and not args.skip_clean:
