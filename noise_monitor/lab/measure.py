@@ -36,7 +36,7 @@ import numpy as np
 from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
 
-from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, global_shift
+from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, camera_shift
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
@@ -72,9 +72,10 @@ CROSS_SE_MAX = 0.5
 CONFIRM_SIGMAS = 3.0
 #: ... in this many partner views (fewer when the block has fewer valid partners)
 CONFIRM_VIEWS = 2
-#: ... whose block has at most this many other pixels beyond CONFIRM_SIGMAS (white noise: 2 or more in
-#: 1.3 % of 8 x 8 blocks; a speckled scene texture has many and would confirm a speck by chance)
-CONFIRM_MAX_OTHERS = 1
+#: ... whose block has at most this many other pixels beyond CONFIRM_SIGMAS (white noise: 4 or more in
+#: < 0.1 % of 8 x 8 blocks; 2 % random telegraph pixels: in 4 %; a speckled scene texture has many and
+#: would confirm a speck by chance)
+CONFIRM_MAX_OTHERS = 3
 #: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
 #: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
 SPIKE_FACTOR = 5.0
@@ -666,7 +667,7 @@ def measure_frames(
         meta = fr.metadata
         assert meta is not None  # skip_reason checked it
         # a segment is a static hold: the camera does not move (global shift) and the metadata agree
-        shift = np.asarray(global_shift(prev, img)[:2]) if prev is not None else np.zeros(2)
+        shift = np.asarray(camera_shift(prev, img)) if prev is not None else np.zeros(2)
         moved = math.hypot(*shift) > STATIC_SHIFT_PX
         pose = pose + shift
         prev = img

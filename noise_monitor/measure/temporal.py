@@ -3,7 +3,8 @@
 Three steps, no model and no lab dependencies (the live monitor reuses them for ``sigma_temporal``):
 
 1. :func:`global_shift`: the camera's global motion between two frames by phase correlation
-   (OpenCV, Hanning window, sub-pixel); :func:`static_runs` cuts a sequence into runs of frames whose
+   (OpenCV, Hanning window, sub-pixel; :func:`camera_shift` checks it on downsampled frames, where a
+   sensor-fixed pattern cannot pin it at 0); :func:`static_runs` cuts a sequence into runs of frames whose
    consecutive shifts stay below ``STATIC_SHIFT_PX``.
 2. :func:`block_temporal` on a static run: per B x B block, each frame's deviation from the run's
    temporal mean is regressed on what scene changes would put there (a per-frame offset, a brightness
@@ -27,6 +28,10 @@ from scipy.stats import f as f_dist
 #: largest |global shift| (px) between consecutive frames of a static run (phase correlation on a
 #: weakly textured noisy frame scatters by up to ~0.1 px; slower drifts are left to the block test)
 STATIC_SHIFT_PX = 0.25
+#: downsampling factor (area average) of the coarse camera-motion estimate in :func:`camera_shift`
+COARSE_FACTOR = 4
+#: the coarse estimate overrides the full-resolution one when they differ by more than this (px)
+COARSE_SHIFT_PX = 2.0
 #: F-test p-value below which a block's frame differences are not pure noise
 P_VALUE = 1e-4
 #: regressors of the pure-noise test: offset, brightness scaling, x and y motion
@@ -47,6 +52,25 @@ def global_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
         raise ValueError(f"global_shift needs two gray images of one size, got {a64.shape} and {b64.shape}")
     (dx, dy), response = cv2.phaseCorrelate(a64, b64, _window(*a64.shape))
     return float(dx), float(dy), float(response)
+
+
+def camera_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(dx, dy): the camera's translation between two frames, robust to a sensor-fixed pattern.
+
+    Phase correlation whitens the spectrum, so a strong pattern that stays in sensor coordinates (DSNU at
+    a high dark signal, hot pixels, line offsets) can outweigh a panning scene at high spatial
+    frequencies and pin the full-resolution estimate at 0. The frames averaged down by ``COARSE_FACTOR``
+    (the pixel pattern averages out, the scene stays) decide when the two estimates differ by more than
+    ``COARSE_SHIFT_PX``; otherwise the sub-pixel full-resolution estimate is kept."""
+    dx, dy, _ = global_shift(a, b)
+    h, w = np.shape(a)
+    size = (w // COARSE_FACTOR, h // COARSE_FACTOR)
+    if min(size) < 16:
+        return dx, dy
+    small = [cv2.resize(np.asarray(x, dtype=np.float64), size, interpolation=cv2.INTER_AREA) for x in (a, b)]
+    cx, cy, _ = global_shift(*small)
+    cx, cy = cx * w / size[0], cy * h / size[1]
+    return (cx, cy) if math.hypot(cx - dx, cy - dy) > COARSE_SHIFT_PX else (dx, dy)
 
 
 def static_runs(shifts: np.ndarray, limit_px: float = STATIC_SHIFT_PX) -> list[tuple[int, int]]:
