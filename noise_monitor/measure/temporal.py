@@ -61,7 +61,8 @@ def camera_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     a high dark signal, hot pixels, line offsets) can outweigh a panning scene at high spatial
     frequencies and pin the full-resolution estimate at 0. The frames averaged down by ``COARSE_FACTOR``
     (the pixel pattern averages out, the scene stays) decide when the two estimates differ by more than
-    ``COARSE_SHIFT_PX``; otherwise the sub-pixel full-resolution estimate is kept."""
+    ``COARSE_SHIFT_PX`` (to about ``COARSE_FACTOR / 2`` px: enough to see motion and place the pose);
+    otherwise the sub-pixel full-resolution estimate is kept."""
     dx, dy, _ = global_shift(a, b)
     h, w = np.shape(a)
     size = (w // COARSE_FACTOR, h // COARSE_FACTOR)

@@ -1,6 +1,7 @@
 """Model-independent measurement on in-memory frame sequences (fast, no bags)."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -103,3 +104,25 @@ def test_unusable_input_gives_clear_errors() -> None:
     good = simulate_frames(PROFILE, conditions=SWEEP[:1], frames_per_condition=2, width=64, height=64)
     meas = measure_frames([*good, _Frame(np.zeros((32, 32)), meta), _Frame(None, meta, image_error="corrupt")])
     assert meas.skipped == {"image size changed": 1, "image unusable: corrupt": 1}
+
+
+def test_short_noisy_holds_are_not_selected_on_their_own_noise() -> None:
+    """A 3-frame hold at sigma 20 DN, 4 sigma above 0: the clipping test must not keep the blocks whose
+    noise came out small (testing the noisy hold mean's darkest pixel against each block's own sigma read
+    the temporal variance ~5 % low)."""
+    meta = PROFILE.metadata(gain_db=0.0, exposure_time_s=0.01, sensor_temperature_c=25.0)
+    rng = np.random.default_rng(5)
+    blob = cv2.GaussianBlur(rng.standard_normal((256, 320)), (0, 0), 1.5)
+    scene = 125.0 + 100.0 * blob / np.abs(blob).max()  # a texture to register the frames by ...
+    scene[64:192, 80:240] = 80.0  # ... around a flat region at 80 DN
+    frames = [Frame(i, np.clip(np.rint(scene + rng.normal(0.0, 20.0, scene.shape)), 0, 255), meta)
+              for i in range(3)]
+    meas = measure_frames(frames)
+    assert len(meas.segments) == 1
+    seg = meas.segments[0]
+    flat = seg.intensity_dn < 100.0
+    temporal = seg.values["temporal"][flat]
+    assert temporal.size > 0.9 * 16 * 20  # the flat 80 DN part is not near clipping
+    truth = 400.0 + 1.0 / 12.0  # + 8-bit rounding (clipping at 0, 4 sigma away, takes < 0.1 %)
+    se = float(temporal.std(ddof=1)) / np.sqrt(temporal.size)  # ~0.5 %
+    assert abs(float(temporal.mean()) - truth) < 3.0 * se
