@@ -103,8 +103,8 @@ Partner = tuple[CameraMetadata, np.ndarray, np.ndarray]
 
 
 class EffectCache:
-    """Per-effect contributions of a fixed set of effects (a comparison's baseline) to one segment's
-    components, computed once: a fit re-evaluates only the effect it varies. Used only while no modifier
+    """Per-effect contributions of a fixed set of effects (a comparison's baseline) to the components of
+    every segment, computed once: a fit re-evaluates only the effect it varies. Used only while no modifier
     or response effect is in the set (they would change every effect's conditions or signal)."""
 
     def __init__(self, effects: Sequence[Effect]) -> None:
@@ -113,98 +113,169 @@ class EffectCache:
         self.parts: dict[int, tuple[dict[str, np.ndarray], dict[str, np.ndarray]]] = {}
 
 
-def unclipped_components(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray,
-                         sigma: np.ndarray, span: np.ndarray | None = None,
-                         position: np.ndarray | None = None,
-                         partners: Sequence[Partner] = (), cache: EffectCache | None = None) -> dict[str, np.ndarray]:
-    """Unclipped variance (DN^2) per measured component at block intensities ``v`` (block centres at
-    ``position``, (B, 2) normalised y, x: what spatial effects see; None: sensor averages).
+class Views:
+    """Every view the model is evaluated in, grouped by metadata: each segment's representative blocks in
+    its own view (its metadata, the block intensities ``v``, their robust sigma and positions) and in its
+    partner views (another segment's metadata, the blocks' intensities there; see
+    :func:`.measure._cross_views`). An effect is evaluated in one call per metadata over all the views
+    that share it, instead of one per segment and partner; the per-block results are gathered back.
 
-    Each effect's variance is split by its ``temporal_share`` into a temporal and a fixed-pattern part and
-    lands in the components of its ``structure``. The fixed part of a mixture (hot pixels) goes to
-    "outlier" where its offset stands out of the block's noise ``sigma`` (robust, DN) and to the white
-    fixed-pattern core elsewhere; its offsets are clipped. Response effects scale everything by their
-    slope squared. Quantization acts on the temporal noise at each block's level ``v`` over its range
-    of levels ``span`` (DN).
-    With ``partners`` (cross-view measurement, see :func:`.measure._cross_views`) the fixed-pattern parts
-    (fixed, column, row) are the weighted products of each effect's fixed sigma (slope included) here and
-    in the partner views, which see the same sensor blocks (same ``position``) at other intensities; the
-    quantization's fixed part, a pattern of the scene's levels, moves with the scene and cancels.
-    ``cache``: contributions of the cache's effects for this segment and these arguments (see
-    :class:`EffectCache`).
+    Component arrays run over the segments' own blocks, concatenated in segment order (``bounds``).
     """
-    cond = _conditions(effects, meta, position)
-    pconds = [_conditions(effects, pm, position) for pm, _, _ in partners]
-    plins = [_linear(effects, pc, pv) for (_, pv, _), pc in zip(partners, pconds)]
-    pslopes = [_slope(effects, pc, pv) for (_, pv, _), pc in zip(partners, pconds)]
-    out = {c: np.zeros(v.shape) for c in MEASURED}
-    cross = {c: np.zeros(v.shape) for c in MEASURED}  # cross-view parts, slopes already applied
-    lin = _linear(effects, cond, v)
-    slope = _slope(effects, cond, v)
-    if cache is not None and any(e.distribution in ("modifier", "response") for e in effects):
-        cache = None
-    for e in effects:
-        if component_of(e) is None or e.distribution == "quantization":
-            continue
-        store = cache.parts if cache is not None and id(e) in cache.ids else None
-        if store is not None and id(e) in store:
-            part, part_cross = store[id(e)]
+
+    def __init__(self, segments: Sequence[tuple[CameraMetadata, np.ndarray, np.ndarray, np.ndarray,
+                                                Sequence[Partner]]]) -> None:
+        """``segments``: per segment (metadata, v, sigma, positions (B, 2), partners)."""
+        group_of: dict[int, int] = {}
+        self.metas: list[CameraMetadata] = []
+        chunks: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
+        placed: list[tuple[int, int, int]] = []  # (group, start in group, size) per view, in placing order
+
+        def place(meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray, pos: np.ndarray) -> int:
+            g = group_of.setdefault(id(meta), len(self.metas))
+            if g == len(self.metas):
+                self.metas.append(meta)
+                chunks.append([])
+            placed.append((g, sum(c[0].size for c in chunks[g]), v.size))
+            chunks[g].append((np.asarray(v, dtype=float), np.asarray(sigma, dtype=float), pos))
+            return len(placed) - 1
+
+        own = [place(m, v, s, pos) for m, v, s, pos, _ in segments]
+        partner = [[place(pm, pv, np.ones(v.shape), pos) for pm, pv, _ in parts] for _, v, _, pos, parts in segments]
+        self.v = [np.concatenate([c[0] for c in ch]) for ch in chunks]
+        self.sigma = [np.concatenate([c[1] for c in ch]) for ch in chunks]
+        pos = [np.concatenate([c[2] for c in ch]) for ch in chunks]
+        starts = np.cumsum([0] + [v.size for v in self.v])
+
+        def index(k: int) -> np.ndarray:
+            g, start, size = placed[k]
+            return starts[g] + start + np.arange(size)
+
+        sizes = [v.size for _, v, _, _, _ in segments]
+        self.bounds = np.cumsum([0] + sizes)
+        self.own = np.concatenate([index(k) for k in own]) if own else np.zeros(0, dtype=int)
+        self.meta_of_segment = [m for m, _, _, _, _ in segments]
+        self.group_of_segment = [placed[k][0] for k in own]
+        self.lone = np.repeat([not parts for *_, parts in segments], sizes)  # blocks without partner views
+        n_slots = max((len(p) for p in partner), default=0)
+        self.partner_index = np.zeros((n_slots, self.own.size), dtype=int)
+        self.partner_weight = np.zeros((n_slots, self.own.size))
+        self.partner_valid = np.zeros((n_slots, self.own.size), dtype=bool)
+        for s, (ks, (*_, parts)) in enumerate(zip(partner, segments)):
+            sl = slice(self.bounds[s], self.bounds[s + 1])
+            for j, (k, (_, _, w)) in enumerate(zip(ks, parts)):
+                self.partner_index[j, sl] = index(k)
+                self.partner_weight[j, sl] = w
+                self.partner_valid[j, sl] = True
+        self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
+        self._pos = pos
+
+    def split(self, arrays: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
+        """Per segment: its part of the component arrays."""
+        return [{c: a[lo:hi] for c, a in arrays.items()} for lo, hi in zip(self.bounds[:-1], self.bounds[1:])]
+
+    def components(self, effects: Sequence[Effect], span: np.ndarray | None = None,
+                   cache: EffectCache | None = None) -> dict[str, np.ndarray]:
+        """Unclipped variance (DN^2) per measured component at every segment's blocks (concatenated).
+
+        Each effect's variance is split by its ``temporal_share`` into a temporal and a fixed-pattern part and
+        lands in the components of its ``structure``. The fixed part of a mixture (hot pixels) goes to
+        "outlier" where its offset stands out of the block's noise ``sigma`` (robust, DN) and to the white
+        fixed-pattern core elsewhere; its offsets are clipped. Response effects scale everything by their
+        slope squared. Quantization acts on the temporal noise at each block's level ``v`` over its range
+        of levels ``span`` (DN; None: phase-averaged).
+        For segments with partner views (cross-view measurement) the fixed-pattern parts (fixed, column, row)
+        are the weighted products of each effect's fixed sigma (slope included) here and in the partner
+        views, which see the same sensor blocks (same positions) at other intensities; the quantization's
+        fixed part, a pattern of the scene's levels, moves with the scene and cancels.
+        ``cache``: contributions of the cache's effects (see :class:`EffectCache`).
+        """
+        bends = any(e.distribution in ("modifier", "response") for e in effects)
+        if bends:
+            conds = [_conditions(effects, m, p) for m, p in zip(self.metas, self._pos)]
+            lins = [_linear(effects, c, v) for c, v in zip(conds, self.v)]
+            slopes = [_slope(effects, c, v) for c, v in zip(conds, self.v)]
+            cache = None
         else:
-            part, part_cross = _effect_parts(e, cond, lin, slope, v, sigma, partners, pconds, plins, pslopes)
-            if store is not None:
-                store[id(e)] = (part, part_cross)
-        for c, a in part.items():
-            out[c] = out[c] + a
-        for c, a in part_cross.items():
-            cross[c] = cross[c] + a
-    if slope is not None:
-        out = {c: a * slope**2 for c, a in out.items()}
-    out = {c: out[c] + cross[c] for c in MEASURED}
-    added, fixed, spread = quantization_variance(effects, cond, out["temporal"], v if span is not None else None,
-                                                 span)
-    out["temporal"] = out["temporal"] + added
-    if not partners:
-        out["fixed"] = out["fixed"] + fixed
-    out[QUANT_SPREAD] = spread
-    return out
+            conds, lins, slopes = self.base_conds, self.v, [None] * len(self.v)
+        slope_all = None if not slopes or slopes[0] is None else np.concatenate(slopes)
+        slope = None if slope_all is None else slope_all[self.own]
+        n = self.own.size
+        out = {c: np.zeros(n) for c in MEASURED}
+        cross = {c: np.zeros(n) for c in MEASURED}  # cross-view parts, slopes already applied
+        for e in effects:
+            if component_of(e) is None or e.distribution == "quantization":
+                continue
+            store = cache.parts if cache is not None and id(e) in cache.ids else None
+            if store is not None and id(e) in store:
+                part, part_cross = store[id(e)]
+            else:
+                part, part_cross = self._effect_parts(e, conds, lins, slope_all, slope)
+                if store is not None:
+                    store[id(e)] = (part, part_cross)
+            for c, a in part.items():
+                out[c] = out[c] + a
+            for c, a in part_cross.items():
+                cross[c] = cross[c] + a
+        if slope is not None:
+            out = {c: a * slope**2 for c, a in out.items()}
+        out = {c: out[c] + cross[c] for c in MEASURED}
+        own_conds = [conds[g] for g in self.group_of_segment]
+        added, fixed, spread = self._quantization(effects, own_conds, out["temporal"], span)
+        out["temporal"] = out["temporal"] + added
+        out["fixed"] = out["fixed"] + np.where(self.lone, fixed, 0.0)
+        out[QUANT_SPREAD] = spread
+        return out
 
+    def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],
+                      slope_all: np.ndarray | None, slope: np.ndarray | None
+                      ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """One effect's (single-view, cross-view) variance contributions per component, see
+        :meth:`components` (single-view parts before the response slope)."""
+        shares, variances, detected = [], [], []
+        for cond, lin, v, sigma in zip(conds, lins, self.v, self.sigma):
+            shares.append(np.broadcast_to(np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0),
+                                          v.shape))
+            if e.distribution == "mixture":
+                variances.append(_mixture_var(e, cond, lin, v))
+                detected.append(_detection(e, cond, v, sigma)[2])
+            else:
+                variances.append(np.broadcast_to(np.asarray(e.variance_dn2(lin, cond), dtype=float), v.shape))
+        share_all, var_all = np.concatenate(shares), np.concatenate(variances)
+        share, var = share_all[self.own], var_all[self.own]
+        comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
+        out: dict[str, np.ndarray] = {}
+        if detected:
+            p = np.concatenate(detected)[self.own]
+            fixed_var = (1.0 - share) * var
+            out["outlier"] = fixed_var * p
+            core = fixed_var * (1.0 - p)
+        else:
+            core = (1.0 - share) * var
+        out[comp_t] = share * var
+        out[comp_f] = np.where(self.lone, core, 0.0)  # with partner views: the cross-view part instead
+        if not self.partner_index.size:
+            return out, {}
+        here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
+        there_all = np.sqrt(np.maximum((1.0 - share_all) * var_all, 0.0)) * (1.0 if slope_all is None else slope_all)
+        acc = np.zeros(here.shape)
+        for idx, w, valid in zip(self.partner_index, self.partner_weight, self.partner_valid):
+            acc = acc + np.where(valid, w * here * there_all[idx], 0.0)
+        return out, {comp_f: acc}
 
-def _effect_parts(e: Effect, cond: Conditions, lin: np.ndarray, slope: np.ndarray | None, v: np.ndarray,
-                  sigma: np.ndarray, partners: Sequence[Partner], pconds: list[Conditions], plins: list[np.ndarray],
-                  pslopes: list[np.ndarray | None]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """One effect's (single-view, cross-view) variance contributions per component, see
-    :func:`unclipped_components` (single-view parts before the response slope)."""
-    out: dict[str, np.ndarray] = {}
-    cross: dict[str, np.ndarray] = {}
-
-    def add(d: dict[str, np.ndarray], c: str, a: np.ndarray) -> None:
-        d[c] = d[c] + a if c in d else a
-
-    share = np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0)
-    comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
-    if e.distribution == "mixture":
-        frac, off = e.mixture(lin, cond)
-        off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
-        var = frac * (1.0 - frac) * off**2
-        _, _, p = _detection(e, cond, v, sigma)
-        fixed_var = (1.0 - share) * var
-        add(out, "outlier", fixed_var * p)
-        core = fixed_var * (1.0 - p)
-    else:
-        var = np.asarray(e.variance_dn2(lin, cond), dtype=float)
-        core = (1.0 - share) * var
-    add(out, comp_t, np.broadcast_to(share * var, v.shape))
-    if not partners:
-        add(out, comp_f, np.broadcast_to(core, v.shape))
-        return out, cross
-    here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
-    for (_, pv, w), pc, pl, ps in zip(partners, pconds, plins, pslopes):
-        p_share = np.clip(np.asarray(e.temporal_share(pl, pc), dtype=float), 0.0, 1.0)
-        p_var = _mixture_var(e, pc, pl, pv) if e.distribution == "mixture" else \
-            np.asarray(e.variance_dn2(pl, pc), dtype=float)
-        there = np.sqrt(np.maximum((1.0 - p_share) * p_var, 0.0)) * (1.0 if ps is None else ps)
-        add(cross, comp_f, np.broadcast_to(w * here * there, v.shape))
-    return out, cross
+    def _quantization(self, effects: Sequence[Effect], conds: Sequence[Conditions], temporal_var: np.ndarray,
+                      span: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`quantization_variance` for every segment (its own conditions' step) in one call per step."""
+        lsb = np.repeat([max((e.lsb_dn(c) for e in effects if e.distribution == "quantization"), default=0.0)
+                         for c in conds], np.diff(self.bounds))
+        added, fixed, spread = (np.zeros(temporal_var.shape) for _ in range(3))
+        level = np.concatenate(self.v)[self.own] if span is not None else None
+        for step in np.unique(lsb[lsb > 0.0]):
+            m = lsb == step
+            a, f, s = quantization_variance_at(float(step), temporal_var[m], None if level is None else level[m],
+                                               None if span is None else span[m])
+            added[m], fixed[m], spread[m] = a, f, s
+        return added, fixed, spread
 
 
 def _mixture_var(effect: Effect, cond: Conditions, lin: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -225,6 +296,12 @@ def quantization_variance(effects: Sequence[Effect], cond: Conditions, temporal_
     in DN^2 of the coarsest quantization step acting on temporal noise of variance ``temporal_var``
     (see :mod:`.quantization`)."""
     lsb = max((e.lsb_dn(cond) for e in effects if e.distribution == "quantization"), default=0.0)
+    return quantization_variance_at(lsb, temporal_var, level_dn, span_dn)
+
+
+def quantization_variance_at(lsb: float, temporal_var: np.ndarray, level_dn: np.ndarray | None = None,
+                             span_dn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`quantization_variance` of a quantization step ``lsb`` (DN; 0: none)."""
     if lsb <= 0.0:
         zero = np.zeros_like(temporal_var)
         return zero, zero, zero
@@ -305,7 +382,6 @@ class _SegmentBase:
             spread = np.sqrt(np.maximum(self.sigma**2 - seg.values["temporal"][rep] / seg.n_frames, 0.0))
         self.span = seg.span_dn[rep] + 2.0 * spread
         self.clip_aware: dict[str, np.ndarray] = {}
-        self.unclipped: dict[str, np.ndarray] = {}
         # per-cell observables; line offsets are pooled per segment (one observable each); the sparse
         # outlier energy is fitted through the outlier count and amplitude instead
         self.observed = tuple(k for k in cells[0].values if k not in POOLED)
@@ -323,7 +399,6 @@ class _SegmentBase:
 
         self.region_errors: dict[str, list[float]] = {}
         self.partners: list[Partner] = []
-        self.cache: EffectCache | None = None  # the comparison's baseline effects, evaluated here once
 
     def set_region_errors(self, comps: dict[str, np.ndarray]) -> None:
         """Standard errors of the regional contrasts: the spread of the blocks' excess over the baseline
@@ -409,13 +484,17 @@ class Comparison:
         clip_model = NoiseModel(analytic + [e for e in rest if e.distribution in ("modifier", "response")])
         metas = [s.meta for s in meas.segments]
         for seg in meas.segments:
-            if seg.index not in by_seg:
-                continue
-            sb = _SegmentBase(seg, by_seg[seg.index])
-            sb.set_partners(metas)
+            if seg.index in by_seg:
+                sb = _SegmentBase(seg, by_seg[seg.index])
+                sb.set_partners(metas)
+                self.segments.append(sb)
+        self.views = Views([(sb.seg.meta, sb.v, sb.sigma, sb.pos, sb.partners) for sb in self.segments])
+        self.span = np.concatenate([sb.span for sb in self.segments]) if self.segments else np.zeros(0)
+        unclipped_rest = self.views.split(self.views.components([e for e in rest if e.distribution != "quantization"]))
+        for sb, comps in zip(self.segments, unclipped_rest):
+            seg = sb.seg
             pred = clip_model.predict(sb.v, seg.meta)
-            comps = unclipped_components([e for e in rest if e.distribution != "quantization"], seg.meta, sb.v,
-                                         sb.sigma, position=sb.pos, partners=sb.partners)
+            comps = dict(comps)
             preds_p = [clip_model.predict(pv, pm) for pm, pv, _ in sb.partners]
             for e in analytic:
                 here = np.asarray(pred[e.name], dtype=float)
@@ -434,12 +513,13 @@ class Comparison:
                 comps["fixed"] = comps["fixed"] + fixed
             sb.clip_aware = comps
             sb.set_region_errors(comps)
-            sb.cache = EffectCache(self.effects)
-            sb.unclipped = unclipped_components(self.effects, seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners,
-                                                cache=sb.cache)
-            self.segments.append(sb)
             if progress is not None:
                 progress.update(1)
+        self.clip_aware = {c: np.concatenate([sb.clip_aware[c] for sb in self.segments]) if self.segments
+                           else np.zeros(0) for c in MEASURED}
+        #: the baseline effects' contributions, evaluated once (a fit varies one effect)
+        self.cache = EffectCache(self.effects)
+        self.unclipped = self.views.components(self.effects, self.span, cache=self.cache)
 
     # --- predictions -------------------------------------------------------------------------
     def replaced(self, extra: Sequence[Effect]) -> list[Effect]:
@@ -453,22 +533,18 @@ class Comparison:
         if not extra:
             return [(sb, sb.clip_aware) for sb in self.segments]
         effects = self.replaced(extra)
-        out = []
         names = ", ".join(e.name for e in extra)
-        for sb in self.segments:
-            try:
-                new = unclipped_components(effects, sb.seg.meta, sb.v, sb.sigma, sb.span, sb.pos, sb.partners,
-                                           cache=sb.cache)
-            except EffectError:
-                raise
-            except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
-                raise EffectError(f"effect(s) {names} failed to evaluate: {exc}") from exc
-            if not all(np.all(np.isfinite(a)) for a in new.values()):
-                raise EffectError(f"effect(s) {names} returned a NaN or infinite variance")
-            comps = {c: np.maximum(sb.clip_aware[c] + new[c] - sb.unclipped[c], 0.0) for c in MEASURED}
-            comps[QUANT_SPREAD] = new[QUANT_SPREAD]
-            out.append((sb, comps))
-        return out
+        try:
+            new = self.views.components(effects, self.span, cache=self.cache)
+        except EffectError:
+            raise
+        except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
+            raise EffectError(f"effect(s) {names} failed to evaluate: {exc}") from exc
+        if not all(np.all(np.isfinite(a)) for a in new.values()):
+            raise EffectError(f"effect(s) {names} returned a NaN or infinite variance")
+        comps = {c: np.maximum(self.clip_aware[c] + new[c] - self.unclipped[c], 0.0) for c in MEASURED}
+        comps[QUANT_SPREAD] = new[QUANT_SPREAD]
+        return list(zip(self.segments, self.views.split(comps)))
 
     def residuals(self, extra: Sequence[Effect] = ()) -> np.ndarray:
         """Normalised residuals (measured - model) / error of every observable, for chi-square fits:
