@@ -14,6 +14,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from scipy import sparse
 from scipy.special import ndtr
 
 from ..physics import CameraMetadata, CameraProfile, Effect, EffectError, NoiseModel, build_effects, make_effect
@@ -408,15 +409,6 @@ class _SegmentBase:
             floor = max(float(np.median(np.abs(comps[k]))) * 0.01, MIN_VAR_ERR)
             self.region_errors[k] = [max(float(x[idx].std(ddof=1)), floor) / math.sqrt(idx.size) for idx in self.regions]
 
-    def region_contrasts(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        """(measured - model) regional contrasts divided by their standard errors."""
-        out: list[float] = []
-        for k in self.regional:
-            x = self.seg.values[k][self.rep] - comps[k]
-            mean = x.mean()
-            out.extend((x[idx].mean() - mean) / err for idx, err in zip(self.regions, self.region_errors[k]))
-        return np.asarray(out)
-
     def set_partners(self, metas: Sequence[CameraMetadata]) -> None:
         """Partner views (cross-view fixed pattern) of the representative blocks; ``metas``: every
         segment's metadata by index."""
@@ -425,19 +417,6 @@ class _SegmentBase:
             assert seg.partner_intensity_dn is not None  # recorded together with the weights
             self.partners = [(metas[p], seg.partner_intensity_dn[self.rep, j], seg.partner_weight[self.rep, j])
                              for j, p in enumerate(seg.partners)]
-
-    def total_errors(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        """Measurement errors with the model's quantization-phase spread added to temporal observables."""
-        spread = self.average @ comps[QUANT_SPREAD]
-        extra = np.stack([spread if k in ("temporal", "single") else np.zeros_like(spread) for k in self.observed], 1)
-        return np.sqrt(self.errors**2 + extra**2)
-
-    def model_cells(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        """Model variance per cell (rows) and per-cell observed component (columns)."""
-        return np.stack([_cell_values(self, comps, k) for k in self.observed], axis=1)
-
-    def model_pooled(self, comps: dict[str, np.ndarray]) -> np.ndarray:
-        return np.array([_pooled(as_measured(self, comps, k), self.weights) for k in self.pooled])
 
 
 def _pooled(x: np.ndarray, weights: np.ndarray) -> float:
@@ -461,6 +440,105 @@ def _cell_values(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> n
     if comp in POOLED:
         return np.full(sb.average.shape[0], _pooled(as_measured(sb, comps, comp), sb.weights))
     return sb.average @ as_measured(sb, comps, comp)
+
+
+class Observables:
+    """Every segment's observables in one set of arrays, so that a model's residuals take a few vectorised
+    steps over all segments: cell averages, pooled line offsets and regional contrasts as sparse matrices
+    over the segments' representative blocks (concatenated in segment order), and the order in which
+    :meth:`Comparison.residuals` lists them (per segment: cell variances, their likelihood terms, pooled
+    offsets, regional contrasts, outlier count and amplitude)."""
+
+    def __init__(self, segments: Sequence[_SegmentBase]) -> None:
+        self.comps = sorted({k for sb in segments for k in sb.observed + sb.pooled})
+        col = {k: i for i, k in enumerate(self.comps)}
+        sizes = [sb.v.size for sb in segments]
+        n_cells = [len(sb.cells) for sb in segments]
+        no_temporal = np.array(["temporal" not in sb.seg.values for sb in segments], dtype=bool)
+        self.no_temporal_block = np.repeat(no_temporal, sizes)
+        self.no_temporal_cell = np.repeat(no_temporal, n_cells)
+        self.average = sparse.block_diag([sb.average for sb in segments], format="csr")
+        self.pooling = sparse.block_diag([(sb.weights / np.sum(sb.weights))[None, :] for sb in segments], format="csr")
+        cell0, block0 = np.cumsum([0] + n_cells), np.cumsum([0] + sizes)
+        n_entries = sum(len(sb.cells) * len(sb.observed) for sb in segments)
+        n_pooled = sum(len(sb.pooled) for sb in segments)
+        n_regional = sum(len(sb.regional) * len(sb.regions) for sb in segments)
+        cell_idx, comp_idx, values, errors, order = [], [], [], [], []
+        pooled_seg, pooled_comp, region_comp, region_row, region_err = [], [], [], [], []
+        rows, cols, vals = [], [], []  # regional contrast matrix: region mean minus its segment's mean
+        c = p = r = n_regions = 0
+        for s, sb in enumerate(segments):
+            nc, no = len(sb.cells), len(sb.observed)
+            cell_idx.append(np.repeat(cell0[s] + np.arange(nc), no))
+            comp_idx.append(np.tile([col[k] for k in sb.observed], nc))
+            values.append(sb.values.ravel())
+            errors.append(sb.errors.ravel())
+            pooled_seg.extend([s] * len(sb.pooled))
+            pooled_comp.extend(col[k] for k in sb.pooled)
+            first = n_regions
+            n_regions += len(sb.regions)
+            blocks = block0[s] + np.arange(sizes[s])
+            for i, idx in enumerate(sb.regions):
+                rows.extend([first + i] * (idx.size + blocks.size))
+                cols.extend((block0[s] + idx).tolist() + blocks.tolist())
+                vals.extend([1.0 / idx.size] * idx.size + [-1.0 / blocks.size] * blocks.size)
+            for k in sb.regional:
+                region_comp.extend([REGIONAL.index(k)] * len(sb.regions))
+                region_row.extend(range(first, first + len(sb.regions)))
+                region_err.extend(sb.region_errors[k])
+            nr = len(sb.regional) * len(sb.regions)
+            order.extend([np.arange(c, c + nc * no), n_entries + np.arange(c, c + nc * no),
+                          2 * n_entries + np.arange(p, p + len(sb.pooled)),
+                          2 * n_entries + n_pooled + np.arange(r, r + nr),
+                          2 * n_entries + n_pooled + n_regional + np.array([2 * s, 2 * s + 1])])
+            c, p, r = c + nc * no, p + len(sb.pooled), r + nr
+        self.cell_idx, self.comp_idx = np.concatenate(cell_idx), np.concatenate(comp_idx)
+        self.values, self.errors = np.concatenate(values), np.concatenate(errors)
+        self.spread_entry = np.isin(self.comp_idx, [col[k] for k in ("temporal", "single") if k in col])
+        self.pooled_seg, self.pooled_comp = np.asarray(pooled_seg, dtype=int), np.asarray(pooled_comp, dtype=int)
+        self.pooled_values = np.concatenate([sb.pooled_values for sb in segments])
+        self.pooled_errors = np.concatenate([sb.pooled_errors for sb in segments])
+        self.contrast = sparse.csr_matrix((vals, (rows, cols)), shape=(n_regions, int(block0[-1])))
+        self.region_comp, self.region_row = np.asarray(region_comp, dtype=int), np.asarray(region_row, dtype=int)
+        self.region_err = np.asarray(region_err, dtype=float)
+        self.region_measured = [np.concatenate([sb.seg.values[k][sb.rep] if k in sb.seg.values else np.zeros(sb.v.size)
+                                                for sb in segments]) for k in REGIONAL]
+        self.order = np.concatenate(order)
+        self.outlier_pixels = np.array([sb.seg.outlier_pixels for sb in segments], dtype=float)
+        self.amplitude = np.array([sb.seg.outlier_amplitude_dn for sb in segments], dtype=float)
+        self.amplitude_err = np.maximum(np.hypot([sb.seg.outlier_amplitude_err_dn for sb in segments],
+                                                 0.05 * self.amplitude), 1e-6)
+
+    def as_measured(self, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+        """:func:`as_measured` over all segments' blocks."""
+        if comp == "single":
+            return comps["temporal"] + comps["fixed"]
+        if comp in ("column", "row"):
+            return comps[comp] + np.where(self.no_temporal_block, comps[f"temporal_{comp}"], 0.0)
+        return comps[comp]
+
+    def residuals(self, comps: dict[str, np.ndarray], count: np.ndarray, amp: np.ndarray) -> np.ndarray:
+        """Normalised residuals of the model ``comps`` (component arrays over all blocks), given each
+        segment's expected outlier count and amplitude, in :meth:`Comparison.residuals`' order."""
+        measured = {k: self.as_measured(comps, k) for k in self.comps}
+        cells = np.stack([self.average @ measured[k] for k in self.comps])
+        for k in ("temporal_column", "temporal_row"):
+            if k in measured:
+                cells[self.comps.index(k), self.no_temporal_cell] = 0.0
+        spread = (self.average @ comps[QUANT_SPREAD])[self.cell_idx]
+        err = np.sqrt(self.errors**2 + np.where(self.spread_entry, spread, 0.0) ** 2)
+        cell_res = (self.values - cells[self.comp_idx, self.cell_idx]) / err
+        # Gaussian likelihood: a vaguer model pays log(err^2) (no escape into its own uncertainty)
+        like = np.sqrt(2.0 * np.log(err / self.errors))
+        pooled = np.stack([self.pooling @ measured[k] for k in self.comps])[self.pooled_comp, self.pooled_seg]
+        pooled_res = (self.pooled_values - pooled) / self.pooled_errors
+        contrasts = np.stack([self.contrast @ (m - comps[k]) for k, m in zip(REGIONAL, self.region_measured)])
+        region_res = contrasts[self.region_comp, self.region_row] / self.region_err
+        count_res = (self.outlier_pixels - count) / np.sqrt(np.maximum(np.maximum(count, self.outlier_pixels), 1.0))
+        amp_res = np.where((self.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE) & (count >= 1.0),
+                           (self.amplitude - amp) / self.amplitude_err, 0.0)
+        tail = np.stack([count_res, amp_res], axis=1).ravel()
+        return np.concatenate([cell_res, like, pooled_res, region_res, tail])[self.order]
 
 
 class Comparison:
@@ -516,7 +594,8 @@ class Comparison:
             if progress is not None:
                 progress.update(1)
         self.clip_aware = {c: np.concatenate([sb.clip_aware[c] for sb in self.segments]) if self.segments
-                           else np.zeros(0) for c in MEASURED}
+                           else np.zeros(0) for c in (*MEASURED, QUANT_SPREAD)}
+        self.observables = Observables(self.segments)
         #: the baseline effects' contributions, evaluated once (a fit varies one effect)
         self.cache = EffectCache(self.effects)
         self.unclipped = self.views.components(self.effects, self.span, cache=self.cache)
@@ -532,6 +611,12 @@ class Comparison:
         (replacing effects of the same name): clip-aware baseline + unclipped change."""
         if not extra:
             return [(sb, sb.clip_aware) for sb in self.segments]
+        return list(zip(self.segments, self.views.split(self._components(extra))))
+
+    def _components(self, extra: Sequence[Effect]) -> dict[str, np.ndarray]:
+        """:meth:`predict_with` over all segments' blocks (concatenated)."""
+        if not extra:
+            return self.clip_aware
         effects = self.replaced(extra)
         names = ", ".join(e.name for e in extra)
         try:
@@ -544,32 +629,21 @@ class Comparison:
             raise EffectError(f"effect(s) {names} returned a NaN or infinite variance")
         comps = {c: np.maximum(self.clip_aware[c] + new[c] - self.unclipped[c], 0.0) for c in MEASURED}
         comps[QUANT_SPREAD] = new[QUANT_SPREAD]
-        return list(zip(self.segments, self.views.split(comps)))
+        return comps
 
     def residuals(self, extra: Sequence[Effect] = ()) -> np.ndarray:
         """Normalised residuals (measured - model) / error of every observable, for chi-square fits:
         cell variances per component, outlier count and amplitude per segment, quantization step."""
         effects = self.replaced(extra) if extra else self.effects
-        res = []
-        for sb, comps in self.predict_with(extra):
-            err = sb.total_errors(comps)
-            res.extend(((sb.values - sb.model_cells(comps)) / err).ravel())
-            # Gaussian likelihood: a vaguer model pays log(err^2) (no escape into its own uncertainty)
-            res.extend(np.sqrt(2.0 * np.log(err / sb.errors)).ravel())
-            res.extend((sb.pooled_values - sb.model_pooled(comps)) / sb.pooled_errors)
-            res.extend(sb.region_contrasts(comps))
-            seg = sb.seg
-            count, amp = outlier_expectation(effects, seg.meta, sb.v, sb.sigma, sb.pixels_per_block * sb.weights)
-            res.append((seg.outlier_pixels - count) / math.sqrt(max(count, seg.outlier_pixels, 1.0)))
-            if seg.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE and count >= 1.0:
-                amp_err = math.hypot(seg.outlier_amplitude_err_dn, 0.05 * seg.outlier_amplitude_dn)
-                res.append((seg.outlier_amplitude_dn - amp) / max(amp_err, 1e-6))
-            else:
-                res.append(0.0)
+        comps = self._components(extra)
+        outliers = np.zeros((2, len(self.segments)))
+        if any(e.distribution == "mixture" for e in effects):
+            for i, sb in enumerate(self.segments):
+                outliers[:, i] = outlier_expectation(effects, sb.seg.meta, sb.v, sb.sigma,
+                                                     sb.pixels_per_block * sb.weights)
+        res = self.observables.residuals(comps, outliers[0], outliers[1])
         z = self.step_z(extra)
-        if z is not None:
-            res.append(z)
-        return np.asarray(res)
+        return res if z is None else np.append(res, z)
 
     def step_z(self, extra: Sequence[Effect] = ()) -> float | None:
         """(measured - model) quantization step over its error, None when the step was not measured."""
