@@ -11,8 +11,9 @@ from typing import Any
 import numpy as np
 
 from ..monitor import Frame, MonitorConfig
-from ..monitor.runtime import MonitorRuntime
+from ..monitor.runtime import HELD_EXACT_REQUESTS, PHYSICS_TABLES, MonitorRuntime
 from ..physics import NoiseModel
+from ..physics.table_grid import GridSpec
 
 #: The view is the estimator's single-image measurement: frame differences (the monitor's sigma_temporal)
 #: cannot see fixed-pattern effects, which the lab measures itself.
@@ -31,11 +32,20 @@ def _stats(v: list[float]) -> dict[str, float | None]:
             "p5": round(float(np.percentile(a, 5)), 4), "p95": round(float(np.percentile(a, 95)), 4)}
 
 
+def node_tables(model: NoiseModel, physics_tables: str = "interpolated") -> NoiseModel:
+    """``model`` with the physics tables the node would use (its ``physics_tables`` parameter): interpolated
+    over metadata that changes every frame, exact for held metadata; or exact for every metadata set."""
+    if physics_tables not in PHYSICS_TABLES:
+        raise ValueError(f"physics_tables must be one of {PHYSICS_TABLES}, got {physics_tables!r}")
+    interpolate = GridSpec(held_exact_requests=HELD_EXACT_REQUESTS) if physics_tables == "interpolated" else False
+    return NoiseModel(model.effects, interpolate=interpolate)
+
+
 def estimator_views(frames: Iterable[Frame], models: Mapping[str, NoiseModel], estimator: str = "full_meta",
                     weights: str | Path | None = None, device: str = "cpu",
-                    config: MonitorConfig = SINGLE_IMAGE) -> dict[str, dict[str, Any]]:
+                    config: MonitorConfig = SINGLE_IMAGE, physics_tables: str = "interpolated") -> dict[str, dict[str, Any]]:
     """One pass over ``frames`` through the shared monitor runtime, one per model (the node's skip rules:
-    frames the replay would skip are skipped here too).
+    frames the replay would skip are skipped here too; the node's physics tables, see :func:`node_tables`).
 
     Returns per model name: frames evaluated / skipped (by reason), xi / sigma_image / sigma_model
     statistics (mean, its standard error, p5, p95 in DN), the mean |xi| and the per-frame series
@@ -43,7 +53,8 @@ def estimator_views(frames: Iterable[Frame], models: Mapping[str, NoiseModel], e
     """
     params = {"model": estimator, "weights": str(weights) if weights else "", "device": device, "camera_name": "lab",
               "hardware_id": "lab"}
-    runtimes = {name: MonitorRuntime(params, model=model, config=config) for name, model in models.items()}
+    runtimes = {name: MonitorRuntime(params, model=node_tables(model, physics_tables), config=config)
+                for name, model in models.items()}
     series: dict[str, dict[str, list[float]]] = {name: {k: [] for k in ("time_s", *KEYS)} for name in models}
     skipped: dict[str, Counter] = {name: Counter() for name in models}
     t0 = None
