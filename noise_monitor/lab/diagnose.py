@@ -335,5 +335,6 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
         ))
         if progress is not None:
             progress.update(1)
-    out.sort(key=lambda c: (-c.delta_bic, c.effect))
+    # BIC gains equal to the reported 0.001 tie (floating-point noise of fits that found nothing): by name
+    out.sort(key=lambda c: (-round(c.delta_bic, 3), c.effect))
     return out
