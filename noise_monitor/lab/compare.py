@@ -199,7 +199,7 @@ class Views:
             cache = None
         else:
             conds, lins, slopes = self.base_conds, self.v, [None] * len(self.v)
-        slope_all = None if not slopes or slopes[0] is None else np.concatenate(slopes)
+        slope_all = None if not slopes or slopes[0] is None else np.concatenate([x for x in slopes if x is not None])
         slope = None if slope_all is None else slope_all[self.own]
         n = self.own.size
         out = {c: np.zeros(n) for c in MEASURED}
@@ -463,9 +463,19 @@ class Observables:
         n_entries = sum(len(sb.cells) * len(sb.observed) for sb in segments)
         n_pooled = sum(len(sb.pooled) for sb in segments)
         n_regional = sum(len(sb.regional) * len(sb.regions) for sb in segments)
-        cell_idx, comp_idx, values, errors, order = [], [], [], [], []
-        pooled_seg, pooled_comp, region_comp, region_row, region_err = [], [], [], [], []
-        rows, cols, vals = [], [], []  # regional contrast matrix: region mean minus its segment's mean
+        cell_idx: list[np.ndarray] = []
+        comp_idx: list[np.ndarray] = []
+        values: list[np.ndarray] = []
+        errors: list[np.ndarray] = []
+        order: list[np.ndarray] = []
+        pooled_seg: list[int] = []
+        pooled_comp: list[int] = []
+        region_comp: list[int] = []
+        region_row: list[int] = []
+        region_err: list[float] = []
+        rows: list[int] = []  # regional contrast matrix: region mean minus its segment's mean
+        cols: list[int] = []
+        vals: list[float] = []
         c = p = r = n_regions = 0
         for s, sb in enumerate(segments):
             nc, no = len(sb.cells), len(sb.observed)
@@ -495,11 +505,11 @@ class Observables:
         self.cell_idx, self.comp_idx = np.concatenate(cell_idx), np.concatenate(comp_idx)
         self.values, self.errors = np.concatenate(values), np.concatenate(errors)
         self.spread_entry = np.isin(self.comp_idx, [col[k] for k in ("temporal", "single") if k in col])
-        self.pooled_seg, self.pooled_comp = np.asarray(pooled_seg, dtype=int), np.asarray(pooled_comp, dtype=int)
+        self.pooled_seg, self.pooled_comp = np.array(pooled_seg, dtype=np.intp), np.array(pooled_comp, dtype=np.intp)
         self.pooled_values = np.concatenate([sb.pooled_values for sb in segments])
         self.pooled_errors = np.concatenate([sb.pooled_errors for sb in segments])
         self.contrast = sparse.csr_matrix((vals, (rows, cols)), shape=(n_regions, int(block0[-1])))
-        self.region_comp, self.region_row = np.asarray(region_comp, dtype=int), np.asarray(region_row, dtype=int)
+        self.region_comp, self.region_row = np.array(region_comp, dtype=np.intp), np.array(region_row, dtype=np.intp)
         self.region_err = np.asarray(region_err, dtype=float)
         self.region_measured = [np.concatenate([sb.seg.values[k][sb.rep] if k in sb.seg.values else np.zeros(sb.v.size)
                                                 for sb in segments]) for k in REGIONAL]
