@@ -263,7 +263,7 @@ class Monitor:
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         if tm is not None:
             held = tm.frames
-            found = self._xi_temporal(tm, meta, sigma)
+            found = self._xi_temporal(tm, sigma)
             if found is not None:
                 xi_t, err_t = found
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
@@ -299,16 +299,16 @@ class Monitor:
         self.view_frames = 1 if step else self.view_frames + 1
         return step
 
-    def _xi_temporal(self, tm: TemporalMeasurement, meta: CameraMetadata,
-                     sigma: dict[str, float]) -> tuple[float, float] | None:
+    def _xi_temporal(self, tm: TemporalMeasurement, sigma: dict[str, float]) -> tuple[float, float] | None:
         """(xi of the static hold's temporal measurement, its standard error), None without accepted blocks.
 
-        The model is evaluated on the hold's temporal mean (the scene without its temporal noise)."""
+        The model is evaluated on the hold's temporal mean (the scene without its temporal noise) at the
+        hold frames' mean metadata (the measurement pools those frames)."""
         ok = np.isfinite(tm.sigma_dn)
         if not ok.any():
             return None
         smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in tm.mean_patches[ok]])
-        model_t = predict_patches(self.temporal_model, smooth, meta, self.config.model_mode)["total"]
+        model_t = predict_patches(self.temporal_model, smooth, tm.meta, self.config.model_mode)["total"]
         d = model_t - tm.sigma_dn[ok]
         n = int(ok.sum())
         spread = float(np.std(d)) if n > 1 else 0.0

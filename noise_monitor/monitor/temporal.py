@@ -7,11 +7,14 @@ their statistics measure the temporal noise without reading texture as noise; ea
 the pure-noise test of :func:`noise_monitor.measure.block_temporal` (a moving object, residual motion or
 flicker rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, hot pixels) is the same in
 every frame and so absent from this measurement: it is compared with the model's temporal effects only.
+The measurement pools the hold's frames, so it is compared with the model at the frames' mean metadata
+(a temperature drifting inside the hold changes the dark-current noise from frame to frame).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import cv2
@@ -39,6 +42,7 @@ class TemporalMeasurement:
     mean_patches: np.ndarray  # (K, size, size) temporal mean of the hold: the scene without temporal noise
     frames: int
     accepted_fraction: float
+    meta: CameraMetadata  # the measured frames' mean metadata (what the model is evaluated at)
 
 
 def _same_conditions(a: CameraMetadata, b: CameraMetadata) -> bool:
@@ -55,6 +59,7 @@ class TemporalNoise:
     def __init__(self, max_frames: int, min_frames: int) -> None:
         self.max_frames, self.min_frames = max_frames, min_frames
         self._stack: deque[np.ndarray] = deque(maxlen=max_frames)
+        self._metas: deque[CameraMetadata] = deque(maxlen=max_frames)
         self._corners: list[tuple[int, int]] = []
         self._size = 0
         self._meta: CameraMetadata | None = None
@@ -64,6 +69,7 @@ class TemporalNoise:
 
     def reset(self) -> None:
         self._stack.clear()
+        self._metas.clear()
         self._corners, self._meta, self._small = [], None, None
 
     def _motion_image(self, image: np.ndarray) -> np.ndarray:
@@ -91,11 +97,13 @@ class TemporalNoise:
             return None
         if not self._static(image, meta, size):
             self._stack.clear()
+            self._metas.clear()
             self._corners, self._size, self._meta = list(corners), size, meta
             self.holds += 1
         if not self._corners:
             return None
         self._stack.append(np.stack([image[y:y + size, x:x + size] for y, x in self._corners]).astype(np.float32))
+        self._metas.append(meta)
         k = len(self._stack)
         if k < max(2, self.min_frames):
             return None
@@ -113,4 +121,11 @@ class TemporalNoise:
             sigma = np.sqrt(np.maximum(v, 0.0))
             sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
-                                   float(stats.accepted.mean()))
+                                   float(stats.accepted.mean()), mean_metadata(self._metas))
+
+
+def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:
+    """The metadata of a hold's frames averaged over its operating conditions (gain, exposure, temperature)."""
+    ms = list(metas)
+    return ms[-1].replace(**{f: float(np.mean([getattr(m, f) for m in ms]))
+                             for f in ("gain_db", "exposure_time_s", "sensor_temperature_c")})

@@ -36,15 +36,17 @@ def shifted(img: np.ndarray, dx: float, dy: float) -> np.ndarray:
     return cv2.warpAffine(img, m, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
 
 
-def run(estimator, cleans, model: NoiseModel, seed: int = 0, **cfg):
-    """Monitor results and the per-frame noise maps (noisy - clean) of a sequence of clean frames."""
+def run(estimator, cleans, model: NoiseModel, seed: int = 0, metas=None, **cfg):
+    """Monitor results and the per-frame noise maps (noisy - clean) of a sequence of clean frames
+    (metadata ``META``, or per frame ``metas``)."""
     rng = np.random.default_rng(seed)
     mon = Monitor(MonitorConfig(**cfg), estimator, NoiseModel(), "cam", "test/cam")
     results, noise = [], []
     for i, clean in enumerate(cleans):
-        noisy, _ = model.simulate(clean, META, rng, per_source=False)
+        meta = META if metas is None else metas[i]
+        noisy, _ = model.simulate(clean, meta, rng, per_source=False)
         img = np.clip(np.rint(noisy), 0, 255).astype(np.float32)
-        results.append(mon.process(Frame(i * 33_000_000, img, META)))
+        results.append(mon.process(Frame(i * 33_000_000, img, meta)))
         noise.append(img - clean)
     return mon, results, noise
 
@@ -64,6 +66,21 @@ def test_static_textured_scene_measures_temporal_noise_to_005_dn_after_10_frames
     assert abs(last.sigma["temporal"] - hold_truth(mon, noise)) <= 0.05
     assert abs(last.xi_temporal) <= 0.1  # the model is exact for this camera
     assert last.temporal_weight > 0.9
+
+
+def test_temperature_drifting_inside_a_hold_is_compared_at_the_frames_mean(estimator):
+    """A hot, long exposure at high gain (dark-current noise dominant) whose temperature rises 0.25 degC per
+    frame: the hold pools frames whose noise grows, so the model is taken at their mean metadata (at the
+    last frame's temperature it reads ~0.3 DN too much after 12 frames)."""
+    metas = [PROFILE.metadata(gain_db=18.0, exposure_time_s=0.1, sensor_temperature_c=50.0 + 0.25 * i)
+             for i in range(12)]
+    model = NoiseModel(interpolate=True)
+    sources = model.predict(128.0, metas[0])
+    assert sources["dcsn"] > max(sources["pn"], sources["rn"])
+    _, results, _ = run(estimator, [photo()] * 12, NoiseModel(), metas=metas)
+    last = results[-1]
+    assert last.temporal_frames == 12 and last.xi_measurement == "temporal"
+    assert abs(last.xi_temporal) <= 0.1
 
 
 def test_moving_camera_has_no_temporal_measurement(estimator):
