@@ -3,7 +3,7 @@
 Issue 15's per-frame target, measured through the shipped runtime (``noise_monitor.bag.replay``, the node's
 code and ``config/node.yaml``): campaigns from ``simulate-bag --scenario campaign`` (tuned: scikit-image
 photographs) and ``--scenario campaign_heldout`` (held-out: matplotlib / PyWavelets photographs, never tuned
-on), ev76c661, 320x256 at 10 Hz, several seeds. Each bag is replayed twice: as recorded (true metadata) and
+on), ev76c661, 320x256 (``--width``/``--height``) at 10 Hz, several seeds. Each bag is replayed twice: as recorded (true metadata) and
 from a copy whose metadata states ``gain_db`` 6 dB below the truth (every frame; nothing else changes).
 
 Definitions (per bag, over the images; frames the monitor skipped in either replay are not counted):
@@ -17,7 +17,7 @@ Definitions (per bag, over the images; frames the monitor skipped in either repl
 - false alarm episode: an alarm episode in the clean replay.
 
 Usage: .venv/bin/python bench/bench_stream_detection.py [--seeds 1 2 3] [--heldout-seeds 21 22 23]
-       [--frames 100] [--params config/node.yaml] [--threads 1] [--json out/stream_detection.json]
+       [--frames 100] [--width 320 --height 256] [--params config/node.yaml] [--threads 1] [--json out/stream_detection.json]
 Prints figures; asserts nothing.
 """
 from __future__ import annotations
@@ -137,6 +137,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="tuned campaign seeds")
     ap.add_argument("--heldout-seeds", type=int, nargs="+", default=[21, 22, 23], help="held-out campaign seeds")
     ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--width", type=int, default=320)
+    ap.add_argument("--height", type=int, default=256)
     ap.add_argument("--params", help="node params YAML (default config/node.yaml)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads")
     ap.add_argument("--json")
@@ -147,7 +149,7 @@ def main() -> None:
                                        ("held-out", "campaign_heldout", args.heldout_seeds)):
             for seed in seeds:
                 bag = simulate_bag(Path(tmp) / f"{scenario}_{seed}.mcap", PROFILE, scenario, frames=args.frames,
-                                   width=320, height=256, fps=10.0, seed=seed)
+                                   width=args.width, height=args.height, fps=10.0, seed=seed)
                 low = stated_gain_copy(bag, Path(tmp) / f"{scenario}_{seed}_low.mcap", GAIN_OFFSET_DB)
                 row = measure_bag(bag, low, args.params, args.threads)
                 row["seed"] = seed
