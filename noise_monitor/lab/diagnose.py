@@ -19,9 +19,12 @@ Candidates the data cannot tell apart form one explanation: two fitted candidate
 their fitted models predict the same observables, i.e. the difference of their normalised residual
 vectors (their predictions' difference in standard errors) has a chi-square of at most
 ``EQUIVALENT_CHI2`` and no entry beyond ``EQUIVALENT_Z`` (both scaled by the best-fitting candidate's
-chi2/dof when above 1, like the F-test): even if one were exactly true, the data could not prefer it to the other by more. A group forms
-around the best candidate by BIC that the BIC prefers to no effect; each member must differ from no
-effect by more than ``EQUIVALENT_CHI2`` (fits that found nothing are never grouped). Members share the
+chi2/dof when above 1, like the F-test): even if one were exactly true, the data could not prefer it to
+the other by more. Their predicted changes must also coincide: that difference is at most
+``EQUIVALENT_SHARE`` of the change each makes to the model's predictions (weak fits near "no effect" lie
+within a few chi-square of one another whatever their physics). A group forms around the best
+candidate by BIC that the BIC prefers to no effect; each member must differ from no effect by more than
+``EQUIVALENT_CHI2`` (fits that found nothing are never grouped). Members share the
 group's rank (ranks count explanations: 1, 1, 2, ...) and its best member's significance, and carry
 ``equivalent_to`` and ``indistinguishable`` (:func:`.equivalence.explain`: what they agree on and which
 observation would separate them).
@@ -66,8 +69,12 @@ SCAN_PER_DECADE = 2
 #: two candidates are equivalent when their fitted predictions differ by at most this chi-square (the
 #: data could not prefer one to the other by more even if one were exactly true: 2 sigma) ...
 EQUIVALENT_CHI2 = 4.0
-#: ... and by at most this many standard errors in every observable
+#: ... and by at most this many standard errors in every observable ...
 EQUIVALENT_Z = 1.0
+#: ... and by at most this fraction of the change each makes to the model's predictions (rms over the
+#: observables): weak fits near "no effect" all lie within a few chi-square of one another, yet their
+#: changes need not coincide
+EQUIVALENT_SHARE = 0.2
 
 
 @dataclass
@@ -379,6 +386,8 @@ def group_equivalent(comp: Comparison, ranked: list[Candidate]) -> list[Candidat
         d = a - b
         return float(d @ d), float(np.max(np.abs(d))) if d.size else 0.0
 
+    change = {name: distance(r, r0)[0] for name, r in resid.items()}  # chi-square of each fit's change
+
     # the errors' scale: the best-fitting model's chi2 per degree of freedom, when above 1
     scale = max(1.0, min((c.chi2 / max(r0.size - len(c.params), 1) for c in ranked), default=1.0))
     groups: list[list[Candidate]] = []
@@ -389,13 +398,14 @@ def group_equivalent(comp: Comparison, ranked: list[Candidate]) -> list[Candidat
             continue
         taken.add(lead.effect)
         group, worst = [lead], (0.0, 0.0)
-        if lead.delta_bic > 0 and lead.effect in resid and distance(resid[lead.effect], r0)[0] > EQUIVALENT_CHI2 * scale:
+        if lead.delta_bic > 0 and change.get(lead.effect, 0.0) > EQUIVALENT_CHI2 * scale:
             for c in ranked:
                 if c.effect in taken or c.effect not in resid:
                     continue
                 chi2, z = distance(resid[c.effect], resid[lead.effect])
                 if (chi2 <= EQUIVALENT_CHI2 * scale and z <= EQUIVALENT_Z * math.sqrt(scale)
-                        and distance(resid[c.effect], r0)[0] > EQUIVALENT_CHI2 * scale):
+                        and change[c.effect] > EQUIVALENT_CHI2 * scale
+                        and chi2 <= EQUIVALENT_SHARE**2 * min(change[c.effect], change[lead.effect])):
                     group.append(c)
                     taken.add(c.effect)
                     worst = (max(worst[0], chi2), max(worst[1], z))

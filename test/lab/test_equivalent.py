@@ -97,7 +97,8 @@ def _cand(name: str, chi2: float, delta_bic: float, significant: bool) -> Candid
 
 def test_grouping_rule(monkeypatch: pytest.MonkeyPatch) -> None:
     """Members within EQUIVALENT_CHI2 of the best are grouped and share its rank and claim; a candidate as
-    far off as the threshold is not; fits indistinguishable from no effect are never grouped."""
+    far off as the threshold is not; weak fits near "no effect" whose changes differ are not, though they
+    lie within EQUIVALENT_CHI2 of each other; fits indistinguishable from no effect are never grouped."""
     monkeypatch.setattr(diagnose_module, "explain", lambda comp, members, chi2, z: "alternatives")
     rng = np.random.default_rng(0)
     base = rng.normal(size=400) + 3.0  # the model without any candidate: chi2 ~ 4000
@@ -106,15 +107,23 @@ def test_grouping_rule(monkeypatch: pytest.MonkeyPatch) -> None:
     step[:16] = 0.45  # chi2 distance 3.24, at most 0.45 standard errors
     far = np.zeros(400)
     far[:40] = 0.35  # chi2 distance 4.9 (> EQUIVALENT_CHI2) though every entry is within 0.35
-    comp = _Fake(base, {"a": fit, "b": fit + step, "c": fit + far, "n1": base + 0.01, "n2": base + 0.011})
-    cands = [_cand("a", fit @ fit, 3000.0, True), _cand("c", 500.0, 2990.0, True),
-             _cand("b", 510.0, 2980.0, False), _cand("n1", 3990.0, -5.0, False), _cand("n2", 3990.0, -5.1, False)]
-    assert far @ far > EQUIVALENT_CHI2 >= step @ step
+    weak = np.zeros(400)
+    weak[100:110] = -1.0  # a weak fit: chi2 change 10
+    other = np.zeros(400)
+    other[200:203] = -1.0  # another weak fit, chi2 3 from the first: its change is not the same
+    comp = _Fake(base, {"a": fit, "b": fit + step, "c": fit + far, "w1": base + weak, "w2": base + weak + other,
+                        "n1": base + 0.01, "n2": base + 0.011})
+    cands = [_cand("a", fit @ fit, 3000.0, True), _cand("c", 500.0, 2990.0, True), _cand("b", 510.0, 2980.0, False),
+             _cand("w1", 3990.0, 2.0, False), _cand("w2", 3990.0, 1.0, False),
+             _cand("n1", 3990.0, -5.0, False), _cand("n2", 3990.0, -5.1, False)]
+    assert far @ far > EQUIVALENT_CHI2 >= step @ step and other @ other < EQUIVALENT_CHI2
     out = group_equivalent(comp, cands)  # type: ignore[arg-type]
-    assert [(c.effect, c.rank) for c in out] == [("a", 1), ("b", 1), ("c", 2), ("n1", 3), ("n2", 4)]
-    a, b, c, n1, n2 = out
+    assert [(c.effect, c.rank) for c in out] == [("a", 1), ("b", 1), ("c", 2), ("w1", 3), ("w2", 4), ("n1", 5),
+                                                 ("n2", 6)]
+    a, b, c, w1, w2, n1, n2 = out
     assert a.equivalent_to == ["b"] and b.equivalent_to == ["a"] and not c.equivalent_to
     assert b.significant and a.indistinguishable == b.indistinguishable == "alternatives" and not c.indistinguishable
+    assert not w1.equivalent_to and not w2.equivalent_to
     assert not n1.equivalent_to and not n2.equivalent_to  # both found nothing: not an explanation
     line = diagnosis_line([x.as_dict() for x in out])
     assert line == "most likely missing effect, one of 2 alternatives these data cannot tell apart: alternatives"
