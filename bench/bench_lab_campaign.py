@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import tempfile
 import time
@@ -50,6 +51,10 @@ def net_mse(cells: list[dict]) -> tuple[float, float]:
     se = [c["measured_sigma_err_dn"] for c in cells]
     n = max(len(r), 1)
     return (sum(a * a - e * e for a, e in zip(r, se)) / n, (2.0 * sum(e**4 for e in se)) ** 0.5 / n)
+
+
+def _pct(x: float) -> str:
+    return "n/a" if math.isnan(x) else f"{100 * x:.0f} %"
 
 
 def _cut(before: float, after: float) -> float:
@@ -115,9 +120,9 @@ def main() -> None:
                 rows.append(row)
                 if effect:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} -> {row['rms_error_after_dn']:.3f} DN "
-                          f"(cut {100 * row['cut']:.0f} %), raw {row['rms_error_raw_dn']:.3f} -> "
-                          f"{row['rms_error_after_raw_dn']:.3f} DN (cut {100 * row['cut_raw']:.0f} %), scatter "
-                          f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} -> "
+                          f"(cut {_pct(row['cut'])}), raw {row['rms_error_raw_dn']:.3f} -> "
+                          f"{row['rms_error_after_raw_dn']:.3f} DN (cut {_pct(row['cut_raw'])}), scatter "
+                          f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- {row['net_mse_se_dn2']:.4f} -> "
                           f"{row['net_mse_after_dn2']:+.4f} +- {row['net_mse_after_se_dn2']:.4f} DN^2, rank {ordinal(row['rank'], row['equivalent_to'])}, "
                           f"significant {row['significant']}, "
                           f"fitted {row['fitted']}, best {row['best']}, groups {row['equivalent_groups'] or 'none'}, "
@@ -130,13 +135,15 @@ def main() -> None:
                           flush=True)
             hidden = [r for r in rows if r["effect"]]
             if hidden and not args.skip_clean:
-                cuts = [r["cut"] for r in hidden]
+                cuts = [r["cut"] for r in hidden if not math.isnan(r["cut"])]
                 raw = [r["cut_raw"] for r in hidden]
+                none = [r["effect"] for r in hidden if math.isnan(r["cut"])]
                 print(f"== {scenario}: clean floor {rows[0]['rms_error_dn']:.3f} DN net, {rows[0]['rms_error_raw_dn']:.3f} DN raw (claimed: "
                       f"{rows[0]['claimed'] or 'nothing'}); ranked first {sum(r['rank'] == 1 for r in hidden)} of "
                       f"{len(hidden)}; significant {sum(r['significant'] for r in hidden)}; error cut median "
-                      f"{100 * statistics.median(cuts):.0f} %, min {100 * min(cuts):.0f} % (raw: median "
-                      f"{100 * statistics.median(raw):.0f} %, min {100 * min(raw):.0f} %)", flush=True)
+                      f"{_pct(statistics.median(cuts) if cuts else math.nan)}, min {_pct(min(cuts, default=math.nan))}"
+                      f"{f' (undefined for {none}: no net error before)' if none else ''} (raw: median "
+                      f"{_pct(statistics.median(raw))}, min {_pct(min(raw))})", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
 
