@@ -204,8 +204,9 @@ def _state(comp: Comparison, members: Sequence[Candidate]) -> dict[str, list[flo
         model = NoiseModel(comp.replaced([c.fitted]))
         conds = [model.conditions(m) for m in metas]
         for q in QUANTITIES:
-            x = np.array([q.value(c1) for c1 in conds]), np.array([q.value(c0) for c0 in conds0])
-            d = np.log(np.maximum(x[0], 1e-300) / np.maximum(x[1], 1e-300)) if q.ratio else x[0] - x[1]
+            now = np.array([q.value(x) for x in conds])
+            was = np.array([q.value(x) for x in conds0])
+            d = np.log(np.maximum(now, 1e-300) / np.maximum(was, 1e-300)) if q.ratio else now - was
             out[q.label].append(float(np.median(d)))
     return out
 
@@ -249,14 +250,21 @@ def explain(comp: Comparison, members: Sequence[Candidate], chi2: float, z: floa
             f"errors, chi-square {chi2:.1f} over {comp.residuals().size} observables)")
     if shared and differing:
         text += f": they see only {' and '.join(q.label for q in shared)}"
-    probe = Probe(comp)
-    sweep = _separating_sweep(probe, members)
+    probe: Probe | None
+    try:
+        probe = Probe(comp)
+        sweep = _separating_sweep(probe, members)
+    except (EffectError, ValueError, FloatingPointError):  # an effect fails beyond the data's conditions
+        probe, sweep = None, ""
     if sweep:
         return f"{text}. To separate them: {sweep}."
-    text += (". No noise measurement separates them: at gains " + _span("gain_db", *probe.swept["gain_db"])
-             + ", exposures " + _span("exposure_time_s", *probe.swept["exposure_time_s"]) + " and temperatures "
-             + _span("sensor_temperature_c", *probe.swept["sensor_temperature_c"])
-             + f" each follows the other's noise within {100 * PROBE_TOLERANCE:.0f} % once refitted")
+    if probe is None:
+        text += ". Their noise beyond the data's operating points could not be evaluated"
+    else:
+        text += (". No noise measurement separates them: at gains " + _span("gain_db", *probe.swept["gain_db"])
+                 + ", exposures " + _span("exposure_time_s", *probe.swept["exposure_time_s"])
+                 + " and temperatures " + _span("sensor_temperature_c", *probe.swept["sensor_temperature_c"])
+                 + f" each follows the other's noise within {100 * PROBE_TOLERANCE:.0f} % once refitted")
     how = [q.how for q in differing if q.how]
     if how:
         return f"{text}. To separate them, measure {how[0]}."

@@ -258,10 +258,15 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         if any(c.significant for c in candidates) else
         "<p>No candidate effect explains a significant part of the model error.</p>"
     )
-    groups = dict.fromkeys((c.rank, c.indistinguishable) for c in candidates if c.equivalent_to)
-    if groups:
+    groups: dict[tuple[int, str], list[str]] = {}
+    for c in candidates:
+        if c.equivalent_to:
+            groups.setdefault((c.rank, c.indistinguishable), []).append(c.effect)
+    if groups:  # the diagnosis' own group is not repeated
         parts.append("<p>Candidates these data cannot tell apart (one explanation, one rank):<ul>" + "".join(
-            f"<li>rank {rank}: {html.escape(text)}</li>" for rank, text in groups) + "</ul></p>")
+            f"<li>rank {rank}, {html.escape(', '.join(names))}: "
+            f"{'the diagnosis above' if text in line else html.escape(text)}</li>"
+            for (rank, text), names in groups.items()) + "</ul></p>")
     parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "explained_fraction", "delta_bic",
                                     "p_value", "params", "param_errors", "degenerate", "rms_error_after_dn", "reading"]))
     parts.append(_unexplained_html(summary.get("unexplained")))
