@@ -4,8 +4,9 @@ Bags: `simulate-bag --scenario campaign` (the variant the lab was developed on) 
 `campaign_heldout` (other photographs, textures, holds, pans, exposure and temperature laws; never
 tuned on), EV76C661, 120 frames 320x256 at 10 Hz, one hidden effect per bag at a field-realistic
 strength (plus a clean bag). Each bag is analysed with `--add-effect NAME=fit` for its hidden effect.
-Prints per bag: rms_error_dn (net of the measurement's scatter) and the raw rms, the best candidate, the true effect's rank and significance, the fitted
-values and the error cut (net and raw), the signed net mean-square error and its standard error; then the summary (clean floor, ranks, median and minimum cut) per variant.
+Prints per bag: rms_error_dn (net of the measurement's scatter) and the raw rms, the best candidate, the true effect's rank (candidates the data
+cannot tell apart share one: "1st (equivalent: exposure_error)") and significance, the fitted values and the error cut (net and raw), the signed
+net mean-square error and its standard error; then the summary (clean floor, ranks, median and minimum cut) per variant.
 
 Usage: .venv/bin/python bench/bench_lab_campaign.py [--variants campaign campaign_heldout]
        [--frames 120] [--width 320] [--height 256] [--seed 11] [--effects ...] [--skip-clean] [--json out.json]
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import tempfile
 import time
@@ -51,9 +53,19 @@ def net_mse(cells: list[dict]) -> tuple[float, float]:
     return (sum(a * a - e * e for a, e in zip(r, se)) / n, (2.0 * sum(e**4 for e in se)) ** 0.5 / n)
 
 
+def _pct(x: float) -> str:
+    return "n/a" if math.isnan(x) else f"{100 * x:.0f} %"
+
+
 def _cut(before: float, after: float) -> float:
     """Relative error cut (NaN when there was no error to cut)."""
     return round(1.0 - after / before, 4) if before > 0 else float("nan")
+
+
+def ordinal(rank: int, equivalent: list[str]) -> str:
+    """'1st', '2nd (equivalent: exposure_error)', ..."""
+    suffix = {1: "st", 2: "nd", 3: "rd"}.get(rank if rank < 20 else rank % 10, "th")
+    return f"{rank}{suffix}" + (f" (equivalent: {', '.join(equivalent)})" if equivalent else "")
 
 
 def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespace) -> dict:
@@ -70,9 +82,15 @@ def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespa
            "measurement_scatter_dn": round(s["measurement_scatter_dn"], 4), "best": names[0], "claimed": claimed,
            "cells": s["measurement"]["cells"], "not_measured": s["measurement"]["not_measured"]}
     row["net_mse_dn2"], row["net_mse_se_dn2"] = (round(x, 5) for x in net_mse(s["cells"]))
+    groups: dict[int, list[str]] = {}
+    for c in s["candidates"]:
+        if c["equivalent_to"]:
+            groups.setdefault(c["rank"], []).append(c["effect"])
+    row["equivalent_groups"] = list(groups.values())  # every group of candidates the data cannot tell apart
     if effect:
         cand = s["candidates"][names.index(effect)]
-        row.update(rank=names.index(effect) + 1, significant=cand["significant"], fitted=s["added_effects"][0]["fitted"],
+        row.update(rank=cand["rank"], equivalent_to=cand["equivalent_to"], significant=cand["significant"],
+                   fitted=s["added_effects"][0]["fitted"],
                    rms_error_after_dn=round(s["rms_error_after_dn"], 4),
                    rms_error_after_raw_dn=round(s["rms_error_after_raw_dn"], 4),
                    cut=_cut(s["rms_error_before_dn"], s["rms_error_after_dn"]),
@@ -102,25 +120,30 @@ def main() -> None:
                 rows.append(row)
                 if effect:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} -> {row['rms_error_after_dn']:.3f} DN "
-                          f"(cut {100 * row['cut']:.0f} %), raw {row['rms_error_raw_dn']:.3f} -> "
-                          f"{row['rms_error_after_raw_dn']:.3f} DN (cut {100 * row['cut_raw']:.0f} %), scatter "
-                          f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} -> "
-                          f"{row['net_mse_after_dn2']:+.4f} +- {row['net_mse_after_se_dn2']:.4f} DN^2, rank {row['rank']}, significant {row['significant']}, "
-                          f"fitted {row['fitted']}, best {row['best']}, {row['analysis_s']:.0f} s", flush=True)
+                          f"(cut {_pct(row['cut'])}), raw {row['rms_error_raw_dn']:.3f} -> "
+                          f"{row['rms_error_after_raw_dn']:.3f} DN (cut {_pct(row['cut_raw'])}), scatter "
+                          f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- {row['net_mse_se_dn2']:.4f} -> "
+                          f"{row['net_mse_after_dn2']:+.4f} +- {row['net_mse_after_se_dn2']:.4f} DN^2, rank {ordinal(row['rank'], row['equivalent_to'])}, "
+                          f"significant {row['significant']}, "
+                          f"fitted {row['fitted']}, best {row['best']}, groups {row['equivalent_groups'] or 'none'}, "
+                          f"{row['analysis_s']:.0f} s", flush=True)
                 else:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} DN, raw {row['rms_error_raw_dn']:.3f} DN, "
                           f"scatter {row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- "
                           f"{row['net_mse_se_dn2']:.4f} DN^2, claimed {row['claimed'] or 'nothing'}, "
-                          f"{row['cells']} cells, {row['analysis_s']:.0f} s", flush=True)
+                          f"groups {row['equivalent_groups'] or 'none'}, {row['cells']} cells, {row['analysis_s']:.0f} s",
+                          flush=True)
             hidden = [r for r in rows if r["effect"]]
             if hidden and not args.skip_clean:
-                cuts = [r["cut"] for r in hidden]
+                cuts = [r["cut"] for r in hidden if not math.isnan(r["cut"])]
                 raw = [r["cut_raw"] for r in hidden]
+                none = [r["effect"] for r in hidden if math.isnan(r["cut"])]
                 print(f"== {scenario}: clean floor {rows[0]['rms_error_dn']:.3f} DN net, {rows[0]['rms_error_raw_dn']:.3f} DN raw (claimed: "
                       f"{rows[0]['claimed'] or 'nothing'}); ranked first {sum(r['rank'] == 1 for r in hidden)} of "
                       f"{len(hidden)}; significant {sum(r['significant'] for r in hidden)}; error cut median "
-                      f"{100 * statistics.median(cuts):.0f} %, min {100 * min(cuts):.0f} % (raw: median "
-                      f"{100 * statistics.median(raw):.0f} %, min {100 * min(raw):.0f} %)", flush=True)
+                      f"{_pct(statistics.median(cuts) if cuts else math.nan)}, min {_pct(min(cuts, default=math.nan))}"
+                      f"{f' (undefined for {none}: no net error before)' if none else ''} (raw: median "
+                      f"{_pct(statistics.median(raw))}, min {_pct(min(raw))})", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
 

@@ -22,7 +22,7 @@ from .compare import (
     rms_error,
     rms_error_raw,
 )
-from .diagnose import EffectSpec, candidate_names, diagnose, fit
+from .diagnose import EffectSpec, candidate_names, diagnose, diagnosis_line, fit
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
 from .signature import plugin_skeleton, unexplained
@@ -105,8 +105,9 @@ def analyze(
     Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma per cell, net of the
     measurement's own scatter: :func:`.compare.rms_error`), ``rms_error_raw_dn`` (the plain rms of the
     residuals), ``measurement_scatter_dn`` (the rms of the cells' standard errors), ``by_condition``,
-    ``candidates`` (ranked best first: ``effect``, ``significant``, ``explained_fraction``, ``params``,
-    ...), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
+    ``candidates`` (ranked best first: ``effect``, ``rank``, ``equivalent_to``, ``indistinguishable``,
+    ``significant``, ``explained_fraction``, ``params``, ...), ``diagnosis`` (one line:
+    :func:`.diagnose.diagnosis_line`), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
     no candidate explains a significant residual), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
     ``rms_error_after_dn`` (both net, as ``rms_error_dn``), ``rms_error_before_raw_dn``, ``rms_error_after_raw_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With
     ``estimator`` (None: skip), ``estimator``: the monitor's xi and sigma_image per model (``before``,
@@ -139,6 +140,7 @@ def analyze(
         "measurement_scatter_dn": measurement_scatter(rows),
         "by_condition": {**by_condition(rows), "region": region_table(comp)},
         "candidates": [c.as_dict() for c in cands],
+        "diagnosis": diagnosis_line([c.as_dict() for c in cands]),
         "unexplained": unexplained(comp, rows, cands),
         "cells": _strip(rows),
     }

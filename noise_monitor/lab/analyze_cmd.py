@@ -55,12 +55,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {n} frame(s) not measured: {reason}")
     for what, why in m["not_measured"].items():
         print(f"  not measured ({what}): {why}")
-    for c in summary["candidates"][:5]:
+    top = summary["candidates"][:5]
+    for c in top:
         mark = "*" if c["significant"] else " "
         params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
-        print(f" {mark} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}")
-    sig = [c for c in summary["candidates"] if c["significant"]]
-    print(f"most likely missing effect: {sig[0]['reading']}" if sig else "no candidate effect is significant")
+        same = f"  (indistinguishable from {', '.join(c['equivalent_to'])})" if c["equivalent_to"] else ""
+        print(f" {mark} {c['rank']:2d} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}{same}")
+    print(summary["diagnosis"])
+    shown = next((c["rank"] for c in summary["candidates"] if c["significant"] and c["equivalent_to"]), None)
+    for rank, text in dict.fromkeys((c["rank"], c["indistinguishable"]) for c in top if c["equivalent_to"]):
+        if rank != shown:
+            print(f"rank {rank}, alternatives these data cannot tell apart: {text}")
     un = summary["unexplained"]
     if un["significant"]:
         print(f"unexplained: {un['reading']}")

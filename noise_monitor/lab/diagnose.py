@@ -14,13 +14,27 @@ observation contradicts (a quantization step the output histogram does not show:
 Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain
 (only a product of parameters is identifiable: fraction x amplitude^2) the error is the parameter's
 whole allowed range and the parameters are listed as ``degenerate``, never a spuriously tight value.
+
+Candidates the data cannot tell apart form one explanation: two fitted candidates are equivalent when
+their fitted models predict the same observables, i.e. the difference of their normalised residual
+vectors (their predictions' difference in standard errors) has a chi-square of at most
+``EQUIVALENT_CHI2`` and no entry beyond ``EQUIVALENT_Z`` (both scaled by the best-fitting candidate's
+chi2/dof when above 1, like the F-test): even if one were exactly true, the data could not prefer it to
+the other by more. Their predicted changes must also coincide: that difference is at most
+``EQUIVALENT_SHARE`` of the change each makes to the model's predictions (weak fits near "no effect" lie
+within a few chi-square of one another whatever their physics). A group forms around the best
+candidate by BIC that the BIC prefers to no effect; each member must differ from no effect by more than
+``EQUIVALENT_CHI2`` (fits that found nothing are never grouped). Members share the
+group's rank (ranks count explanations: 1, 1, 2, ...) and its best member's significance, and carry
+``equivalent_to`` and ``indistinguishable`` (:func:`.equivalence.explain`: what they agree on and which
+observation would separate them).
 """
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,6 +44,7 @@ from scipy.stats import f as f_dist
 from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
 from .compare import Comparison, rms_error, rms_error_raw
+from .equivalence import explain
 
 #: F-test p-value below which a candidate's improvement counts as real
 SIGNIFICANCE_P = 1e-6
@@ -51,6 +66,15 @@ MAX_GRID = 32
 #: best points of the coarse parameter scan refined by least squares
 N_STARTS = 3
 SCAN_PER_DECADE = 2
+#: two candidates are equivalent when their fitted predictions differ by at most this chi-square (the
+#: data could not prefer one to the other by more even if one were exactly true: 2 sigma) ...
+EQUIVALENT_CHI2 = 4.0
+#: ... and by at most this many standard errors in every observable ...
+EQUIVALENT_Z = 1.0
+#: ... and by at most this fraction of the change each makes to the model's predictions (rms over the
+#: observables): weak fits near "no effect" all lie within a few chi-square of one another, yet their
+#: changes need not coincide
+EQUIVALENT_SHARE = 0.2
 
 
 @dataclass
@@ -84,10 +108,21 @@ class Candidate:
     rms_error_after_raw_dn: float = float("nan")
     #: why a candidate that passes the statistical tests is not claimed (empty: it is, or it fails them)
     contradicted: str = ""
+    #: rank among the explanations (equivalent candidates share one)
+    rank: int = 0
+    #: the candidates these data cannot tell apart from this one
+    equivalent_to: list[str] = field(default_factory=list)
+    #: what the equivalent candidates agree on and which observation would separate them
+    indistinguishable: str = ""
+    #: the fitted effect instance
+    fitted: Effect | None = field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict[str, Any]:
         return {
             "effect": self.effect,
+            "rank": self.rank,
+            "equivalent_to": self.equivalent_to,
+            "indistinguishable": self.indistinguishable,
             "significant": self.significant,
             "explained_fraction": round(self.explained_fraction, 6),
             "params": self.params,
@@ -332,9 +367,70 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             contradicted=contradicted,
             degenerate=(res.degenerate or {}).get(name),
             components=comps,
+            fitted=eff,
         ))
         if progress is not None:
             progress.update(1)
     # BIC gains equal to the reported 0.001 tie (floating-point noise of fits that found nothing): by name
     out.sort(key=lambda c: (-round(c.delta_bic, 3), c.effect))
+    return group_equivalent(comp, out)
+
+
+def group_equivalent(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
+    """Group the candidates (ranked best first) the data cannot tell apart (see the module's docstring):
+    each group right after its best member, ranks and significance per group."""
+    r0 = comp.residuals()
+    resid = {c.effect: comp.residuals([c.fitted]) for c in ranked if c.fitted is not None}
+
+    def distance(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+        d = a - b
+        return float(d @ d), float(np.max(np.abs(d))) if d.size else 0.0
+
+    change = {name: distance(r, r0)[0] for name, r in resid.items()}  # chi-square of each fit's change
+
+    # the errors' scale: the best-fitting model's chi2 per degree of freedom, when above 1
+    scale = max(1.0, min((c.chi2 / max(r0.size - len(c.params), 1) for c in ranked), default=1.0))
+    groups: list[list[Candidate]] = []
+    spans: list[tuple[float, float]] = []
+    taken: set[str] = set()
+    for lead in ranked:
+        if lead.effect in taken:
+            continue
+        taken.add(lead.effect)
+        group, worst = [lead], (0.0, 0.0)
+        if lead.delta_bic > 0 and change.get(lead.effect, 0.0) > EQUIVALENT_CHI2 * scale:
+            for c in ranked:
+                if c.effect in taken or c.effect not in resid:
+                    continue
+                chi2, z = distance(resid[c.effect], resid[lead.effect])
+                if (chi2 <= EQUIVALENT_CHI2 * scale and z <= EQUIVALENT_Z * math.sqrt(scale)
+                        and change[c.effect] > EQUIVALENT_CHI2 * scale
+                        and chi2 <= EQUIVALENT_SHARE**2 * min(change[c.effect], change[lead.effect])):
+                    group.append(c)
+                    taken.add(c.effect)
+                    worst = (max(worst[0], chi2), max(worst[1], z))
+        groups.append(group)
+        spans.append(worst)
+    out: list[Candidate] = []
+    for rank, (group, (chi2, z)) in enumerate(zip(groups, spans), start=1):
+        text = explain(comp, group, chi2, z) if len(group) > 1 else ""
+        for c in group:
+            c.rank = rank
+            c.equivalent_to = [o.effect for o in group if o is not c]
+            c.indistinguishable = text
+            c.significant = group[0].significant
+        out.extend(group)
     return out
+
+
+def diagnosis_line(candidates: Sequence[Mapping[str, Any]]) -> str:
+    """The diagnosis in one line (from :meth:`Candidate.as_dict` entries, ranked): the best claimed
+    explanation, as alternatives when the data cannot tell its candidates apart."""
+    claimed = [c for c in candidates if c["significant"]]
+    if not claimed:
+        return "no candidate effect is significant"
+    best = claimed[0]
+    if not best.get("equivalent_to"):
+        return f"most likely missing effect: {best['reading']}"
+    n = len(best["equivalent_to"]) + 1
+    return f"most likely missing effect, one of {n} alternatives these data cannot tell apart: {best['indistinguishable']}"

@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 
 from ..physics import NoiseModel  # noqa: E402
 from .compare import Comparison, as_measured, model_curve  # noqa: E402
-from .diagnose import Candidate  # noqa: E402
+from .diagnose import Candidate, diagnosis_line  # noqa: E402
 from .measure import BLOCK  # noqa: E402
 
 CONDITION_LABELS = {
@@ -172,6 +172,8 @@ def _fmt(v: Any) -> str:
         return f"{v:.4g}"
     if isinstance(v, dict):
         return ", ".join(f"{k}={_fmt(x)}" for k, x in v.items())
+    if isinstance(v, list):
+        return ", ".join(_fmt(x) for x in v)
     return str(v)
 
 
@@ -249,14 +251,24 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "
                      f"after {summary['rms_error_after_dn']:.4f} DN</b> (raw {summary['rms_error_before_raw_dn']:.4f} -> "
                      f"{summary['rms_error_after_raw_dn']:.4f} DN)</p>")
-    sig = [c for c in candidates if c.significant]
+    line = diagnosis_line(cand_rows)
     parts.append("<h2>Diagnosis</h2>")
     parts.append(
-        "<p class='sig'>" + html.escape(f"Most likely missing effect: {sig[0].effect}. {sig[0].reading}") + "</p>"
-        if sig else "<p>No candidate effect explains a significant part of the model error.</p>"
+        "<p class='sig'>" + html.escape(line[:1].upper() + line[1:]) + "</p>"
+        if any(c.significant for c in candidates) else
+        "<p>No candidate effect explains a significant part of the model error.</p>"
     )
-    parts.append(_table(cand_rows, ["effect", "significant", "explained_fraction", "delta_bic", "p_value", "params",
-                                    "param_errors", "degenerate", "rms_error_after_dn", "reading"]))
+    groups: dict[tuple[int, str], list[str]] = {}
+    for c in candidates:
+        if c.equivalent_to:
+            groups.setdefault((c.rank, c.indistinguishable), []).append(c.effect)
+    if groups:  # the diagnosis' own group is not repeated
+        parts.append("<p>Candidates these data cannot tell apart (one explanation, one rank):<ul>" + "".join(
+            f"<li>rank {rank}, {html.escape(', '.join(names))}: "
+            f"{'the diagnosis above' if text in line else html.escape(text)}</li>"
+            for (rank, text), names in groups.items()) + "</ul></p>")
+    parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "explained_fraction", "delta_bic",
+                                    "p_value", "params", "param_errors", "degenerate", "rms_error_after_dn", "reading"]))
     parts.append(_unexplained_html(summary.get("unexplained")))
     for title, b64 in images.items():
         parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{b64}'>")
