@@ -99,8 +99,8 @@ def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarra
     return float(frac), off, ndtr((off - thr) / s) + ndtr((-off - thr) / s)
 
 
-#: a partner view of a block set: (its metadata, the blocks' intensities there, their weights)
-Partner = tuple[CameraMetadata, np.ndarray, np.ndarray]
+#: a partner view of a block set: (its metadata, the blocks' intensities and robust sigmas there, their weights)
+Partner = tuple[CameraMetadata, np.ndarray, np.ndarray, np.ndarray]
 
 
 class EffectCache:
@@ -117,7 +117,7 @@ class EffectCache:
 class Views:
     """Every view the model is evaluated in, grouped by metadata: each segment's representative blocks in
     its own view (its metadata, the block intensities ``v``, their robust sigma and positions) and in its
-    partner views (another segment's metadata, the blocks' intensities there; see
+    partner views (another segment's metadata, the blocks' intensities and robust sigmas there; see
     :func:`.measure._cross_views`). An effect is evaluated in one call per metadata over all the views
     that share it, instead of one per segment and partner; the per-block results are gathered back.
 
@@ -142,7 +142,7 @@ class Views:
             return len(placed) - 1
 
         own = [place(m, v, s, pos) for m, v, s, pos, _ in segments]
-        partner = [[place(pm, pv, np.ones(v.shape), pos) for pm, pv, _ in parts] for _, v, _, pos, parts in segments]
+        partner = [[place(pm, pv, ps, pos) for pm, pv, ps, _ in parts] for _, _, _, pos, parts in segments]
         self.v = [np.concatenate([c[0] for c in ch]) for ch in chunks]
         self.sigma = [np.concatenate([c[1] for c in ch]) for ch in chunks]
         pos = [np.concatenate([c[2] for c in ch]) for ch in chunks]
@@ -164,7 +164,7 @@ class Views:
         self.partner_valid = np.zeros((n_slots, self.own.size), dtype=bool)
         for s, (ks, (*_, parts)) in enumerate(zip(partner, segments)):
             sl = slice(self.bounds[s], self.bounds[s + 1])
-            for j, (k, (_, _, w)) in enumerate(zip(ks, parts)):
+            for j, (k, (*_, w)) in enumerate(zip(ks, parts)):
                 self.partner_index[j, sl] = index(k)
                 self.partner_weight[j, sl] = w
                 self.partner_valid[j, sl] = True
@@ -211,7 +211,7 @@ class Views:
             if store is not None and id(e) in store:
                 part, part_cross = store[id(e)]
             else:
-                part, part_cross = self._effect_parts(e, conds, lins, slope_all, slope)
+                part, part_cross = self._effect_parts(e, conds, lins, slope_all)
                 if store is not None:
                     store[id(e)] = (part, part_cross)
             for c, a in part.items():
@@ -229,8 +229,7 @@ class Views:
         return out
 
     def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],
-                      slope_all: np.ndarray | None, slope: np.ndarray | None
-                      ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+                      slope_all: np.ndarray | None) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """One effect's (single-view, cross-view) variance contributions per component, see
         :meth:`components` (single-view parts before the response slope)."""
         shares, variances, detected = [], [], []
@@ -257,8 +256,14 @@ class Views:
         out[comp_f] = np.where(self.lone, core, 0.0)  # with partner views: the cross-view part instead
         if not self.partner_index.size:
             return out, {}
-        here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
-        there_all = np.sqrt(np.maximum((1.0 - share_all) * var_all, 0.0)) * (1.0 if slope_all is None else slope_all)
+        # each view's fixed sigma (slope included); a mixture's affected pixel adds to the cross energy
+        # only where neither view took it out as an outlier pixel (independent noise: (1 - p_here) x
+        # (1 - p_there), not the square root of that product the two single-view cores would give)
+        kept = 1.0 - np.concatenate(detected) if detected else 1.0
+        there_all = np.sqrt(np.maximum((1.0 - share_all) * var_all, 0.0)) * kept
+        if slope_all is not None:
+            there_all = there_all * slope_all
+        here = there_all[self.own]
         acc = np.zeros(here.shape)
         for idx, w, valid in zip(self.partner_index, self.partner_weight, self.partner_valid):
             acc = acc + np.where(valid, w * here * there_all[idx], 0.0)
@@ -414,9 +419,9 @@ class _SegmentBase:
         segment's metadata by index."""
         seg = self.seg
         if seg.partner_weight is not None:
-            assert seg.partner_intensity_dn is not None  # recorded together with the weights
-            self.partners = [(metas[p], seg.partner_intensity_dn[self.rep, j], seg.partner_weight[self.rep, j])
-                             for j, p in enumerate(seg.partners)]
+            assert seg.partner_intensity_dn is not None and seg.partner_sigma_dn is not None  # recorded together
+            self.partners = [(metas[p], seg.partner_intensity_dn[self.rep, j], seg.partner_sigma_dn[self.rep, j],
+                              seg.partner_weight[self.rep, j]) for j, p in enumerate(seg.partners)]
 
 
 def _pooled(x: np.ndarray, weights: np.ndarray) -> float:
@@ -583,12 +588,12 @@ class Comparison:
             seg = sb.seg
             pred = clip_model.predict(sb.v, seg.meta)
             comps = dict(comps)
-            preds_p = [clip_model.predict(pv, pm) for pm, pv, _ in sb.partners]
+            preds_p = [clip_model.predict(pv, pm) for pm, pv, _, _ in sb.partners]
             for e in analytic:
                 here = np.asarray(pred[e.name], dtype=float)
                 if sb.partners and not e.temporal:  # cross-view: product of the sigmas in both views
                     var = sum(w * here * np.asarray(pp[e.name], dtype=float)
-                              for (_, _, w), pp in zip(sb.partners, preds_p))
+                              for (*_, w), pp in zip(sb.partners, preds_p))
                 else:
                     var = here**2
                 name = component_of(e)

@@ -137,6 +137,7 @@ class SegmentMeasurement:
     partners: tuple[int, ...] = ()
     partner_weight: np.ndarray | None = None  # (B, P) weight of each partner per block (0: not used)
     partner_intensity_dn: np.ndarray | None = None  # (B, P) the block's intensity in each partner view
+    partner_sigma_dn: np.ndarray | None = None  # (B, P) the block's robust sigma in each partner view
     #: pixels of the accepted blocks whose temporal variance is a SPIKE_FACTOR outlier, and the number
     #: white temporal noise would give
     temporal_spikes: int = 0
@@ -376,7 +377,11 @@ class _SegmentAccumulator:
         lo, hi = INTENSITY_RANGE_DN
         excluded: dict[str, int] = {}
         in_range = (v >= lo) & (v <= hi)
-        flat = _without_line_pattern(rm, b, grid)  # real column/row offsets removed: edges stand out
+        # the texture tests see the residual with the outlier pixels replaced: a hot pixel's energy would
+        # swamp a textured block's lag-1 correlation and pass it as flat (blocks holding hot pixels were
+        # kept 2-4 x as often as others on textured campaigns, more outliers and at other levels than
+        # a random choice of blocks holds); real column/row offsets removed: edges stand out
+        flat = _without_line_pattern(clean, b, grid)
         rho_x, rho_y = _lag1(flat, b)
         lines = _line_ratio(flat, b, robust)
         tex = in_range & (
@@ -442,6 +447,7 @@ class _Full:
     partners: tuple[int, ...] = ()
     partner_weight: np.ndarray | None = None  # (N, P)
     partner_v: np.ndarray | None = None  # (N, P)
+    partner_robust: np.ndarray | None = None  # (N, P)
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -469,6 +475,7 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         partners=f.partners,
         partner_weight=None if f.partner_weight is None else f.partner_weight[keep],
         partner_intensity_dn=None if f.partner_v is None else f.partner_v[keep],
+        partner_sigma_dn=None if f.partner_robust is None else f.partner_robust[keep],
         temporal_spikes=int(f.spikes[keep].sum()),
         temporal_spikes_expected=spikes_expected,
     )
@@ -532,6 +539,7 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         f.partners = tuple(g.index for g in cands)
         f.partner_weight = weight
         f.partner_v = np.stack([g.v for g in cands], axis=1)
+        f.partner_robust = np.stack([g.robust for g in cands], axis=1)
         done += 1
     return done
 
