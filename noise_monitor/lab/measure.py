@@ -138,6 +138,8 @@ class SegmentMeasurement:
     partner_weight: np.ndarray | None = None  # (B, P) weight of each partner per block (0: not used)
     partner_intensity_dn: np.ndarray | None = None  # (B, P) the block's intensity in each partner view
     partner_sigma_dn: np.ndarray | None = None  # (B, P) the block's robust sigma in each partner view
+    #: (B, P) whether the block in each partner view can confirm an outlier pixel (CONFIRM_MAX_OTHERS)
+    partner_confirms: np.ndarray | None = None
     #: pixels of the accepted blocks whose temporal variance is a SPIKE_FACTOR outlier, and the number
     #: white temporal noise would give
     temporal_spikes: int = 0
@@ -448,6 +450,7 @@ class _Full:
     partner_weight: np.ndarray | None = None  # (N, P)
     partner_v: np.ndarray | None = None  # (N, P)
     partner_robust: np.ndarray | None = None  # (N, P)
+    partner_confirms: np.ndarray | None = None  # (N, P)
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -476,6 +479,7 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         partner_weight=None if f.partner_weight is None else f.partner_weight[keep],
         partner_intensity_dn=None if f.partner_v is None else f.partner_v[keep],
         partner_sigma_dn=None if f.partner_robust is None else f.partner_robust[keep],
+        partner_confirms=None if f.partner_confirms is None else f.partner_confirms[keep],
         temporal_spikes=int(f.spikes[keep].sum()),
         temporal_spikes_expected=spikes_expected,
     )
@@ -521,11 +525,13 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         # beyond CONFIRM_SIGMAS (a speckled texture: bright specks on a flat background pass the flat
         # tests) would confirm by chance and does not count
         confirmed = np.zeros(f.is_out.shape, dtype=np.int16)
+        capable = []  # per partner: its block can confirm a pixel beyond CONFIRM_SIGMAS there
         for j, g in enumerate(cands):
             beyond = np.abs(g.centred) > CONFIRM_SIGMAS * g.robust[:, None]
-            others = beyond.sum(axis=1, keepdims=True) - beyond
-            same = (np.sign(g.centred) == np.sign(f.centred)) & beyond & (others <= CONFIRM_MAX_OTHERS)
+            n_beyond = beyond.sum(axis=1, keepdims=True)
+            same = (np.sign(g.centred) == np.sign(f.centred)) & beyond & (n_beyond - beyond <= CONFIRM_MAX_OTHERS)
             confirmed += same & (valid[:, j] > 0)[:, None]
+            capable.append(n_beyond[:, 0] <= CONFIRM_MAX_OTHERS + 1)
         need = np.maximum(np.minimum(CONFIRM_VIEWS, count), 1)
         f.is_out = f.is_out & (confirmed >= need[:, None])
         f.values["outlier"] = np.sum(np.where(f.is_out, f.centred**2, 0.0), axis=1) / (b * b)
@@ -540,6 +546,7 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         f.partner_weight = weight
         f.partner_v = np.stack([g.v for g in cands], axis=1)
         f.partner_robust = np.stack([g.robust for g in cands], axis=1)
+        f.partner_confirms = np.stack(capable, axis=1)
         done += 1
     return done
 
