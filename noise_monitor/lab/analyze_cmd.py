@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  not measured ({what}): {why}")
     for c in summary["candidates"][:5]:
         mark = "*" if c["significant"] else " "
-        params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
+        params = ", ".join(_param_text(k, v, c["param_ranges"].get(k)) for k, v in c["params"].items())
         print(f" {mark} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}")
     sig = [c for c in summary["candidates"] if c["significant"]]
     print(f"most likely missing effect: {sig[0]['reading']}" if sig else "no candidate effect is significant")
@@ -81,3 +81,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, summary)
     return 0
+
+
+def _param_text(name: str, value: float, fits_as_well: list[float] | None) -> str:
+    """'name=value', with the range that fits as well when the data do not identify the parameter."""
+    text = f"{name}={value:.4g}"
+    return text if fits_as_well is None else f"{text} (not identified: {fits_as_well[0]:.4g} to {fits_as_well[1]:.4g} fit as well)"
