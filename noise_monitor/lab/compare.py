@@ -36,8 +36,8 @@ from .quantization import quantized_variance
 MEASURED = ("temporal", "fixed", "column", "row", "outlier", "temporal_column", "temporal_row")
 #: assumed standard error of the quantization-step measurement beyond its statistical error (DN)
 STEP_SYSTEMATIC_DN = 0.05
-#: outlier pixels a segment needs before their mean amplitude is compared with the model
-MIN_OUTLIERS_FOR_AMPLITUDE = 5
+#: relative systematic error of the measured mean outlier amplitude
+AMPLITUDE_SYSTEMATIC = 0.05
 #: blocks per cell at which the model is evaluated (evenly spread over the cell's intensities)
 MAX_MODEL_BLOCKS = 16
 #: blocks a region (3 x 3 grid) needs for its contrast to be an observable
@@ -132,13 +132,16 @@ class Partner(NamedTuple):
     confirms: np.ndarray  # whether the block there can confirm an outlier pixel
 
 
-#: keys of the expected outlier pixels per pixel and of their sum of |offset| in component dicts
+#: keys of the expected outlier pixels per pixel and of their sums of |offset| and of its square (the
+#: pixel's noise included) in component dicts
 OUTLIER_PIXELS = "outlier_pixels"
 OUTLIER_OFFSET = "outlier_offset"
+OUTLIER_OFFSET2 = "outlier_offset2"
+OUTLIER_KEYS = (OUTLIER_PIXELS, OUTLIER_OFFSET, OUTLIER_OFFSET2)
 #: key of the model's own uncertainty of the temporal variance (quantization phase) in component dicts
 QUANT_SPREAD = "quantization_spread"
 #: per-block values in component dicts besides the measured components' variances
-EXTRA = (QUANT_SPREAD, OUTLIER_PIXELS, OUTLIER_OFFSET)
+EXTRA = (QUANT_SPREAD, *OUTLIER_KEYS)
 
 
 class EffectCache:
@@ -225,7 +228,7 @@ class Views:
         lands in the components of its ``structure``. The fixed part of a mixture (hot pixels) goes to
         "outlier" where its offset stands out of the block's noise ``sigma`` (robust, DN) and to the white
         fixed-pattern core elsewhere; its offsets are clipped. The mixture's expected outlier pixels (per
-        pixel) and their sum of |offset| are returned under OUTLIER_PIXELS and OUTLIER_OFFSET (detected
+        pixel) and their sums of |offset| and squared offset are returned under OUTLIER_KEYS (detected
         and confirmed by partner views as the measurement requires). Response effects scale everything by their
         slope squared. Quantization acts on the temporal noise at each block's level ``v`` over its range
         of levels ``span`` (DN; None: phase-averaged).
@@ -246,7 +249,7 @@ class Views:
         slope_all = None if not slopes or slopes[0] is None else np.concatenate([x for x in slopes if x is not None])
         slope = None if slope_all is None else slope_all[self.own]
         n = self.own.size
-        out = {c: np.zeros(n) for c in MEASURED + (OUTLIER_PIXELS, OUTLIER_OFFSET)}
+        out = {c: np.zeros(n) for c in MEASURED + OUTLIER_KEYS}
         cross = {c: np.zeros(n) for c in MEASURED}  # cross-view parts, slopes already applied
         for e in effects:
             if component_of(e) is None or e.distribution == "quantization":
@@ -262,7 +265,7 @@ class Views:
                 out[c] = out[c] + a
             for c, a in part_cross.items():
                 cross[c] = cross[c] + a
-        counts = {c: out[c] for c in (OUTLIER_PIXELS, OUTLIER_OFFSET)}
+        counts = {c: out[c] for c in OUTLIER_KEYS}
         if slope is not None:
             out = {c: a * slope**2 for c, a in out.items()}
         out = {c: out[c] + cross[c] for c in MEASURED} | counts
@@ -303,7 +306,9 @@ class Views:
             # detected pixels the partner views do not confirm leave the measurement (neither outlier nor core)
             out["outlier"] = fixed_var * p
             out[OUTLIER_PIXELS] = np.concatenate(fracs)[self.own] * p
-            out[OUTLIER_OFFSET] = out[OUTLIER_PIXELS] * np.concatenate(offsets)[self.own]
+            off = np.concatenate(offsets)[self.own]
+            out[OUTLIER_OFFSET] = out[OUTLIER_PIXELS] * off
+            out[OUTLIER_OFFSET2] = out[OUTLIER_PIXELS] * (off**2 + np.concatenate(self.sigma)[self.own] ** 2)
             core = fixed_var * (1.0 - np.concatenate(detected)[self.own])
         else:
             core = (1.0 - share) * var
@@ -445,12 +450,22 @@ class _SegmentBase:
         self.partners: list[Partner] = []
 
     def set_region_errors(self, comps: dict[str, np.ndarray]) -> None:
-        """Standard errors of the regional contrasts: the spread of the blocks' excess over the baseline
-        model ``comps`` (fixed once, so a fit cannot widen its own errors)."""
+        """Standard errors of the regional contrasts (a region's mean block excess over the baseline model
+        ``comps`` minus the segment's), from the spread of the blocks' excess inside the region and outside
+        it (a sparse effect, e.g. a hot pixel no view took out, lifts a few blocks elsewhere and with them
+        the segment's mean); fixed once, so a fit cannot widen its own errors."""
+        n_all = self.rep.size
         for k in self.regional:
             x = self.seg.values[k][self.rep] - comps[k]
             floor = max(float(np.median(np.abs(comps[k]))) * 0.01, MIN_VAR_ERR)
-            self.region_errors[k] = [max(float(x[idx].std(ddof=1)), floor) / math.sqrt(idx.size) for idx in self.regions]
+            errs = []
+            for idx in self.regions:
+                out = np.delete(x, idx)
+                s_in = max(float(x[idx].std(ddof=1)), floor)
+                s_out = max(float(out.std(ddof=1)), floor) if out.size > 1 else s_in
+                n = idx.size  # contrast = (1/n - 1/N) sum(inside) - (1/N) sum(outside)
+                errs.append(math.sqrt((1.0 / n - 1.0 / n_all) ** 2 * n * s_in**2 + out.size * s_out**2 / n_all**2))
+            self.region_errors[k] = errs
 
     def set_partners(self, metas: Sequence[CameraMetadata]) -> None:
         """Partner views (cross-view fixed pattern) of the representative blocks; ``metas``: every
@@ -494,7 +509,7 @@ class Observables:
     steps over all segments: cell averages, pooled line offsets and regional contrasts as sparse matrices
     over the segments' representative blocks (concatenated in segment order), and the order in which
     :meth:`Comparison.residuals` lists them (per segment: cell variances, their likelihood terms, pooled
-    offsets, regional contrasts, outlier count and amplitude)."""
+    offsets, regional contrasts, outlier count, amplitude and its likelihood term)."""
 
     def __init__(self, segments: Sequence[_SegmentBase]) -> None:
         self.comps = sorted({k for sb in segments for k in sb.observed + sb.pooled})
@@ -549,7 +564,7 @@ class Observables:
             order.extend([np.arange(c, c + nc * no), n_entries + np.arange(c, c + nc * no),
                           2 * n_entries + np.arange(p, p + len(sb.pooled)),
                           2 * n_entries + n_pooled + np.arange(r, r + nr),
-                          2 * n_entries + n_pooled + n_regional + np.array([2 * s, 2 * s + 1])])
+                          2 * n_entries + n_pooled + n_regional + 3 * s + np.arange(3)])
             c, p, r = c + nc * no, p + len(sb.pooled), r + nr
         self.cell_idx, self.comp_idx = np.concatenate(cell_idx), np.concatenate(comp_idx)
         self.values, self.errors = np.concatenate(values), np.concatenate(errors)
@@ -566,7 +581,7 @@ class Observables:
         self.outlier_pixels = np.array([sb.seg.outlier_pixels for sb in segments], dtype=float)
         self.amplitude = np.array([sb.seg.outlier_amplitude_dn for sb in segments], dtype=float)
         self.amplitude_err = np.maximum(np.hypot([sb.seg.outlier_amplitude_err_dn for sb in segments],
-                                                 0.05 * self.amplitude), 1e-6)
+                                                 AMPLITUDE_SYSTEMATIC * self.amplitude), 1e-6)
 
     def as_measured(self, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
         """:func:`as_measured` over all segments' blocks."""
@@ -576,10 +591,12 @@ class Observables:
             return comps[comp] + np.where(self.no_temporal_block, comps[f"temporal_{comp}"], 0.0)
         return comps[comp]
 
-    def outliers(self, comps: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Per segment: the model's expected outlier pixels and their mean |offset| (DN)."""
-        count = self.totals @ comps[OUTLIER_PIXELS]
-        return count, (self.totals @ comps[OUTLIER_OFFSET]) / np.maximum(count, 1e-300)
+    def outliers(self, comps: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per segment: the model's expected outlier pixels, their mean |offset| (DN) and its spread over
+        the pixels (DN: the clipped offset differs from block to block, plus the pixel's noise)."""
+        count, s1, s2 = (self.totals @ comps[k] for k in OUTLIER_KEYS)
+        n = np.maximum(count, 1e-300)
+        return count, s1 / n, np.sqrt(np.maximum(s2 / n - (s1 / n) ** 2, 0.0))
 
     def residuals(self, comps: dict[str, np.ndarray]) -> np.ndarray:
         """Normalised residuals of the model ``comps`` (component arrays over all blocks) in
@@ -598,11 +615,18 @@ class Observables:
         pooled_res = (self.pooled_values - pooled) / self.pooled_errors
         contrasts = np.stack([self.contrast @ (m - comps[k]) for k, m in zip(REGIONAL, self.region_measured)])
         region_res = contrasts[self.region_comp, self.region_row] / self.region_err
-        count, amp = self.outliers(comps)
+        count, amp, spread = self.outliers(comps)
         count_res = (self.outlier_pixels - count) / np.sqrt(np.maximum(np.maximum(count, self.outlier_pixels), 1.0))
-        amp_res = np.where((self.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE) & (count >= 1.0),
-                           (self.amplitude - amp) / self.amplitude_err, 0.0)
-        tail = np.stack([count_res, amp_res], axis=1).ravel()
+        # the mean of n outlier amplitudes: the standard error of n draws from the model's spread (a sample
+        # of a few pixels cannot show its own), at least the sample's, with its likelihood term (a vaguer
+        # model pays); weighted by the share of the n pixels the model expects (the others' amplitudes say
+        # nothing about it): smooth, where a gate on the expected count would let a fit switch it off
+        n = np.maximum(self.outlier_pixels, 1.0)
+        share = np.sqrt(np.clip(count / n, 0.0, 1.0))
+        amp_err = np.maximum(self.amplitude_err, np.hypot(AMPLITUDE_SYSTEMATIC * self.amplitude, spread / np.sqrt(n)))
+        amp_res = share * (self.amplitude - amp) / amp_err
+        amp_like = share * np.sqrt(2.0 * np.log(amp_err / self.amplitude_err))
+        tail = np.stack([count_res, amp_res, amp_like], axis=1).ravel()
         return np.concatenate([cell_res, like, pooled_res, region_res, tail])[self.order]
 
 
@@ -705,7 +729,7 @@ class Comparison:
     def outlier_expectation(self, extra: Sequence[Effect] = ()) -> tuple[np.ndarray, np.ndarray]:
         """Per segment: expected outlier pixels (detected in the frame average and confirmed by partner
         views, as :func:`.measure._cross_views` counts them) and their mean |offset| (DN)."""
-        return self.observables.outliers(self._components(extra))
+        return self.observables.outliers(self._components(extra))[:2]
 
     def step_z(self, extra: Sequence[Effect] = ()) -> float | None:
         """(measured - model) quantization step over its error, None when the step was not measured."""
