@@ -617,12 +617,13 @@ class Observables:
         region_res = contrasts[self.region_comp, self.region_row] / self.region_err
         count, amp, spread = self.outliers(comps)
         count_res = (self.outlier_pixels - count) / np.sqrt(np.maximum(np.maximum(count, self.outlier_pixels), 1.0))
-        # the mean of n outlier amplitudes: the standard error of n draws from the model's spread (a sample
-        # of a few pixels cannot show its own), at least the sample's, with its likelihood term (a vaguer
-        # model pays); weighted by the share of the n pixels the model expects (the others' amplitudes say
-        # nothing about it): smooth, where a gate on the expected count would let a fit switch it off
+        # the mean of n >= 1 outlier amplitudes: the standard error of n draws from the model's spread (a
+        # sample of a few pixels cannot show its own), at least the sample's, with its likelihood term (a
+        # vaguer model pays); weighted by the share of the n pixels the model expects (the others'
+        # amplitudes say nothing about it): smooth, where a gate on the expected count would let a fit
+        # switch it off
         n = np.maximum(self.outlier_pixels, 1.0)
-        share = np.sqrt(np.clip(count / n, 0.0, 1.0))
+        share = np.where(self.outlier_pixels >= 1, np.sqrt(np.clip(count / n, 0.0, 1.0)), 0.0)
         amp_err = np.maximum(self.amplitude_err, np.hypot(AMPLITUDE_SYSTEMATIC * self.amplitude, spread / np.sqrt(n)))
         amp_res = share * (self.amplitude - amp) / amp_err
         amp_like = share * np.sqrt(2.0 * np.log(amp_err / self.amplitude_err))
