@@ -5,8 +5,9 @@ Bags: `simulate-bag --scenario campaign` (the variant the lab was developed on) 
 tuned on), EV76C661, 120 frames 320x256 at 10 Hz, one hidden effect per bag at a field-realistic
 strength (plus a clean bag). Each bag is analysed with `--add-effect NAME=fit` for its hidden effect.
 Prints per bag: rms_error_dn (net of the measurement's scatter) and the raw rms, the best candidate, the true effect's rank (candidates the data
-cannot tell apart share one: "1st (equivalent: exposure_error)") and significance, the fitted values and the error cut (net and raw), the signed
-net mean-square error and its standard error; then the summary (clean floor, ranks, median and minimum cut) per variant.
+cannot tell apart share one: "1st (equivalent: exposure_error)") and significance, the fitted values (with the range that fits as well for a
+parameter the data do not identify) and the error cut (net and raw), the signed net mean-square error and its standard error; then the summary
+(clean floor, ranks, median and minimum cut) per variant.
 
 Usage: .venv/bin/python bench/bench_lab_campaign.py [--variants campaign campaign_heldout]
        [--frames 120] [--width 320] [--height 256] [--seed 11] [--effects ...] [--skip-clean] [--json out.json]
@@ -68,6 +69,11 @@ def ordinal(rank: int, equivalent: list[str]) -> str:
     return f"{rank}{suffix}" + (f" (equivalent: {', '.join(equivalent)})" if equivalent else "")
 
 
+def _ranges(ranges: dict[str, list[float]]) -> str:
+    """Degenerate parameters' ranges that fit as well (empty when every parameter is identified)."""
+    return "".join(f" ({k} not identified: {lo:.4g} to {hi:.4g} fit as well)" for k, (lo, hi) in ranges.items())
+
+
 def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespace) -> dict:
     name = f"{scenario}-{effect or 'clean'}"
     bag = simulate_bag(tmp / f"{name}.mcap", PROFILE, scenario, effects=[EFFECTS[effect]] if effect else [],
@@ -89,8 +95,9 @@ def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespa
     row["equivalent_groups"] = list(groups.values())  # every group of candidates the data cannot tell apart
     if effect:
         cand = s["candidates"][names.index(effect)]
+        added = s["added_effects"][0]
         row.update(rank=cand["rank"], equivalent_to=cand["equivalent_to"], significant=cand["significant"],
-                   fitted=s["added_effects"][0]["fitted"],
+                   fitted=added["fitted"], fits_as_well=added["param_ranges"],
                    rms_error_after_dn=round(s["rms_error_after_dn"], 4),
                    rms_error_after_raw_dn=round(s["rms_error_after_raw_dn"], 4),
                    cut=_cut(s["rms_error_before_dn"], s["rms_error_after_dn"]),
@@ -125,7 +132,7 @@ def main() -> None:
                           f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- {row['net_mse_se_dn2']:.4f} -> "
                           f"{row['net_mse_after_dn2']:+.4f} +- {row['net_mse_after_se_dn2']:.4f} DN^2, rank {ordinal(row['rank'], row['equivalent_to'])}, "
                           f"significant {row['significant']}, "
-                          f"fitted {row['fitted']}, best {row['best']}, groups {row['equivalent_groups'] or 'none'}, "
+                          f"fitted {row['fitted']}{_ranges(row['fits_as_well'])}, best {row['best']}, groups {row['equivalent_groups'] or 'none'}, "
                           f"{row['analysis_s']:.0f} s", flush=True)
                 else:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} DN, raw {row['rms_error_raw_dn']:.3f} DN, "

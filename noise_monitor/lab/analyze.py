@@ -156,7 +156,9 @@ def analyze(
         out.update({
             "added_effects": [
                 {"effect": e.name, "params": dict(e.values), "fitted": res.values[e.name],
-                 "param_errors": res.errors[e.name], "reading": e.reading()}
+                 "param_errors": res.errors[e.name], "degenerate": (res.degenerate or {}).get(e.name, []),
+                 "param_ranges": {k: list(v) for k, v in (res.ranges or {}).get(e.name, {}).items()},
+                 "reading": e.reading()}
                 for e in res.effects
             ],
             "rms_error_before_dn": out["rms_error_dn"],

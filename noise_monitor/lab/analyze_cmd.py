@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     top = summary["candidates"][:5]
     for c in top:
         mark = "*" if c["significant"] else " "
-        params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
+        params = ", ".join(_param_text(k, v, c["param_ranges"].get(k)) for k, v in c["params"].items())
         same = f"  (indistinguishable from {', '.join(c['equivalent_to'])})" if c["equivalent_to"] else ""
         print(f" {mark} {c['rank']:2d} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}{same}")
     print(summary["diagnosis"])
@@ -86,3 +86,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, summary)
     return 0
+
+
+def _param_text(name: str, value: float, fits_as_well: list[float] | None) -> str:
+    """'name=value', with the range that fits as well when the data do not identify the parameter."""
+    text = f"{name}={value:.4g}"
+    return text if fits_as_well is None else f"{text} (not identified: {fits_as_well[0]:.4g} to {fits_as_well[1]:.4g} fit as well)"

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy import sparse
@@ -22,14 +22,22 @@ from ..physics.clipping import DN_MAX
 from ..physics.effects import PAPER_EFFECTS
 from ..physics.effects import Effect as _Effect
 from ..physics.sensor import Conditions, Pixels
-from .measure import OUTLIER_PIXEL_SIGMAS, POOLED, Cell, Measurements, SegmentMeasurement
+from .measure import (
+    CONFIRM_SIGMAS,
+    CONFIRM_VIEWS,
+    OUTLIER_PIXEL_SIGMAS,
+    POOLED,
+    Cell,
+    Measurements,
+    SegmentMeasurement,
+)
 from .quantization import quantized_variance
 
 MEASURED = ("temporal", "fixed", "column", "row", "outlier", "temporal_column", "temporal_row")
 #: assumed standard error of the quantization-step measurement beyond its statistical error (DN)
 STEP_SYSTEMATIC_DN = 0.05
-#: outlier pixels a segment needs before their mean amplitude is compared with the model
-MIN_OUTLIERS_FOR_AMPLITUDE = 5
+#: relative systematic error of the measured mean outlier amplitude
+AMPLITUDE_SYSTEMATIC = 0.05
 #: blocks per cell at which the model is evaluated (evenly spread over the cell's intensities)
 MAX_MODEL_BLOCKS = 16
 #: blocks a region (3 x 3 grid) needs for its contrast to be an observable
@@ -89,18 +97,51 @@ def _linear(effects: Sequence[Effect], cond: Conditions, v: np.ndarray) -> np.nd
     return v
 
 
-def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+def _detection(effect: Effect, cond: Conditions, v: np.ndarray, sigma: np.ndarray
+               ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """A mixture's fixed part as the frame average shows it: (fraction, clipped offset, probability that
-    an affected pixel is an outlier)."""
+    an affected pixel is an outlier (beyond OUTLIER_PIXEL_SIGMAS), probability that it stands beyond
+    CONFIRM_SIGMAS with its offset's sign, as a partner view must show it to confirm an outlier)."""
     frac, off = effect.fixed_mixture(v, cond)
     off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
     s = np.maximum(sigma, 1e-6)
     thr = OUTLIER_PIXEL_SIGMAS * s
-    return float(frac), off, ndtr((off - thr) / s) + ndtr((-off - thr) / s)
+    return float(frac), off, ndtr((off - thr) / s) + ndtr((-off - thr) / s), ndtr((np.abs(off) - CONFIRM_SIGMAS * s) / s)
 
 
-#: a partner view of a block set: (its metadata, the blocks' intensities there, their weights)
-Partner = tuple[CameraMetadata, np.ndarray, np.ndarray]
+def _at_least(q: np.ndarray, need: np.ndarray) -> np.ndarray:
+    """Probability that at least ``need`` (per column, 1..CONFIRM_VIEWS) of independent events with
+    probabilities ``q`` (slots, n) happen."""
+    dist = np.zeros((CONFIRM_VIEWS + 1, q.shape[1]))
+    dist[0] = 1.0
+    for qj in q:  # distribution of the number of events, the last bin holding CONFIRM_VIEWS or more
+        top = dist[-1] + dist[-2] * qj
+        dist[1:-1] = dist[1:-1] * (1.0 - qj) + dist[:-2] * qj
+        dist[0] = dist[0] * (1.0 - qj)
+        dist[-1] = top
+    return np.sum(np.where(np.arange(CONFIRM_VIEWS + 1)[:, None] >= need[None, :], dist, 0.0), axis=0)
+
+
+class Partner(NamedTuple):
+    """A partner view of a segment's blocks (see :func:`.measure._cross_views`)."""
+
+    meta: CameraMetadata
+    v: np.ndarray  # the blocks' intensities there
+    sigma: np.ndarray  # their robust sigma there
+    weight: np.ndarray  # their weight in the cross energies (0: not flat there)
+    confirms: np.ndarray  # whether the block there can confirm an outlier pixel
+
+
+#: keys of the expected outlier pixels per pixel and of their sums of |offset| and of its square (the
+#: pixel's noise included) in component dicts
+OUTLIER_PIXELS = "outlier_pixels"
+OUTLIER_OFFSET = "outlier_offset"
+OUTLIER_OFFSET2 = "outlier_offset2"
+OUTLIER_KEYS = (OUTLIER_PIXELS, OUTLIER_OFFSET, OUTLIER_OFFSET2)
+#: key of the model's own uncertainty of the temporal variance (quantization phase) in component dicts
+QUANT_SPREAD = "quantization_spread"
+#: per-block values in component dicts besides the measured components' variances
+EXTRA = (QUANT_SPREAD, *OUTLIER_KEYS)
 
 
 class EffectCache:
@@ -117,7 +158,7 @@ class EffectCache:
 class Views:
     """Every view the model is evaluated in, grouped by metadata: each segment's representative blocks in
     its own view (its metadata, the block intensities ``v``, their robust sigma and positions) and in its
-    partner views (another segment's metadata, the blocks' intensities there; see
+    partner views (another segment's metadata, the blocks' intensities and robust sigmas there; see
     :func:`.measure._cross_views`). An effect is evaluated in one call per metadata over all the views
     that share it, instead of one per segment and partner; the per-block results are gathered back.
 
@@ -142,7 +183,7 @@ class Views:
             return len(placed) - 1
 
         own = [place(m, v, s, pos) for m, v, s, pos, _ in segments]
-        partner = [[place(pm, pv, np.ones(v.shape), pos) for pm, pv, _ in parts] for _, v, _, pos, parts in segments]
+        partner = [[place(p.meta, p.v, p.sigma, pos) for p in parts] for _, _, _, pos, parts in segments]
         self.v = [np.concatenate([c[0] for c in ch]) for ch in chunks]
         self.sigma = [np.concatenate([c[1] for c in ch]) for ch in chunks]
         pos = [np.concatenate([c[2] for c in ch]) for ch in chunks]
@@ -162,12 +203,16 @@ class Views:
         self.partner_index = np.zeros((n_slots, self.own.size), dtype=int)
         self.partner_weight = np.zeros((n_slots, self.own.size))
         self.partner_valid = np.zeros((n_slots, self.own.size), dtype=bool)
+        self.partner_confirms = np.zeros((n_slots, self.own.size), dtype=bool)
         for s, (ks, (*_, parts)) in enumerate(zip(partner, segments)):
             sl = slice(self.bounds[s], self.bounds[s + 1])
-            for j, (k, (_, _, w)) in enumerate(zip(ks, parts)):
+            for j, (k, part) in enumerate(zip(ks, parts)):
                 self.partner_index[j, sl] = index(k)
-                self.partner_weight[j, sl] = w
+                self.partner_weight[j, sl] = part.weight
                 self.partner_valid[j, sl] = True
+                self.partner_confirms[j, sl] = part.confirms & (part.weight > 0)
+        # outlier pixels need CONFIRM_VIEWS confirming partner views (all of them when fewer are flat there)
+        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(self.partner_weight > 0, axis=0)), 1)
         self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
         self._pos = pos
 
@@ -182,7 +227,9 @@ class Views:
         Each effect's variance is split by its ``temporal_share`` into a temporal and a fixed-pattern part and
         lands in the components of its ``structure``. The fixed part of a mixture (hot pixels) goes to
         "outlier" where its offset stands out of the block's noise ``sigma`` (robust, DN) and to the white
-        fixed-pattern core elsewhere; its offsets are clipped. Response effects scale everything by their
+        fixed-pattern core elsewhere; its offsets are clipped. The mixture's expected outlier pixels (per
+        pixel) and their sums of |offset| and squared offset are returned under OUTLIER_KEYS (detected
+        and confirmed by partner views as the measurement requires). Response effects scale everything by their
         slope squared. Quantization acts on the temporal noise at each block's level ``v`` over its range
         of levels ``span`` (DN; None: phase-averaged).
         For segments with partner views (cross-view measurement) the fixed-pattern parts (fixed, column, row)
@@ -202,7 +249,7 @@ class Views:
         slope_all = None if not slopes or slopes[0] is None else np.concatenate([x for x in slopes if x is not None])
         slope = None if slope_all is None else slope_all[self.own]
         n = self.own.size
-        out = {c: np.zeros(n) for c in MEASURED}
+        out = {c: np.zeros(n) for c in MEASURED + OUTLIER_KEYS}
         cross = {c: np.zeros(n) for c in MEASURED}  # cross-view parts, slopes already applied
         for e in effects:
             if component_of(e) is None or e.distribution == "quantization":
@@ -211,16 +258,17 @@ class Views:
             if store is not None and id(e) in store:
                 part, part_cross = store[id(e)]
             else:
-                part, part_cross = self._effect_parts(e, conds, lins, slope_all, slope)
+                part, part_cross = self._effect_parts(e, conds, lins, slope_all)
                 if store is not None:
                     store[id(e)] = (part, part_cross)
             for c, a in part.items():
                 out[c] = out[c] + a
             for c, a in part_cross.items():
                 cross[c] = cross[c] + a
+        counts = {c: out[c] for c in OUTLIER_KEYS}
         if slope is not None:
             out = {c: a * slope**2 for c, a in out.items()}
-        out = {c: out[c] + cross[c] for c in MEASURED}
+        out = {c: out[c] + cross[c] for c in MEASURED} | counts
         own_conds = [conds[g] for g in self.group_of_segment]
         added, fixed, spread = self._quantization(effects, own_conds, out["temporal"], span)
         out["temporal"] = out["temporal"] + added
@@ -229,17 +277,20 @@ class Views:
         return out
 
     def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],
-                      slope_all: np.ndarray | None, slope: np.ndarray | None
-                      ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+                      slope_all: np.ndarray | None) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """One effect's (single-view, cross-view) variance contributions per component, see
         :meth:`components` (single-view parts before the response slope)."""
-        shares, variances, detected = [], [], []
+        shares, variances, detected, visible, offsets, fracs = [], [], [], [], [], []
         for cond, lin, v, sigma in zip(conds, lins, self.v, self.sigma):
             shares.append(np.broadcast_to(np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0),
                                           v.shape))
             if e.distribution == "mixture":
                 variances.append(_mixture_var(e, cond, lin, v))
-                detected.append(_detection(e, cond, v, sigma)[2])
+                frac, off, p_out, p_beyond = _detection(e, cond, v, sigma)
+                detected.append(p_out)
+                visible.append(p_beyond)
+                offsets.append(np.abs(off))
+                fracs.append(np.full(v.shape, frac))
             else:
                 variances.append(np.broadcast_to(np.asarray(e.variance_dn2(lin, cond), dtype=float), v.shape))
         share_all, var_all = np.concatenate(shares), np.concatenate(variances)
@@ -248,17 +299,31 @@ class Views:
         out: dict[str, np.ndarray] = {}
         if detected:
             p = np.concatenate(detected)[self.own]
+            if self.partner_index.size:  # confirmed by partner views (where there are any)
+                q = np.concatenate(visible)[self.partner_index] * self.partner_confirms
+                p = p * np.where(self.lone, 1.0, _at_least(q, self.confirm_need))
             fixed_var = (1.0 - share) * var
+            # detected pixels the partner views do not confirm leave the measurement (neither outlier nor core)
             out["outlier"] = fixed_var * p
-            core = fixed_var * (1.0 - p)
+            out[OUTLIER_PIXELS] = np.concatenate(fracs)[self.own] * p
+            off = np.concatenate(offsets)[self.own]
+            out[OUTLIER_OFFSET] = out[OUTLIER_PIXELS] * off
+            out[OUTLIER_OFFSET2] = out[OUTLIER_PIXELS] * (off**2 + np.concatenate(self.sigma)[self.own] ** 2)
+            core = fixed_var * (1.0 - np.concatenate(detected)[self.own])
         else:
             core = (1.0 - share) * var
         out[comp_t] = share * var
         out[comp_f] = np.where(self.lone, core, 0.0)  # with partner views: the cross-view part instead
         if not self.partner_index.size:
             return out, {}
-        here = np.sqrt(np.maximum(core, 0.0)) * (1.0 if slope is None else slope)
-        there_all = np.sqrt(np.maximum((1.0 - share_all) * var_all, 0.0)) * (1.0 if slope_all is None else slope_all)
+        # each view's fixed sigma (slope included); a mixture's affected pixel adds to the cross energy
+        # only where neither view took it out as an outlier pixel (independent noise: (1 - p_here) x
+        # (1 - p_there), not the square root of that product the two single-view cores would give)
+        kept = 1.0 - np.concatenate(detected) if detected else 1.0
+        there_all = np.sqrt(np.maximum((1.0 - share_all) * var_all, 0.0)) * kept
+        if slope_all is not None:
+            there_all = there_all * slope_all
+        here = there_all[self.own]
         acc = np.zeros(here.shape)
         for idx, w, valid in zip(self.partner_index, self.partner_weight, self.partner_valid):
             acc = acc + np.where(valid, w * here * there_all[idx], 0.0)
@@ -285,9 +350,6 @@ def _mixture_var(effect: Effect, cond: Conditions, lin: np.ndarray, v: np.ndarra
     off = np.clip(np.broadcast_to(np.asarray(off, dtype=float), v.shape), -v, DN_MAX - v)
     return frac * (1.0 - frac) * off**2
 
-
-#: key of the model's own uncertainty of the temporal variance (quantization phase) in component dicts
-QUANT_SPREAD = "quantization_spread"
 
 
 def quantization_variance(effects: Sequence[Effect], cond: Conditions, temporal_var: np.ndarray,
@@ -317,20 +379,6 @@ def quantization_variance_at(lsb: float, temporal_var: np.ndarray, level_dn: np.
 
 
 _QUANT_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-
-
-def outlier_expectation(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray, sigma: np.ndarray,
-                        pixels: float | np.ndarray) -> tuple[float, float]:
-    """(expected outlier pixels, their mean |offset| in DN) from the fixed mixtures; ``pixels``: pixels
-    each block stands for."""
-    cond = _conditions(effects, meta)
-    count = weighted = 0.0
-    for e in effects:
-        if e.distribution == "mixture":
-            frac, off, p = _detection(e, cond, v, sigma)
-            count += float(np.sum(frac * p * pixels))
-            weighted += float(np.sum(frac * p * np.abs(off) * pixels))
-    return count, (weighted / count if count > 0 else 0.0)
 
 
 def predicted_step(effects: Sequence[Effect], meta: CameraMetadata, output_step: float) -> float:
@@ -402,20 +450,34 @@ class _SegmentBase:
         self.partners: list[Partner] = []
 
     def set_region_errors(self, comps: dict[str, np.ndarray]) -> None:
-        """Standard errors of the regional contrasts: the spread of the blocks' excess over the baseline
-        model ``comps`` (fixed once, so a fit cannot widen its own errors)."""
+        """Standard errors of the regional contrasts (a region's mean block excess over the baseline model
+        ``comps`` minus the segment's), from the spread of the blocks' excess inside the region and outside
+        it (a sparse effect, e.g. a hot pixel no view took out, lifts a few blocks elsewhere and with them
+        the segment's mean); fixed once, so a fit cannot widen its own errors."""
+        n_all = self.rep.size
         for k in self.regional:
             x = self.seg.values[k][self.rep] - comps[k]
             floor = max(float(np.median(np.abs(comps[k]))) * 0.01, MIN_VAR_ERR)
-            self.region_errors[k] = [max(float(x[idx].std(ddof=1)), floor) / math.sqrt(idx.size) for idx in self.regions]
+            errs = []
+            for idx in self.regions:
+                out = np.delete(x, idx)
+                s_in = max(float(x[idx].std(ddof=1)), floor)
+                s_out = max(float(out.std(ddof=1)), floor) if out.size > 1 else s_in
+                n = idx.size  # contrast = (1/n - 1/N) sum(inside) - (1/N) sum(outside)
+                errs.append(math.sqrt((1.0 / n - 1.0 / n_all) ** 2 * n * s_in**2 + out.size * s_out**2 / n_all**2))
+            self.region_errors[k] = errs
 
     def set_partners(self, metas: Sequence[CameraMetadata]) -> None:
         """Partner views (cross-view fixed pattern) of the representative blocks; ``metas``: every
         segment's metadata by index."""
         seg = self.seg
         if seg.partner_weight is not None:
-            assert seg.partner_intensity_dn is not None  # recorded together with the weights
-            self.partners = [(metas[p], seg.partner_intensity_dn[self.rep, j], seg.partner_weight[self.rep, j])
+            # recorded together with the weights
+            assert seg.partner_intensity_dn is not None and seg.partner_sigma_dn is not None
+            assert seg.partner_confirms is not None
+            rep = self.rep
+            self.partners = [Partner(metas[p], seg.partner_intensity_dn[rep, j], seg.partner_sigma_dn[rep, j],
+                                     seg.partner_weight[rep, j], seg.partner_confirms[rep, j])
                              for j, p in enumerate(seg.partners)]
 
 
@@ -447,7 +509,7 @@ class Observables:
     steps over all segments: cell averages, pooled line offsets and regional contrasts as sparse matrices
     over the segments' representative blocks (concatenated in segment order), and the order in which
     :meth:`Comparison.residuals` lists them (per segment: cell variances, their likelihood terms, pooled
-    offsets, regional contrasts, outlier count and amplitude)."""
+    offsets, regional contrasts, outlier count, amplitude and its likelihood term)."""
 
     def __init__(self, segments: Sequence[_SegmentBase]) -> None:
         self.comps = sorted({k for sb in segments for k in sb.observed + sb.pooled})
@@ -459,6 +521,8 @@ class Observables:
         self.no_temporal_cell = np.repeat(no_temporal, n_cells)
         self.average = sparse.block_diag([sb.average for sb in segments], format="csr")
         self.pooling = sparse.block_diag([(sb.weights / np.sum(sb.weights))[None, :] for sb in segments], format="csr")
+        #: per segment, the sum over its blocks of per-pixel values times the pixels each block stands for
+        self.totals = sparse.block_diag([(sb.pixels_per_block * sb.weights)[None, :] for sb in segments], format="csr")
         cell0, block0 = np.cumsum([0] + n_cells), np.cumsum([0] + sizes)
         n_entries = sum(len(sb.cells) * len(sb.observed) for sb in segments)
         n_pooled = sum(len(sb.pooled) for sb in segments)
@@ -500,7 +564,7 @@ class Observables:
             order.extend([np.arange(c, c + nc * no), n_entries + np.arange(c, c + nc * no),
                           2 * n_entries + np.arange(p, p + len(sb.pooled)),
                           2 * n_entries + n_pooled + np.arange(r, r + nr),
-                          2 * n_entries + n_pooled + n_regional + np.array([2 * s, 2 * s + 1])])
+                          2 * n_entries + n_pooled + n_regional + 3 * s + np.arange(3)])
             c, p, r = c + nc * no, p + len(sb.pooled), r + nr
         self.cell_idx, self.comp_idx = np.concatenate(cell_idx), np.concatenate(comp_idx)
         self.values, self.errors = np.concatenate(values), np.concatenate(errors)
@@ -517,7 +581,7 @@ class Observables:
         self.outlier_pixels = np.array([sb.seg.outlier_pixels for sb in segments], dtype=float)
         self.amplitude = np.array([sb.seg.outlier_amplitude_dn for sb in segments], dtype=float)
         self.amplitude_err = np.maximum(np.hypot([sb.seg.outlier_amplitude_err_dn for sb in segments],
-                                                 0.05 * self.amplitude), 1e-6)
+                                                 AMPLITUDE_SYSTEMATIC * self.amplitude), 1e-6)
 
     def as_measured(self, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
         """:func:`as_measured` over all segments' blocks."""
@@ -527,9 +591,16 @@ class Observables:
             return comps[comp] + np.where(self.no_temporal_block, comps[f"temporal_{comp}"], 0.0)
         return comps[comp]
 
-    def residuals(self, comps: dict[str, np.ndarray], count: np.ndarray, amp: np.ndarray) -> np.ndarray:
-        """Normalised residuals of the model ``comps`` (component arrays over all blocks), given each
-        segment's expected outlier count and amplitude, in :meth:`Comparison.residuals`' order."""
+    def outliers(self, comps: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per segment: the model's expected outlier pixels, their mean |offset| (DN) and its spread over
+        the pixels (DN: the clipped offset differs from block to block, plus the pixel's noise)."""
+        count, s1, s2 = (self.totals @ comps[k] for k in OUTLIER_KEYS)
+        n = np.maximum(count, 1e-300)
+        return count, s1 / n, np.sqrt(np.maximum(s2 / n - (s1 / n) ** 2, 0.0))
+
+    def residuals(self, comps: dict[str, np.ndarray]) -> np.ndarray:
+        """Normalised residuals of the model ``comps`` (component arrays over all blocks) in
+        :meth:`Comparison.residuals`' order."""
         measured = {k: self.as_measured(comps, k) for k in self.comps}
         cells = np.stack([self.average @ measured[k] for k in self.comps])
         for k in ("temporal_column", "temporal_row"):
@@ -544,10 +615,19 @@ class Observables:
         pooled_res = (self.pooled_values - pooled) / self.pooled_errors
         contrasts = np.stack([self.contrast @ (m - comps[k]) for k, m in zip(REGIONAL, self.region_measured)])
         region_res = contrasts[self.region_comp, self.region_row] / self.region_err
+        count, amp, spread = self.outliers(comps)
         count_res = (self.outlier_pixels - count) / np.sqrt(np.maximum(np.maximum(count, self.outlier_pixels), 1.0))
-        amp_res = np.where((self.outlier_pixels >= MIN_OUTLIERS_FOR_AMPLITUDE) & (count >= 1.0),
-                           (self.amplitude - amp) / self.amplitude_err, 0.0)
-        tail = np.stack([count_res, amp_res], axis=1).ravel()
+        # the mean of n >= 1 outlier amplitudes: the standard error of n draws from the model's spread (a
+        # sample of a few pixels cannot show its own), at least the sample's, with its likelihood term (a
+        # vaguer model pays); weighted by the share of the n pixels the model expects (the others'
+        # amplitudes say nothing about it): smooth, where a gate on the expected count would let a fit
+        # switch it off
+        n = np.maximum(self.outlier_pixels, 1.0)
+        share = np.where(self.outlier_pixels >= 1, np.sqrt(np.clip(count / n, 0.0, 1.0)), 0.0)
+        amp_err = np.maximum(self.amplitude_err, np.hypot(AMPLITUDE_SYSTEMATIC * self.amplitude, spread / np.sqrt(n)))
+        amp_res = share * (self.amplitude - amp) / amp_err
+        amp_like = share * np.sqrt(2.0 * np.log(amp_err / self.amplitude_err))
+        tail = np.stack([count_res, amp_res, amp_like], axis=1).ravel()
         return np.concatenate([cell_res, like, pooled_res, region_res, tail])[self.order]
 
 
@@ -583,12 +663,12 @@ class Comparison:
             seg = sb.seg
             pred = clip_model.predict(sb.v, seg.meta)
             comps = dict(comps)
-            preds_p = [clip_model.predict(pv, pm) for pm, pv, _ in sb.partners]
+            preds_p = [clip_model.predict(p.v, p.meta) for p in sb.partners]
             for e in analytic:
                 here = np.asarray(pred[e.name], dtype=float)
                 if sb.partners and not e.temporal:  # cross-view: product of the sigmas in both views
-                    var = sum(w * here * np.asarray(pp[e.name], dtype=float)
-                              for (_, _, w), pp in zip(sb.partners, preds_p))
+                    var = sum(p.weight * here * np.asarray(pp[e.name], dtype=float)
+                              for p, pp in zip(sb.partners, preds_p))
                 else:
                     var = here**2
                 name = component_of(e)
@@ -604,7 +684,7 @@ class Comparison:
             if progress is not None:
                 progress.update(1)
         self.clip_aware = {c: np.concatenate([sb.clip_aware[c] for sb in self.segments]) if self.segments
-                           else np.zeros(0) for c in (*MEASURED, QUANT_SPREAD)}
+                           else np.zeros(0) for c in (*MEASURED, *EXTRA)}
         self.observables = Observables(self.segments)
         #: the baseline effects' contributions, evaluated once (a fit varies one effect)
         self.cache = EffectCache(self.effects)
@@ -638,22 +718,19 @@ class Comparison:
         if not all(np.all(np.isfinite(a)) for a in new.values()):
             raise EffectError(f"effect(s) {names} returned a NaN or infinite variance")
         comps = {c: np.maximum(self.clip_aware[c] + new[c] - self.unclipped[c], 0.0) for c in MEASURED}
-        comps[QUANT_SPREAD] = new[QUANT_SPREAD]
-        return comps
+        return comps | {c: new[c] for c in EXTRA}
 
     def residuals(self, extra: Sequence[Effect] = ()) -> np.ndarray:
         """Normalised residuals (measured - model) / error of every observable, for chi-square fits:
         cell variances per component, outlier count and amplitude per segment, quantization step."""
-        effects = self.replaced(extra) if extra else self.effects
-        comps = self._components(extra)
-        outliers = np.zeros((2, len(self.segments)))
-        if any(e.distribution == "mixture" for e in effects):
-            for i, sb in enumerate(self.segments):
-                outliers[:, i] = outlier_expectation(effects, sb.seg.meta, sb.v, sb.sigma,
-                                                     sb.pixels_per_block * sb.weights)
-        res = self.observables.residuals(comps, outliers[0], outliers[1])
+        res = self.observables.residuals(self._components(extra))
         z = self.step_z(extra)
         return res if z is None else np.append(res, z)
+
+    def outlier_expectation(self, extra: Sequence[Effect] = ()) -> tuple[np.ndarray, np.ndarray]:
+        """Per segment: expected outlier pixels (detected in the frame average and confirmed by partner
+        views, as :func:`.measure._cross_views` counts them) and their mean |offset| (DN)."""
+        return self.observables.outliers(self._components(extra))[:2]
 
     def step_z(self, extra: Sequence[Effect] = ()) -> float | None:
         """(measured - model) quantization step over its error, None when the step was not measured."""

@@ -12,8 +12,10 @@ cannot hide a correct fit, and an effect that only bends the model towards a res
 observation contradicts (a quantization step the output histogram does not show: ``contradicted``).
 
 Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain
-(only a product of parameters is identifiable: fraction x amplitude^2) the error is the parameter's
-whole allowed range and the parameters are listed as ``degenerate``, never a spuriously tight value.
+(only a product of parameters is identifiable: fraction x amplitude^2; hot pixels saturated in every
+hold: only a lower bound of their dark current) the error is the parameter's whole allowed range and the
+parameters are listed as ``degenerate``, never a spuriously tight value, with the range of values that
+fit as well along that direction (``param_ranges``).
 
 Candidates the data cannot tell apart form one explanation: two fitted candidates are equivalent when
 their fitted models predict the same observables, i.e. the difference of their normalised residual
@@ -33,7 +35,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,6 +89,8 @@ class FitResult:
     chi2: float
     n_free: int
     degenerate: dict[str, list[str]] | None = None
+    #: effect -> degenerate parameter -> (lowest, highest) value fitting as well (see :func:`_flat_range`)
+    ranges: dict[str, dict[str, tuple[float, float]]] | None = None
 
 
 @dataclass
@@ -104,6 +108,7 @@ class Candidate:
     reading: str
     rms_error_after_dn: float
     degenerate: list[str] | None = None
+    param_ranges: dict[str, tuple[float, float]] | None = None
     components: dict[str, dict[str, float]] | None = None
     rms_error_after_raw_dn: float = float("nan")
     #: why a candidate that passes the statistical tests is not claimed (empty: it is, or it fails them)
@@ -135,6 +140,7 @@ class Candidate:
             "contradicted": self.contradicted,
             "reading": self.reading,
             "degenerate": self.degenerate or [],
+            "param_ranges": {k: list(v) for k, v in (self.param_ranges or {}).items()},
             "components": self.components or {},
         }
 
@@ -239,18 +245,25 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
     effects = build(xc, xg)
     errs: list[dict[str, float | None]] = [{} for _ in specs]
     degenerate: list[list[str]] = [[] for _ in specs]
+    ranges: list[dict[str, tuple[float, float]]] = [{} for _ in specs]
     if cont and jac is not None:
         dof = max(n_obs - len(cont) - len(grid), 1)
         lo = to_internal(np.array([p.bounds[0] for _, p in cont]))
         hi = to_internal(np.array([p.bounds[1] for _, p in cont]))
-        cov, loose = _covariance(jac, max(1.0, chi2 / dof), hi - lo)
+        chi2_scale = max(1.0, chi2 / dof)
+        cov, loose, flat_dirs = _covariance(jac, chi2_scale, hi - lo)
         ext = to_external(xc)
+        limit = chi2 + UNIDENTIFIED_CHI2 * chi2_scale
+        ends = [xc] + [_flat_range(lambda x: float(np.sum(resid(x, xg) ** 2)), xc, sign * u, lo, hi, limit)
+                       for u in flat_dirs for sign in (1.0, -1.0)]
+        span_lo, span_hi = to_external(np.min(ends, axis=0)), to_external(np.max(ends, axis=0))
         for k, (i, p) in enumerate(cont):
             sd = math.sqrt(max(cov[k, k], 0.0))
             err = 10.0 ** (xc[k] + sd) - ext[k] if logs[k] else sd  # log scale: the upper 1-sigma step
             if loose[k]:  # unidentified: the whole range, wherever in it the fit stopped
                 err = p.bounds[1] - p.bounds[0]
                 degenerate[i].append(p.name)
+                ranges[i][p.name] = (float(span_lo[k]), float(span_hi[k]))
             errs[i][p.name] = float(min(err, p.bounds[1] - p.bounds[0]))
     for i, p in grid:
         errs[i][p.name] = None
@@ -262,11 +275,13 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
         chi2=chi2,
         n_free=len(cont) + len(grid),
         degenerate={e.name: d for e, d in zip(effects, degenerate) if d},
+        ranges={e.name: r for e, r in zip(effects, ranges) if r},
     )
 
 
-def _covariance(jac: np.ndarray, scale: float, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Covariance of the fitted (internal) parameters and which take part in an unidentified direction.
+def _covariance(jac: np.ndarray, scale: float, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Covariance of the fitted (internal) parameters, which take part in an unidentified direction,
+    and those directions (unit vectors).
 
     Along an eigen-direction u of J^T J that moves the chi-square by less than UNIDENTIFIED_CHI2 over the
     allowed range (extent R along u) the data say nothing: its variance becomes (R / 2)^2 (the range)
@@ -277,7 +292,29 @@ def _covariance(jac: np.ndarray, scale: float, ranges: np.ndarray) -> tuple[np.n
     unidentified = w * extent**2 < UNIDENTIFIED_CHI2
     inv = np.where(unidentified, (extent / 2.0) ** 2, 1.0 / np.maximum(w, 1e-300))
     loose = np.any(unidentified[None, :] & (np.abs(vecs) > 0.1), axis=1)
-    return (vecs * inv) @ vecs.T, loose
+    return (vecs * inv) @ vecs.T, loose, [vecs[:, j] for j in np.flatnonzero(unidentified)]
+
+
+#: bisection steps of :func:`_flat_range` (a range of 9 decades to 0.01 decade)
+FLAT_RANGE_STEPS = 10
+
+
+def _flat_range(chi2: Callable[[np.ndarray], float], x: np.ndarray, u: np.ndarray, lo: np.ndarray,
+                hi: np.ndarray, limit: float) -> np.ndarray:
+    """How far from the optimum ``x`` along direction ``u`` (internal parameters, within [lo, hi]) the
+    chi-square stays within ``limit``: the end point. The Jacobian at the optimum says only that the
+    direction is flat there; a saturated effect (hot pixels clipped in every hold) fits as well above some
+    dark current and worse below it."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steps = np.where(u > 0, (hi - x) / u, np.where(u < 0, (lo - x) / u, np.inf))
+    t_max = max(float(np.min(steps)), 0.0)  # finite: u is a unit vector
+    if chi2(x + t_max * u) <= limit:
+        return x + t_max * u
+    inside, outside = 0.0, t_max
+    for _ in range(FLAT_RANGE_STEPS):
+        mid = 0.5 * (inside + outside)
+        inside, outside = (mid, outside) if chi2(x + mid * u) <= limit else (inside, mid)
+    return x + inside * u
 
 
 def candidate_names(extra: Iterable[str] = ()) -> list[str]:
@@ -366,6 +403,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             rms_error_after_raw_dn=rms_error_raw(rows1),
             contradicted=contradicted,
             degenerate=(res.degenerate or {}).get(name),
+            param_ranges=(res.ranges or {}).get(name),
             components=comps,
             fitted=eff,
         ))

@@ -137,6 +137,9 @@ class SegmentMeasurement:
     partners: tuple[int, ...] = ()
     partner_weight: np.ndarray | None = None  # (B, P) weight of each partner per block (0: not used)
     partner_intensity_dn: np.ndarray | None = None  # (B, P) the block's intensity in each partner view
+    partner_sigma_dn: np.ndarray | None = None  # (B, P) the block's robust sigma in each partner view
+    #: (B, P) whether the block in each partner view can confirm an outlier pixel (CONFIRM_MAX_OTHERS)
+    partner_confirms: np.ndarray | None = None
     #: pixels of the accepted blocks whose temporal variance is a SPIKE_FACTOR outlier, and the number
     #: white temporal noise would give
     temporal_spikes: int = 0
@@ -376,7 +379,11 @@ class _SegmentAccumulator:
         lo, hi = INTENSITY_RANGE_DN
         excluded: dict[str, int] = {}
         in_range = (v >= lo) & (v <= hi)
-        flat = _without_line_pattern(rm, b, grid)  # real column/row offsets removed: edges stand out
+        # the texture tests see the residual with the outlier pixels replaced: a hot pixel's energy would
+        # swamp a textured block's lag-1 correlation and pass it as flat (blocks holding hot pixels were
+        # kept 2-4 x as often as others on textured campaigns, more outliers and at other levels than
+        # a random choice of blocks holds); real column/row offsets removed: edges stand out
+        flat = _without_line_pattern(clean, b, grid)
         rho_x, rho_y = _lag1(flat, b)
         lines = _line_ratio(flat, b, robust)
         tex = in_range & (
@@ -442,6 +449,8 @@ class _Full:
     partners: tuple[int, ...] = ()
     partner_weight: np.ndarray | None = None  # (N, P)
     partner_v: np.ndarray | None = None  # (N, P)
+    partner_robust: np.ndarray | None = None  # (N, P)
+    partner_confirms: np.ndarray | None = None  # (N, P)
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -469,6 +478,8 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         partners=f.partners,
         partner_weight=None if f.partner_weight is None else f.partner_weight[keep],
         partner_intensity_dn=None if f.partner_v is None else f.partner_v[keep],
+        partner_sigma_dn=None if f.partner_robust is None else f.partner_robust[keep],
+        partner_confirms=None if f.partner_confirms is None else f.partner_confirms[keep],
         temporal_spikes=int(f.spikes[keep].sum()),
         temporal_spikes_expected=spikes_expected,
     )
@@ -514,11 +525,13 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         # beyond CONFIRM_SIGMAS (a speckled texture: bright specks on a flat background pass the flat
         # tests) would confirm by chance and does not count
         confirmed = np.zeros(f.is_out.shape, dtype=np.int16)
+        capable = []  # per partner: its block can confirm a pixel beyond CONFIRM_SIGMAS there
         for j, g in enumerate(cands):
             beyond = np.abs(g.centred) > CONFIRM_SIGMAS * g.robust[:, None]
-            others = beyond.sum(axis=1, keepdims=True) - beyond
-            same = (np.sign(g.centred) == np.sign(f.centred)) & beyond & (others <= CONFIRM_MAX_OTHERS)
+            n_beyond = beyond.sum(axis=1, keepdims=True)
+            same = (np.sign(g.centred) == np.sign(f.centred)) & beyond & (n_beyond - beyond <= CONFIRM_MAX_OTHERS)
             confirmed += same & (valid[:, j] > 0)[:, None]
+            capable.append(n_beyond[:, 0] <= CONFIRM_MAX_OTHERS + 1)
         need = np.maximum(np.minimum(CONFIRM_VIEWS, count), 1)
         f.is_out = f.is_out & (confirmed >= need[:, None])
         f.values["outlier"] = np.sum(np.where(f.is_out, f.centred**2, 0.0), axis=1) / (b * b)
@@ -532,6 +545,8 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         f.partners = tuple(g.index for g in cands)
         f.partner_weight = weight
         f.partner_v = np.stack([g.v for g in cands], axis=1)
+        f.partner_robust = np.stack([g.robust for g in cands], axis=1)
+        f.partner_confirms = np.stack(capable, axis=1)
         done += 1
     return done
 

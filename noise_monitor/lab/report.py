@@ -268,7 +268,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
             f"{'the diagnosis above' if text in line else html.escape(text)}</li>"
             for (rank, text), names in groups.items()) + "</ul></p>")
     parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "explained_fraction", "delta_bic",
-                                    "p_value", "params", "param_errors", "degenerate", "rms_error_after_dn", "reading"]))
+                                    "p_value", "params", "param_errors", "degenerate", "param_ranges", "rms_error_after_dn",
+                                    "reading"]))
     parts.append(_unexplained_html(summary.get("unexplained")))
     for title, b64 in images.items():
         parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{b64}'>")

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.stats import f as f_dist
 
 from ..physics.sensor import dark_electrons
-from .compare import Comparison, as_measured, outlier_expectation
+from .compare import Comparison, as_measured
 
 #: a component's weighted mean excess must be this many standard errors from zero to count
 Z_SIGNIFICANT = 5.0
@@ -238,11 +238,10 @@ def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
 def _pixel_counts(comp: Comparison) -> dict[str, float]:
     """Outlier pixels of the frame averages and temporal spikes: observed, expected, z."""
     out_obs = out_exp = spk_obs = spk_exp = checked = 0.0
-    for sb, _ in comp.predict_with():
+    for sb, count in zip(comp.segments, comp.outlier_expectation()[0]):
         seg = sb.seg
-        count, _ = outlier_expectation(comp.effects, seg.meta, sb.v, sb.sigma, sb.pixels_per_block * sb.weights)
         out_obs += seg.outlier_pixels
-        out_exp += count
+        out_exp += float(count)
         spk_obs += seg.temporal_spikes
         spk_exp += seg.temporal_spikes_expected
         checked += seg.pixels_checked

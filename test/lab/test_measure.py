@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from noise_monitor.lab.compare import Comparison, baseline_effects, outlier_expectation
+from noise_monitor.lab.compare import Comparison, baseline_effects
 from noise_monitor.lab.measure import measure_frames
 from noise_monitor.lab.quantization import quantized_variance
 from noise_monitor.lab.synthetic import simulate_frames
@@ -58,13 +58,13 @@ def test_hot_pixels_are_counted_as_outliers() -> None:
     meas = measure_frames(frames)
     seg = meas.segments[0]
     model = NoiseModel(baseline_effects(PROFILE, seg.meta, True))
-    count, amplitude = outlier_expectation(model.with_effects(hot).effects, seg.meta, seg.intensity_dn,
-                                           seg.robust_sigma_dn, 64)
+    hot_model = Comparison(meas, model.with_effects(hot))
+    (count,), (amplitude,) = hot_model.outlier_expectation()
     assert count > 50
     assert seg.outlier_pixels == pytest.approx(count, rel=0.25)
     assert seg.outlier_amplitude_dn == pytest.approx(amplitude, rel=0.15)
     base = Comparison(meas, model).residuals()
-    with_hot = Comparison(meas, model.with_effects(hot)).residuals()
+    with_hot = hot_model.residuals()
     assert np.sum(base**2) > 2.0 * base.size  # the paper model cannot explain the outliers ...
     assert np.sum(with_hot**2) < 1.2 * with_hot.size  # ... the model with the true hot pixels can
 
