@@ -2,11 +2,17 @@
 
 For each effect (simulated in numpy, apart from the plug-in API: ``test/lab/outside_effects.py``) the lab
 runs twice: without a plug-in (is a built-in claimed? what does the ``unexplained`` signature say?) and
-with the plug-in a user writes for it (rank, significance, fitted value, rms error cut). Two sets:
-``tuned`` (the test's seed and magnitudes, which the thresholds were set on) and ``heldout`` (another
-scene and noise seed, 320x256 frames, other magnitudes). Prints a table; ``--json PATH`` writes it.
+with the plug-in a user writes for it (rank, significance, fitted value, rms error cut); a clean run gives
+the floor. Sets: ``tuned`` (the test's seed and magnitudes, which the thresholds were set on) and
+``heldout`` (another scene and noise seed, 320x256 frames, other magnitudes) on the lab's tiled chart;
+``campaign`` (the field-like ``simulate-bag --scenario campaign``: 120 frames 320x256 at 10 Hz, the
+test's magnitudes) and ``campaign_heldout`` (``--scenario campaign_heldout`` with the held-out
+magnitudes; measure it once, never tune on it), written as MCAP bags and analysed end to end.
+``--seed`` replaces the campaign sets' seed (scene, plan and noise). Prints a line per run; ``--json
+PATH`` writes them.
 
-    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_outside_effects.py [--sets tuned heldout] [--json out.json]
+    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_outside_effects.py [--sets tuned heldout campaign]
+        [--seed 12] [--json out.json]
 """
 from __future__ import annotations
 
@@ -28,21 +34,43 @@ _spec = importlib.util.spec_from_file_location(
 oe = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(oe)
 
+HELDOUT_TRUTH = {
+    "amp_glow": {"rate_e_per_s": 6.0e4, "radius": 0.2},
+    "row_noise": {"sigma_dn": 1.5},
+    "nonlinearity": {"beta": 0.12},
+    "rts": {"fraction": 0.01, "q": 0.5, "amplitude_dn": 20.0},
+}
 SETS = {
     "tuned": {"seed": 0, "width": 160, "height": 128, "truth": {}},
-    "heldout": {"seed": 11, "width": 320, "height": 256, "truth": {
-        "amp_glow": {"rate_e_per_s": 6.0e4, "radius": 0.2},
-        "row_noise": {"sigma_dn": 1.5},
-        "nonlinearity": {"beta": 0.12},
-        "rts": {"fraction": 0.01, "q": 0.5, "amplitude_dn": 20.0},
-    }},
+    "heldout": {"seed": 11, "width": 320, "height": 256, "truth": HELDOUT_TRUTH},
+    "campaign": {"scenario": "campaign", "seed": 11, "width": 320, "height": 256, "truth": {}},
+    "campaign_heldout": {"scenario": "campaign_heldout", "seed": 11, "width": 320, "height": 256,
+                         "truth": HELDOUT_TRUTH},
 }
 
 
-def run(effect: str, cfg: dict, plugin: Path) -> dict:
+def source(effect: str | None, cfg: dict, tmp: Path) -> Path | list:
+    """The frames of one run: a campaign bag (MCAP, written to ``tmp``) or the tiled chart's frames."""
+    truth = {**oe.TRUTH.get(effect, {}), **cfg["truth"].get(effect, {})}
+    if "scenario" in cfg:
+        bag = tmp / f"{cfg['scenario']}-{cfg['seed']}-{effect or 'clean'}.mcap"
+        return oe.campaign_bag(bag, effect, cfg["scenario"], seed=cfg["seed"], width=cfg["width"],
+                               height=cfg["height"], truth=truth)
+    return oe.simulate(load_profile("ev76c661"), effect, width=cfg["width"], height=cfg["height"],
+                       seed=cfg["seed"], truth=truth)
+
+
+def floor(cfg: dict, tmp: Path) -> dict:
+    """The clean camera's run: its error (net, raw) and what is claimed."""
+    s = analyze(source(None, cfg, tmp), "ev76c661", estimator=None)
+    return {"effect": None, "rms_error_dn": s["rms_error_dn"], "rms_error_raw_dn": s["rms_error_raw_dn"],
+            "claimed": [c["effect"] for c in s["candidates"] if c["significant"]],
+            "unexplained_significant": s["unexplained"]["residual_significant"]}
+
+
+def run(effect: str, cfg: dict, plugin: Path, tmp: Path) -> dict:
     truth = {**oe.TRUTH[effect], **cfg["truth"].get(effect, {})}
-    frames = oe.simulate(load_profile("ev76c661"), effect, width=cfg["width"], height=cfg["height"],
-                         seed=cfg["seed"], truth=truth)
+    frames = source(effect, cfg, tmp)
     reg = dict(registry._REGISTRY)
     name, param, _ = oe.PLUGIN_TRUTH[effect]
     t0 = time.perf_counter()
@@ -59,7 +87,7 @@ def run(effect: str, cfg: dict, plugin: Path) -> dict:
         "effect": effect, "truth": truth,
         "builtins_claimed_without_plugin": [c["effect"] for c in bare["candidates"] if c["significant"]],
         "unexplained_significant": un["significant"], "kind": un["kind"], "traits": un["traits"],
-        "suggested": un.get("suggested"), "reading": un["reading"],
+        "suggested": un.get("suggested"), "law": un.get("law"), "reading": un["reading"],
         "plugin_rank": [c["effect"] for c in with_plugin["candidates"]].index(name) + 1,
         "plugin_significant": best["effect"] == name and best["significant"],
         "claimed_with_plugin": [c["effect"] for c in with_plugin["candidates"] if c["significant"]],
@@ -77,27 +105,42 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS))
     ap.add_argument("--effects", nargs="+", default=sorted(oe.TRUTH), choices=sorted(oe.TRUTH))
+    ap.add_argument("--seed", type=int, help="seed of the campaign sets (default: 11)")
+    ap.add_argument("--skip-clean", action="store_true", help="leave out the clean run (the floor)")
     ap.add_argument("--json", metavar="PATH")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    tmp = Path(tempfile.mkdtemp())
     rows = []
-    for set_name in args.sets:
-        for effect in args.effects:
-            plugin = tmp / f"{effect}.py"
-            plugin.write_text(oe.PLUGINS[effect])
-            r = {"set": set_name, **run(effect, SETS[set_name], plugin)}
-            rows.append(r)
-            print(f"{set_name:8s} {effect:13s} built-ins claimed: {r['builtins_claimed_without_plugin'] or 'none'}; "
-                  f"unexplained: {r['unexplained_significant']} ({r['kind']}: {'; '.join(r['traits'])}); "
-                  f"plug-in rank {r['plugin_rank']} significant {r['plugin_significant']}, claimed "
-                  f"{r['claimed_with_plugin']}; fitted {r['fitted']} (truth {r['truth']}); rms "
-                  f"{r['rms_error_before_dn']:.3f} -> {r['rms_error_after_dn']:.3f} DN "
-                  f"(cut {r['error_cut']:.0%}; raw {r['rms_error_before_raw_dn']:.3f} -> {r['rms_error_after_raw_dn']:.3f} DN, "
-                  f"cut {r['error_cut_raw']:.0%}); {r['analysis_time_s']} s", flush=True)
+    with tempfile.TemporaryDirectory() as tmp_dir:
+        tmp = Path(tmp_dir)
+        for set_name in args.sets:
+            cfg = {**SETS[set_name], **({"seed": args.seed} if args.seed is not None and "scenario" in SETS[set_name]
+                                       else {})}
+            if not args.skip_clean:
+                r = {"set": set_name, "seed": cfg["seed"], **floor(cfg, tmp)}
+                rows.append(r)
+                print(f"{set_name:16s} clean         floor {r['rms_error_dn']:.3f} DN (raw {r['rms_error_raw_dn']:.3f} DN); "
+                      f"claimed: {r['claimed'] or 'nothing'}; residual significant: {r['unexplained_significant']}",
+                      flush=True)
+            for effect in args.effects:
+                plugin = tmp / f"{effect}.py"
+                plugin.write_text(oe.PLUGINS[effect])
+                rows.append({"set": set_name, "seed": cfg["seed"], **run(effect, cfg, plugin, tmp)})
+                print_row(rows[-1])
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
     return 0
+
+
+def print_row(r: dict) -> None:
+    """One line per effect run."""
+    print(f"{r['set']:16s} {r['effect']:13s} built-ins claimed: {r['builtins_claimed_without_plugin'] or 'none'}; "
+          f"unexplained: {r['unexplained_significant']} ({r['kind']}: {'; '.join(r['traits'])}); law {r['law'] and {k: r['law'][k] for k in ('intensity_power', 'exposure_power', 'gain_power', 'dark_current_law')}}; "
+          f"plug-in rank {r['plugin_rank']} significant {r['plugin_significant']}, claimed "
+          f"{r['claimed_with_plugin']}; fitted {r['fitted']} +- {r['fitted_errors']} (truth {r['truth']}); rms "
+          f"{r['rms_error_before_dn']:.3f} -> {r['rms_error_after_dn']:.3f} DN "
+          f"(cut {r['error_cut']:.0%}; raw {r['rms_error_before_raw_dn']:.3f} -> {r['rms_error_after_raw_dn']:.3f} DN, "
+          f"cut {r['error_cut_raw']:.0%}); {r['analysis_time_s']} s", flush=True)
 
 
 if __name__ == "__main__":

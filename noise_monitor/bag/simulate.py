@@ -11,12 +11,12 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from tqdm import tqdm
 
-from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel, load_profile
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
 from . import campaign
@@ -25,7 +25,7 @@ from .scenarios import SCENARIOS, Step, get_scenario
 from .scenes import camera_path, make_world, view
 from .writer import STORAGES, BagWriter
 
-__all__ = ["SCENARIOS", "TOPICS", "simulate_bag", "truth_path", "load_truth"]
+__all__ = ["SCENARIOS", "TOPICS", "FrameHook", "simulate_bag", "truth_path", "load_truth"]
 
 #: Contract topic names (under the default ``/camera`` namespace).
 TOPICS = {"image": "image_raw", "camera_info": "camera_info", "metadata": "metadata"}
@@ -45,6 +45,17 @@ def load_truth(bag: str | Path) -> dict[str, Any]:
     if not p.is_file():
         raise FileNotFoundError(f"no ground-truth sidecar {p} (only simulated bags have one)")
     return json.loads(p.read_text())
+
+
+class FrameHook(Protocol):
+    """Camera physics outside the noise model, applied to each frame in sensor coordinates before the
+    image noise and quantization: ``hook(index, clean, noisy, true_meta)`` returns the new float frame
+    (DN) from the clean view and the model's noisy one (clipped to 0..255); ``truth`` (JSON-able) goes to
+    the truth sidecar."""
+
+    truth: dict[str, Any]
+
+    def __call__(self, index: int, clean: np.ndarray, noisy: np.ndarray, meta: CameraMetadata) -> np.ndarray: ...
 
 
 def _stated(meta, step: Step):
@@ -76,6 +87,7 @@ def simulate_bag(
     progress: bool = False,
     hardware_id: str | None = None,
     start_ns: int = START_NS,
+    frame_hook: FrameHook | None = None,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -86,7 +98,9 @@ def simulate_bag(
     A campaign scenario (``scenario.campaign``, see :mod:`.campaign`) sets its own per-frame plan: a photo
     world, static holds and sub-pixel pans, auto-exposure per hold, temperature every frame (``hold_s`` unused).
     ``hardware_id``: the camera's id in the metadata messages (default: the profile name); ``start_ns``: the
-    first frame's stamp (a field campaign's bags are recorded at different times).
+    first frame's stamp (a field campaign's bags are recorded at different times). ``frame_hook``: an
+    effect outside the noise model (:class:`FrameHook`), e.g. a response non-linearity or amplifier glow;
+    it draws from its own random generator, so the model's noise is that of the bag without it.
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -143,6 +157,8 @@ def simulate_bag(
                 window, offset = view(world, positions[i], height, width)
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
             noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
+            if frame_hook is not None:
+                noisy = np.clip(frame_hook(i, clean, noisy, true_meta), 0.0, 255.0).astype(np.float32)
             if step.image_noise_dn:
                 noisy = np.clip(noisy + rng.normal(0.0, step.image_noise_dn, noisy.shape).astype(np.float32), 0, 255)
             img = np.rint(noisy).astype(np.uint8)
@@ -170,7 +186,8 @@ def simulate_bag(
             prev_offset = offset
     truth = {
         "bag": out.name, "profile": prof.name, "scenario": scen.name, "description": scen.description,
-        "effects": effect_specs, "seed": seed, "fps": fps, "width": width, "height": height,
+        "effects": effect_specs, **({"frame_hook": frame_hook.truth} if frame_hook is not None else {}),
+        "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "
                       "sigma_image: std(mono8 image - clean); sigma_model: paper model (pn, dcsn, rn, joint, "

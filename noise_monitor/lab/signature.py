@@ -7,6 +7,8 @@ block positions on the sensor) the signature says
 - **its law**: the power of intensity, exposure time and gain, and whether it follows the dark
   current's temperature law, fitted to the per-cell excess of the dominant component; the gain power
   reads as electrons (before the gain: variance x gain^2) or DN (after it: independent of the gain);
+  an excess towards a sensor corner is fitted with that corner's shape (each cell's mean over its
+  blocks), so a scene that happens to be brighter near the corner is not read as an intensity law;
 - **its spatial structure**: rows or columns (fixed, or changing from frame to frame), isolated pixels
   (outliers of the frame average, or pixels blinking between frames), a corner or a gradient across
   the sensor (block excess vs position), or white pixel-wise noise;
@@ -76,12 +78,18 @@ class _Obs:
     gain: np.ndarray
     dark_rate: np.ndarray
     pooled: bool
+    #: the cells' mean of a corner shape the excess follows (ones: none), and that corner
+    position: np.ndarray
+    corner: str | None = None
 
 
-def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool, dark: dict[int, float]) -> _Obs | None:
+def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool, dark: dict[int, float],
+                  corner: tuple[str, np.ndarray] | None = None) -> _Obs | None:
+    """The component's excess per cell (per segment when pooled); ``corner``: (its name, each row's mean
+    of its shape), a factor of the law."""
     seen: set[int] = set()
     data = []
-    for r in rows:
+    for i, r in enumerate(rows):
         if comp not in r["measured_var_dn2"]:
             continue
         if pooled:
@@ -90,12 +98,12 @@ def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool, dark:
             seen.add(r["segment"])
         m, p = r["measured_var_dn2"][comp], r["model_var_dn2"].get(comp, 0.0)
         data.append((m - p, max(r["measured_var_err_dn2"][comp], 1e-9), p, r["intensity_dn"], r["exposure_time_s"],
-                     10.0 ** (r["gain_db"] / 20.0), dark[r["segment"]]))
+                     10.0 ** (r["gain_db"] / 20.0), dark[r["segment"]], 1.0 if corner is None else corner[1][i]))
     if not data:
         return None
-    excess, error, model, intensity, exposure, gain, dark_rate = np.asarray(data, dtype=float).T
+    excess, error, model, intensity, exposure, gain, dark_rate, position = np.asarray(data, dtype=float).T
     return _Obs(excess=excess, error=error, model=model, intensity=intensity, exposure=exposure, gain=gain,
-                dark_rate=dark_rate, pooled=pooled)
+                dark_rate=dark_rate, pooled=pooled, position=position, corner=corner and corner[0])
 
 
 def _component_stats(obs: _Obs, total_model: float) -> dict[str, Any]:
@@ -123,12 +131,13 @@ def _law_basis(obs: _Obs, law: tuple[Any, int, int, int]) -> np.ndarray:
     v = np.maximum(obs.intensity, 1.0)
     f = (v / 255.0) ** 8 if a == "full_well" else (v / 128.0) ** a
     f = f * (obs.exposure / np.median(obs.exposure)) ** b * (obs.gain / np.median(obs.gain)) ** g
-    return f * (obs.dark_rate / np.median(obs.dark_rate)) ** d
+    return f * (obs.dark_rate / np.median(obs.dark_rate)) ** d * obs.position
 
 
 def fit_law(obs: _Obs) -> dict[str, Any]:
-    """The product law intensity^a x exposure^b x gain^g x dark-rate(T)^d that best fits the excess
-    (one amplitude; each non-zero power costs ln(n) in the BIC); axes that do not vary are not fitted."""
+    """The product law intensity^a x exposure^b x gain^g x dark-rate(T)^d (x the cells' corner shape, if
+    any: the amplitude is then the one at the corner) that best fits the excess (one amplitude; each
+    non-zero power costs ln(n) in the BIC); axes that do not vary are not fitted."""
     varies = {
         "intensity": bool(not obs.pooled and np.ptp(obs.intensity) > 0.2 * np.mean(obs.intensity)),
         "exposure": bool(np.ptp(np.log(obs.exposure)) > 0.3),
@@ -154,7 +163,7 @@ def fit_law(obs: _Obs) -> dict[str, Any]:
     return {"law": (a, b, g, d), "intensity_power": a, "exposure_power": b, "gain_power": g, "dark_current_law": bool(d),
             "amplitude_dn2": amp, "chi2": chi2, "observations": n, "varied": varies,
             "reference": {"intensity_dn": 128.0, "exposure_time_s": float(np.median(obs.exposure)),
-                          "gain": float(np.median(obs.gain))}}
+                          "gain": float(np.median(obs.gain)), **({"at": obs.corner} if obs.corner else {})}}
 
 
 def _law_text(law: dict[str, Any], pooled: bool) -> str:
@@ -177,13 +186,28 @@ def _law_text(law: dict[str, Any], pooled: bool) -> str:
     if v["temperature"]:
         parts.append("following the dark current's temperature law" if law["dark_current_law"]
                      else "independent of the temperature")
-    return "variance " + ", ".join(parts)
+    at = law["reference"].get("at")
+    return "variance " + (f"(at the {at}, fitted with its shape) " if at else "") + ", ".join(parts)
 
 
 def _rss(design: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
     """(residual sum of squares, coefficients) of the least-squares fit of x on design's columns."""
     coef = np.linalg.lstsq(design, x, rcond=None)[0]
     return float(np.sum((x - design @ coef) ** 2)), coef
+
+
+def _corner_shape(pos: np.ndarray, label: str) -> np.ndarray:
+    """exp(-d / CORNER_SCALE), d: the distance of normalised (y, x) positions to the corner ``label``."""
+    y0, x0 = REGIONS[label]
+    return np.exp(-np.hypot(pos[:, 0] - y0, pos[:, 1] - x0) / CORNER_SCALE)
+
+
+def _corner_factor(comp: Comparison, found: dict[str, Any] | None) -> tuple[str, np.ndarray] | None:
+    """For a significant excess towards a corner: (the corner, each cell's mean of its shape over the cell's
+    blocks, in cell-table order); None otherwise."""
+    if not (found and found["significant"] and found["shape"] in REGIONS and found["pattern"].startswith("towards")):
+        return None
+    return found["shape"], np.concatenate([sb.average @ _corner_shape(sb.pos, found["shape"]) for sb in comp.segments])
 
 
 def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
@@ -208,7 +232,7 @@ def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
     # the design is block-diagonal over segments, so each segment is fitted on its own (same least squares)
     nuisance = np.stack([np.ones_like(v), v, v**2], axis=1)
     rss0 = sum(_rss(nuisance[r], x[r])[0] for r in rows)
-    shapes = {k: np.exp(-np.hypot(p[:, 0] - y0, p[:, 1] - x0) / CORNER_SCALE) for k, (y0, x0) in REGIONS.items()}
+    shapes = {k: _corner_shape(p, k) for k in REGIONS}
     shapes["gradient from top to bottom"] = p[:, 0] - 0.5
     shapes["gradient from left to right"] = p[:, 1] - 0.5
     best = None
@@ -262,15 +286,17 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
     pooled_names = ("column", "row", "temporal_column", "temporal_row")
     stats: dict[str, dict[str, Any]] = {}
     observations: dict[str, _Obs] = {}
-    for name in ("temporal", "fixed", "single") + pooled_names:
-        obs = _observations(rows, name, name in pooled_names, dark)
-        if obs is not None:
-            observations[name] = obs
-            stats[name] = _component_stats(obs, total_model)
     spatial_by: dict[str, dict[str, Any] | None] = {}
-    for name in ("temporal", "fixed", "single"):
-        if name in stats:
-            found = spatial_by[name] = _spatial(comp, name)
+    for name in ("temporal", "fixed", "single") + pooled_names:
+        pixelwise = name in ("temporal", "fixed", "single")
+        found = _spatial(comp, name) if pixelwise and any(name in r["measured_var_dn2"] for r in rows) else None
+        obs = _observations(rows, name, name in pooled_names, dark, _corner_factor(comp, found))
+        if obs is None:
+            continue
+        observations[name] = obs
+        stats[name] = _component_stats(obs, total_model)
+        if pixelwise:
+            spatial_by[name] = found
             stats[name]["position_significant"] = bool(found and found["significant"])
             stats[name]["significant"] = bool(stats[name]["significant"] or stats[name]["position_significant"])
     counts = _pixel_counts(comp)

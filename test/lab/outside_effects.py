@@ -13,16 +13,24 @@ exposure / temperature sweep, moved between conditions; each effect is added to 
   the noisy linear signal (the noise shrinks by the local slope);
 - ``rts``: random telegraph pixels: a fixed fraction of pixels, each frame "up" with probability q by a
   fixed amplitude in DN.
+
+:func:`campaign_bag` applies the same effects to a field-like ``simulate-bag`` campaign (photographic scene,
+sub-pixel pans, auto-exposure, temperature drifting every frame, vignetting) through the simulator's
+frame hook: in sensor coordinates (the glow stays in the corner, the telegraph pixels are fixed sensor
+pixels while the scene pans), with each frame's true metadata, before the 8-bit quantization.
 """
 from __future__ import annotations
 
 import textwrap
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.lab.synthetic import DEFAULT_SWEEP, tiled_scene
 from noise_monitor.monitor.frame import Frame
-from noise_monitor.physics import CameraProfile, NoiseModel
+from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel
 
 TRUTH = {
     "amp_glow": {"rate_e_per_s": 1.0e5, "radius": 0.3},
@@ -36,6 +44,31 @@ def _compress(x: np.ndarray, beta: float) -> np.ndarray:
     return x - beta * x**3 / 255.0**2
 
 
+def _sensor_maps(height: int, width: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(each pixel's distance to the top-right sensor corner in sensor sizes, the telegraph pixels)."""
+    y, x = np.mgrid[0:height, 0:width]
+    dist = np.hypot((y + 0.5) / height - 0.0, (x + 0.5) / width - 1.0)
+    return dist, np.random.default_rng(seed + 1).random((height, width)) < fraction
+
+
+def _apply(effect: str | None, t: dict[str, float], img: np.ndarray, meta: CameraMetadata,
+           rng: np.random.Generator, dist: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """One frame (float DN, before quantization) with the outside ``effect`` under its true metadata."""
+    if effect == "amp_glow":
+        lam = t["rate_e_per_s"] * meta.exposure_time_s * np.exp(-dist / t["radius"])
+        dn_per_e = 255.0 * meta.gain / meta.full_well_e
+        return img + dn_per_e * (rng.poisson(lam) - lam)  # dark-frame subtracted: the noise stays
+    if effect == "row_noise":
+        return img + t["sigma_dn"] * rng.standard_normal((img.shape[0], 1))
+    if effect == "nonlinearity":
+        return _compress(img, t["beta"])
+    if effect == "rts":
+        return img + t["amplitude_dn"] * (hit & (rng.random(img.shape) < t["q"]))
+    if effect is not None:
+        raise ValueError(effect)
+    return img
+
+
 def simulate(profile: CameraProfile, effect: str | None, frames_per_condition: int = 6, width: int = 160,
              height: int = 128, seed: int = 0, truth: dict[str, float] | None = None) -> list[Frame]:
     """Frames of the paper's camera plus one outside ``effect`` (None: clean) with the parameters of
@@ -44,31 +77,48 @@ def simulate(profile: CameraProfile, effect: str | None, frames_per_condition: i
     model = NoiseModel()
     rng = np.random.default_rng(seed)
     scene = tiled_scene(height, width, seed)
-    y, x = np.mgrid[0:height, 0:width]
-    dist = np.hypot((y + 0.5) / height - 0.0, (x + 0.5) / width - 1.0)  # to the top-right corner
-    hit = np.random.default_rng(seed + 1).random((height, width)) < t.get("fraction", 0.0)
+    dist, hit = _sensor_maps(height, width, t.get("fraction", 0.0), seed)
     frames = []
     for c, (gain_db, exposure, temp) in enumerate(DEFAULT_SWEEP):
         meta = profile.metadata(gain_db=gain_db, exposure_time_s=exposure, sensor_temperature_c=temp)
-        dn_per_e = 255.0 * meta.gain / meta.full_well_e
         clean = np.roll(scene, (3 * c, 5 * c), axis=(0, 1)).astype(np.float64)
         for _ in range(frames_per_condition):
             noisy, _ = model.simulate(clean.astype(np.float32), meta, rng, per_source=False)
-            img = noisy.astype(np.float64)
-            if effect == "amp_glow":
-                lam = t["rate_e_per_s"] * exposure * np.exp(-dist / t["radius"])
-                img = img + dn_per_e * (rng.poisson(lam) - lam)  # dark-frame subtracted: the noise stays
-            elif effect == "row_noise":
-                img = img + t["sigma_dn"] * rng.standard_normal((height, 1))
-            elif effect == "nonlinearity":
-                img = _compress(img, t["beta"])
-            elif effect == "rts":
-                img = img + t["amplitude_dn"] * (hit & (rng.random((height, width)) < t["q"]))
-            elif effect is not None:
-                raise ValueError(effect)
+            img = _apply(effect, t, noisy.astype(np.float64), meta, rng, dist, hit)
             i = len(frames)
             frames.append(Frame(i * 50_000_000, np.rint(np.clip(img, 0, 255)).astype(np.float32), meta, index=i))
     return frames
+
+
+class SensorEffect:
+    """An outside effect as the simulator's frame hook (:class:`noise_monitor.bag.simulate.FrameHook`):
+    in sensor coordinates, with each frame's true metadata, drawing from its own generator (``seed``)."""
+
+    def __init__(self, effect: str | None, truth: dict[str, float], seed: int) -> None:
+        self.effect, self.params, self.seed = effect, dict(truth), seed
+        self._rng = np.random.default_rng(seed)
+        self._maps: tuple[np.ndarray, np.ndarray] | None = None
+        self.seen: list[CameraMetadata] = []  # the true metadata of every frame, in order
+
+    @property
+    def truth(self) -> dict[str, Any]:
+        return {"outside_effect": self.effect, "params": self.params, "seed": self.seed}
+
+    def __call__(self, index: int, clean: np.ndarray, noisy: np.ndarray, meta: CameraMetadata) -> np.ndarray:
+        if self._maps is None:
+            self._maps = _sensor_maps(*noisy.shape, self.params.get("fraction", 0.0), self.seed)
+        self.seen.append(meta)
+        return _apply(self.effect, self.params, noisy.astype(np.float64), meta, self._rng, *self._maps)
+
+
+def campaign_bag(path: str | Path, effect: str | None, scenario: str = "campaign", seed: int = 11,
+                 frames: int = 120, width: int = 320, height: int = 256,
+                 truth: dict[str, float] | None = None) -> Path:
+    """A field-like ``simulate-bag`` campaign (EV76C661, 10 Hz) with one outside ``effect`` (None: the
+    clean campaign, the same noise realization) at ``TRUTH`` (``truth`` overrides), written as MCAP."""
+    hook = SensorEffect(effect, {**TRUTH.get(effect, {}), **(truth or {})}, seed + 1000) if effect else None
+    return simulate_bag(path, "ev76c661", scenario, frames=frames, width=width, height=height, fps=10.0,
+                        seed=seed, frame_hook=hook)
 
 
 #: the plug-ins, as a user writes them for these effects with the README's API
