@@ -43,14 +43,31 @@ def _window(height: int, width: int) -> np.ndarray:
     return cv2.createHanningWindow((width, height), cv2.CV_64F)
 
 
+@lru_cache(maxsize=64)
+def _dft_side(n: int) -> int:
+    """The largest even side <= n that OpenCV's DFT takes without padding (n when n is too small)."""
+    m = n - n % 2
+    while m > 2 and cv2.getOptimalDFTSize(m) != m:
+        m -= 2
+    return m if m > 2 else n
+
+
 def global_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
     """(dx, dy, response): translation of ``b`` relative to ``a`` in pixels (phase correlation, sub-pixel)
-    and the correlation peak's response (near 1 for a clean translation, near 0 for no match)."""
+    and the correlation peak's response (near 1 for a clean translation, near 0 for no match).
+
+    Both images are cropped (centred) to even sides OpenCV's DFT takes as they are: ``phaseCorrelate``
+    pads other sides, to an odd size for e.g. 224 = 2^5 x 7 (225), which biases the estimate by half a
+    pixel (identical frames 224 px wide read 0.5 px apart)."""
     a64 = np.array(a, dtype=np.float64)  # copies: OpenCV windows its inputs in place
     b64 = np.array(b, dtype=np.float64)
     if a64.shape != b64.shape or a64.ndim != 2:
         raise ValueError(f"global_shift needs two gray images of one size, got {a64.shape} and {b64.shape}")
-    (dx, dy), response = cv2.phaseCorrelate(a64, b64, _window(*a64.shape))
+    h, w = a64.shape
+    hc, wc = _dft_side(h), _dft_side(w)
+    crop = (slice((h - hc) // 2, (h - hc) // 2 + hc), slice((w - wc) // 2, (w - wc) // 2 + wc))
+    a64, b64 = np.ascontiguousarray(a64[crop]), np.ascontiguousarray(b64[crop])
+    (dx, dy), response = cv2.phaseCorrelate(a64, b64, _window(hc, wc))
     return float(dx), float(dy), float(response)
 
 
