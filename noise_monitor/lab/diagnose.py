@@ -5,11 +5,15 @@ of all observables (cell variances per component, outlier-pixel counts, quantiza
 parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - k ln N``; explained
 fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
 chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction and
-a minimum relative drop of the model error (DN) where the effect acts: in the measured components the
-effect changes (temporal, fixed, rows, columns, ...). A floor of scene texture in other components then
-cannot hide a correct fit, and an effect that only bends the model towards a residual it cannot shape
-(a uniform dark-current change for a glowing corner) is not claimed. Nor is a fit that a direct
-observation contradicts (a quantization step the output histogram does not show: ``contradicted``).
+a minimum relative drop of the model error (DN, net of the measurement's scatter) where the effect acts:
+in the measured components the effect changes (temporal, fixed, rows, columns, ...). A floor of scene
+texture in other components then cannot hide a correct fit, and an effect that only bends the model
+towards a residual it cannot shape (a uniform dark-current change for a glowing corner) is not claimed;
+nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
+excess (towards a corner, along a gradient, beyond an intensity law per segment:
+:func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
+amplitude. Nor is a fit that a direct observation contradicts (a quantization step the output histogram
+does not show: ``contradicted``).
 
 Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain
 (only a product of parameters is identifiable: fraction x amplitude^2; hot pixels saturated in every
@@ -45,8 +49,9 @@ from scipy.stats import f as f_dist
 
 from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
-from .compare import Comparison, rms_error, rms_error_raw
+from .compare import REGIONAL, Comparison, rms_error, rms_error_raw
 from .equivalence import explain
+from .signature import position_pattern
 
 #: F-test p-value below which a candidate's improvement counts as real
 SIGNIFICANCE_P = 1e-6
@@ -61,6 +66,8 @@ MIN_OWN_REDUCTION = 0.5
 MAX_STEP_Z = 5.0
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
+#: smallest total sigma (DN) a component's variance mismatch is scaled by (8-bit rounding alone: 0.29)
+MIN_SIGMA_DN = 0.1
 #: a direction in parameter space is unidentified if crossing the whole allowed range along it changes
 #: the chi-square (scaled by chi2/dof) by less than this
 UNIDENTIFIED_CHI2 = 1.0
@@ -324,13 +331,20 @@ def candidate_names(extra: Iterable[str] = ()) -> list[str]:
 
 
 def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
-    """rms over cells of measured - model sigma (DN) per measured component."""
+    """Per measured component: the rms over cells of the error its variance mismatch (measured - model)
+    makes in the cell's total sigma (DN: the measured total sigma minus what it would be with the model's
+    variance in that component), net of the measurement's scatter like :func:`.compare.rms_error` (a
+    component's cells can be noisy, even negative, where its variance is small: the rms of their square
+    roots would be their noise, not the model's error)."""
     out: dict[str, list[float]] = {}
     for r in rows:
+        total = sum(r["measured_var_dn2"].values())
+        sigma = max(r["measured_sigma_dn"], MIN_SIGMA_DN)
         for c, m in r["measured_var_dn2"].items():
-            p = r["model_var_dn2"].get(c, 0.0)
-            out.setdefault(c, []).append(math.sqrt(max(m, 0.0)) - math.sqrt(max(p, 0.0)))
-    return {c: float(np.sqrt(np.mean(np.square(v)))) for c, v in out.items()}
+            d = sigma - math.sqrt(max(total - m + r["model_var_dn2"].get(c, 0.0), 0.0))
+            se = r["measured_var_err_dn2"][c] / (2.0 * sigma)
+            out.setdefault(c, []).append(d * d - se * se)
+    return {c: math.sqrt(max(float(np.mean(v)), 0.0)) for c, v in out.items()}
 
 
 def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) -> list[str]:
@@ -344,12 +358,29 @@ def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) ->
 
 
 def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tuple[bool, dict[str, dict[str, float]]]:
-    """Whether an added effect cuts the rms model error (DN) by MIN_OWN_REDUCTION in every measured
-    component it changes; and those components' errors before and after."""
+    """Whether an added effect cuts the rms model error (DN, net of the measurement's scatter) by
+    MIN_OWN_REDUCTION in every measured component it changes (an error within the scatter cannot be cut);
+    and those components' errors before and after."""
     e0, e1 = component_errors(rows0), component_errors(rows1)
     own = own_components(rows0, rows1)
     comps = {c: {"rms_error_before_dn": round(e0[c], 5), "rms_error_after_dn": round(e1[c], 5)} for c in own}
-    return bool(own) and all(e1[c] <= (1.0 - MIN_OWN_REDUCTION) * e0[c] for c in own), comps
+    return bool(own) and all(e0[c] > 0.0 and e1[c] <= (1.0 - MIN_OWN_REDUCTION) * e0[c] for c in own), comps
+
+
+def shapes_position(comp: Comparison, patterns: Mapping[str, dict[str, Any] | None], effect: Effect,
+                    own: Iterable[str]) -> tuple[bool, dict[str, float]]:
+    """Whether an added effect removes MIN_OWN_REDUCTION of the amplitude of every significant position
+    pattern (``patterns``: the baseline's, per component) in the components ``own`` it changes; and for
+    each such component the amplitude left (sqrt of the pattern's explained variance after / before). A
+    position-independent effect changes the excess by an intensity law only and leaves the pattern."""
+    left: dict[str, float] = {}
+    for c in own:
+        base = patterns.get(c)
+        if not base or not base["significant"]:
+            continue
+        after = position_pattern(comp, c, [effect], shape=base["shape"])
+        left[c] = math.sqrt(after["strength"] / base["strength"]) if after and base["strength"] > 0 else 0.0
+    return all(x <= 1.0 - MIN_OWN_REDUCTION for x in left.values()), left
 
 
 def _contradiction(comp: Comparison, effect: Effect) -> str:
@@ -371,6 +402,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
     rows0 = comp.cell_table()
     n = r0.size
     reg = available()
+    patterns = {c: position_pattern(comp, c) for c in REGIONAL}
     out = []
     for name in names if names is not None else candidate_names():
         cls = reg[name]
@@ -388,6 +420,9 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
         rows1 = comp.cell_table(extra=[eff])
         rms1 = rms_error(rows1)
         cut, comps = cuts_error(rows0, rows1)
+        shaped, left = shapes_position(comp, patterns, eff, comps)
+        for c, x in left.items():
+            comps[c]["position_pattern_left"] = round(x, 4)
         contradicted = _contradiction(comp, eff)
         out.append(Candidate(
             effect=name,
@@ -397,7 +432,8 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             explained_fraction=explained,
             delta_bic=drop - k * math.log(n),
             p_value=p,
-            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION and cut and not contradicted),
+            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION and cut and shaped
+                             and not contradicted),
             reading=eff.reading(),
             rms_error_after_dn=rms1,
             rms_error_after_raw_dn=rms_error_raw(rows1),

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import f as f_dist
 
+from ..physics import Effect
 from ..physics.sensor import dark_electrons
 from .compare import Comparison, as_measured
 
@@ -210,13 +211,16 @@ def _corner_factor(comp: Comparison, found: dict[str, Any] | None) -> tuple[str,
     return found["shape"], np.concatenate([sb.average @ _corner_shape(sb.pos, found["shape"]) for sb in comp.segments])
 
 
-def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
-    """Best corner or gradient shape for the block excess of component ``name`` (scaled per segment).
+def position_pattern(comp: Comparison, name: str, extra: Sequence[Effect] = (),
+                     shape: str | None = None) -> dict[str, Any] | None:
+    """Best corner or gradient shape (or the given ``shape``) for the block excess of component ``name``
+    over the model with ``extra`` effects (scaled per segment, beyond a level and intensity law per
+    segment); ``strength``: the block excess variance (DN^4 summed over blocks) the shape explains.
 
     The fixed component counts only in segments measured across views: a single view's fixed pattern is
     the hold mean's residual, where a region of fine scene texture would read as a position law."""
     xs, segs, pos, vs = [], [], [], []
-    for j, (sb, comps) in enumerate(comp.predict_with()):
+    for j, (sb, comps) in enumerate(comp.predict_with(extra)):
         if name not in sb.seg.values or (name == "fixed" and not sb.seg.partners):
             continue
         xs.append(sb.seg.values[name][sb.rep] - as_measured(sb, comps, name))
@@ -235,6 +239,8 @@ def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
     shapes = {k: _corner_shape(p, k) for k in REGIONS}
     shapes["gradient from top to bottom"] = p[:, 0] - 0.5
     shapes["gradient from left to right"] = p[:, 1] - 0.5
+    if shape is not None:
+        shapes = {shape: shapes[shape]}
     best = None
     for label, h in shapes.items():
         design = np.concatenate([nuisance, h[:, None]], axis=1)
@@ -254,7 +260,7 @@ def _spatial(comp: Comparison, name: str) -> dict[str, Any] | None:
                                                                                             "right to left")
     else:
         where = f"towards the {label}" if sign > 0 else f"away from the {label}"
-    return {"pattern": where, "shape": label, "p_value": p_value, "explained_fraction": r2,
+    return {"pattern": where, "shape": label, "p_value": p_value, "explained_fraction": r2, "strength": drop,
             "blocks": int(x.size),
             "significant": bool(p_value < SPATIAL_P and r2 >= MIN_SPATIAL_R2 and sign != 0)}
 
@@ -289,7 +295,7 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
     spatial_by: dict[str, dict[str, Any] | None] = {}
     for name in ("temporal", "fixed", "single") + pooled_names:
         pixelwise = name in ("temporal", "fixed", "single")
-        found = _spatial(comp, name) if pixelwise and any(name in r["measured_var_dn2"] for r in rows) else None
+        found = position_pattern(comp, name) if pixelwise and any(name in r["measured_var_dn2"] for r in rows) else None
         obs = _observations(rows, name, name in pooled_names, dark, _corner_factor(comp, found))
         if obs is None:
             continue
