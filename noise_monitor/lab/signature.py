@@ -35,8 +35,8 @@ from .compare import Comparison, as_measured
 Z_SIGNIFICANT = 5.0
 #: the same for the amplitude of the best of the laws tried (more: it is picked among many)
 Z_LAW_SIGNIFICANT = 10.0
-#: ... and at least this fraction of the component's model variance plus the total (guards 8-bit
-#: rounding details and residual scene texture that the errors do not capture)
+#: ... and at least this fraction of the component's model variance plus the total, in the cells where it
+#: is measured (guards 8-bit rounding details and residual scene texture that the errors do not capture)
 MIN_RELATIVE_EXCESS = 0.03
 #: excess outlier / blinking pixels must also reach this fraction of the pixels checked (a few 6-sigma
 #: outliers are what 8-bit rounding and texture leave on clean data)
@@ -74,6 +74,7 @@ class _Obs:
     excess: np.ndarray
     error: np.ndarray
     model: np.ndarray
+    total: np.ndarray  # the cell's total model variance
     intensity: np.ndarray
     exposure: np.ndarray
     gain: np.ndarray
@@ -98,30 +99,33 @@ def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool, dark:
                 continue
             seen.add(r["segment"])
         m, p = r["measured_var_dn2"][comp], r["model_var_dn2"].get(comp, 0.0)
-        data.append((m - p, max(r["measured_var_err_dn2"][comp], 1e-9), p, r["intensity_dn"], r["exposure_time_s"],
-                     10.0 ** (r["gain_db"] / 20.0), dark[r["segment"]], 1.0 if corner is None else corner[1][i]))
+        data.append((m - p, max(r["measured_var_err_dn2"][comp], 1e-9), p, sum(r["model_var_dn2"].values()),
+                     r["intensity_dn"], r["exposure_time_s"], 10.0 ** (r["gain_db"] / 20.0), dark[r["segment"]],
+                     1.0 if corner is None else corner[1][i]))
     if not data:
         return None
-    excess, error, model, intensity, exposure, gain, dark_rate, position = np.asarray(data, dtype=float).T
-    return _Obs(excess=excess, error=error, model=model, intensity=intensity, exposure=exposure, gain=gain,
-                dark_rate=dark_rate, pooled=pooled, position=position, corner=corner and corner[0])
+    excess, error, model, total, intensity, exposure, gain, dark_rate, position = np.asarray(data, dtype=float).T
+    return _Obs(excess=excess, error=error, model=model, total=total, intensity=intensity, exposure=exposure,
+                gain=gain, dark_rate=dark_rate, pooled=pooled, position=position, corner=corner and corner[0])
 
 
-def _component_stats(obs: _Obs, total_model: float) -> dict[str, Any]:
+def _component_stats(obs: _Obs) -> dict[str, Any]:
     """Weighted mean excess and its z; the best law's amplitude and its z (an excess concentrated in a few
     cells, e.g. near full well, shows there); significant if either clears its z threshold and is at
-    least MIN_RELATIVE_EXCESS of the model where it is largest."""
+    least MIN_RELATIVE_EXCESS of the model where it is measured: the floor averaged with the excess's
+    weights (a campaign's high-gain holds, whose large variance weighs little in the mean excess, do not
+    raise it), or at the cell where the law is largest."""
     w = 1.0 / obs.error**2
     mean = float(np.sum(w * obs.excess) / np.sum(w))
     err = float(1.0 / math.sqrt(np.sum(w)))
     model = float(np.mean(obs.model))
     z = mean / err
-    floor = MIN_RELATIVE_EXCESS * (obs.model + total_model)
+    floor = MIN_RELATIVE_EXCESS * (obs.model + obs.total)
     law = fit_law(obs)
     f = _law_basis(obs, law["law"])
     z_law = law["amplitude_dn2"] * math.sqrt(float(np.sum(w * f * f)))
     peak = int(np.argmax(np.abs(law["amplitude_dn2"] * f)))
-    significant = (abs(z) >= Z_SIGNIFICANT and abs(mean) >= float(np.mean(floor))) or \
+    significant = (abs(z) >= Z_SIGNIFICANT and abs(mean) >= float(np.sum(w * floor) / np.sum(w))) or \
         (abs(z_law) >= Z_LAW_SIGNIFICANT and abs(law["amplitude_dn2"] * f[peak]) >= floor[peak])
     return {"excess_dn2": mean, "excess_err_dn2": err, "model_dn2": model, "z": z, "law_z": z_law,
             "significant": bool(significant), "_law": law}
@@ -288,7 +292,6 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
     """The residual of ``comp`` (model vs measurement) described in physics terms (see module doc)."""
     rows = comp.cell_table() if rows is None else rows
     dark = {sb.seg.index: dark_electrons(sb.seg.meta, 1.0, sb.seg.meta.temperature_k) for sb in comp.segments}
-    total_model = float(np.mean([sum(r["model_var_dn2"].values()) for r in rows])) if rows else 0.0
     pooled_names = ("column", "row", "temporal_column", "temporal_row")
     stats: dict[str, dict[str, Any]] = {}
     observations: dict[str, _Obs] = {}
@@ -300,7 +303,7 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
         if obs is None:
             continue
         observations[name] = obs
-        stats[name] = _component_stats(obs, total_model)
+        stats[name] = _component_stats(obs)
         if pixelwise:
             spatial_by[name] = found
             stats[name]["position_significant"] = bool(found and found["significant"])
