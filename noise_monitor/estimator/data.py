@@ -106,7 +106,7 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
     prior = PhysicsPrior(camera_model(effects))  # validates the specs before any work
     images = source_images(split, rng, variants=photo_variants, procedural=procedural)
     n_groups = -(-n // group)
-    clean = sample_clean_patches(images, rng, n, patch_size)
+    clean, source = sample_clean_patches(images, rng, n, patch_size)
     noisy = np.empty_like(clean)
     truth = {k: np.zeros(n) for k in TRUTH_KEYS}
     overridden = np.zeros((n, len(SOURCES)), dtype=bool)
@@ -141,7 +141,7 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
             truth["sigma_image"][i] = np.sqrt(var_image)
     truth["xi"] = truth["sigma_model"] - truth["sigma_image"]
     return {
-        "noisy": noisy, "clean": clean, "group_of": group_of, "meta_rows": np.stack(metas),
+        "noisy": noisy, "clean": clean, "source_index": source, "group_of": group_of, "meta_rows": np.stack(metas),
         "tables": np.stack(tables), "overridden": overridden, "unexpected": unexpected,
         "effects_json": np.array(json.dumps(_plain(effects), sort_keys=True)),
         "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)), "photo_variants": np.array(photo_variants),

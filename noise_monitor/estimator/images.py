@@ -138,15 +138,16 @@ def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
 
 
 def sample_clean_patches(images: list[np.ndarray], rng: np.random.Generator, n: int, size: int,
-                         shift_dn: float = 20.0) -> np.ndarray:
-    """n random crops (random image, position, flip, rotation) with a uniform +-shift_dn offset, clipped."""
-    usable = [im for im in images if min(im.shape) >= size]
+                         shift_dn: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
+    """n random crops (random image, position, flip, rotation) with a uniform +-shift_dn offset, clipped;
+    and the index in ``images`` of each crop's source image."""
+    usable = [i for i, im in enumerate(images) if min(im.shape) >= size]
     if not usable:
         raise ValueError(f"no source image is at least {size}x{size} px")
     out = np.empty((n, size, size), dtype=np.float32)
-    picks = rng.integers(0, len(usable), n)
-    for i, k in enumerate(picks):
-        im = usable[k]
+    source = np.asarray(usable)[rng.integers(0, len(usable), n)]
+    for i, k in enumerate(source):
+        im = images[k]
         y = rng.integers(0, im.shape[0] - size + 1)
         x = rng.integers(0, im.shape[1] - size + 1)
         p = np.rot90(im[y:y + size, x:x + size], int(rng.integers(0, 4)))
@@ -154,4 +155,4 @@ def sample_clean_patches(images: list[np.ndarray], rng: np.random.Generator, n: 
             p = p[:, ::-1]
         out[i] = p
     out += rng.uniform(-shift_dn, shift_dn, (n, 1, 1)).astype(np.float32)
-    return np.clip(out, 0.0, 255.0)
+    return np.clip(out, 0.0, 255.0), source

@@ -1,0 +1,76 @@
+"""Where the per-patch xi error sits: the estimator's xi error per source image of a held-out or tuning set.
+
+The held-out photos (``evaluate.HELDOUT_SETS["photos"]``: matplotlib and PyWavelets images) and the tuning
+crops of the training photographs (``estimator_tuning.py``'s ``tune`` set) are regenerated bit-exact from their
+seeds (or read from ``--cache``); each patch's source image is recorded by the generator (``source_index``).
+Per image and part: patches, xi RMS and mean error over every patch, and the coverage and xi RMS of the
+patches the confidence head accepts (``measurable``), plus the median true sigma_image.
+
+Usage: .venv/bin/python bench/estimator_per_image.py [--sets photos tune] [--parts a b c] [--patch-size 64]
+       [--cache out/estimator_eval] [--weights W.pt]
+Prints figures; asserts nothing.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from estimator_tuning import tuning_set
+
+from noise_monitor.estimator import images
+from noise_monitor.estimator.data import metas_of
+from noise_monitor.estimator.evaluate import heldout
+from noise_monitor.estimator.inference import load
+
+NAMES = {"photos": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS, "tune": images.SKIMAGE_PHOTOS}
+N = 600
+
+
+def dataset(name: str, part: str, size: int, cache: Path) -> dict[str, np.ndarray]:
+    """The set's data of a part, regenerated when the cached copy predates ``source_index``."""
+    def make() -> dict[str, np.ndarray]:
+        if name == "photos":
+            return heldout(part, N, size, cache, progress=False, heldout_set="photos")
+        return tuning_set(name, part, size, cache)
+    data = make()
+    if "source_index" not in data:
+        for path in cache.glob(f"{'photos' if name == 'photos' else name}_{part}_p{size}_n{N}.npz"):
+            path.unlink()
+        data = make()
+    return data
+
+
+def rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sets", nargs="+", default=list(NAMES), choices=list(NAMES))
+    ap.add_argument("--parts", nargs="+", default=["a", "b", "c"], choices=["a", "b", "c"])
+    ap.add_argument("--patch-size", type=int, default=64)
+    ap.add_argument("--cache", type=Path, default=Path("out/estimator_eval"))
+    ap.add_argument("--weights", default=None, help="full_meta weights (default: the shipped ones)")
+    args = ap.parse_args()
+    args.cache.mkdir(parents=True, exist_ok=True)
+    est = load("full_meta", device="cpu", weights=args.weights, threads=1)
+    for name in args.sets:
+        for part in args.parts:
+            d = dataset(name, part, args.patch_size, args.cache)
+            pred = est.predict(d["noisy"], metas_of(d))
+            err = pred["xi"] - d["truth_xi"]
+            ok = np.asarray(pred["measurable"], dtype=bool)
+            print(f"== {name} ({part}), {args.patch_size} px: all xi RMS {rms(err):.3f} DN; accepted {ok.mean():.0%}, "
+                  f"xi RMS {rms(err[ok]):.3f} DN")
+            print(f"   {'source image':32s} {'n':>4s} {'xi RMS':>7s} {'mean':>7s} {'accepted':>9s} {'acc. RMS':>9s} "
+                  f"{'sigma med':>9s}")
+            for k, image in enumerate(NAMES[name]):
+                m = d["source_index"] == k
+                if m.any():
+                    print(f"   {image:32s} {m.sum():4d} {rms(err[m]):7.3f} {err[m].mean():+7.3f} {ok[m].mean():9.0%} "
+                          f"{rms(err[m & ok]):9.3f} {np.median(d['truth_sigma_image'][m]):9.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
