@@ -539,7 +539,7 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     is significant beyond them by the same tests (:func:`assess`); its fit beyond them then joins the
     claimed model. A group significant alone but not beyond them is ``explained_by`` them."""
     model: list[Effect] = []
-    names: list[str] = []
+    claimed: list[Candidate] = []  # the best member of each claimed group
     n_params = 0
     given: Given | None = None
     for _, members in itertools.groupby(ranked, key=lambda c: c.rank):
@@ -553,27 +553,29 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
             if given is None:
                 given = Given.of(comp, model, n_params)
             a = assess(comp, given, EffectSpec.fit_all(type(lead.fitted)))
-            beyond = _beyond(names, a)
+            beyond = _beyond(claimed, a)
             for c in group:
                 c.significant = a.significant
                 c.beyond = beyond
-                c.explained_by = [] if a.significant else list(names)
+                c.explained_by = [] if a.significant else beyond["given"]
             if not a.significant:
                 continue
             fitted = a.effect
         else:
             fitted = lead.fitted
         model.append(fitted)
-        names.append(lead.effect)
+        claimed.append(lead)
         n_params += len(lead.params)
         given = None
     return ranked
 
 
-def _beyond(names: Sequence[str], a: Assessment) -> dict[str, Any]:
-    """A refit on top of the claimed explanations ``names`` for :attr:`Candidate.beyond`, with a plain reading."""
+def _beyond(claimed: Sequence[Candidate], a: Assessment) -> dict[str, Any]:
+    """A refit on top of the ``claimed`` explanations (each group's best member) for :attr:`Candidate.beyond`,
+    with a plain reading (naming each group's alternatives)."""
+    names = [c.effect for c in claimed]
     them, they = ("it", "it leaves") if len(names) == 1 else ("them", "they leave")
-    listed = ", ".join(names)
+    listed = ", ".join(c.effect + (f" (or {', '.join(c.equivalent_to)})" if c.equivalent_to else "") for c in claimed)
     figures = (f"refitted on top of {them}: chi-square {a.chi2_given:.1f} -> {min(a.fit.chi2, a.chi2_given):.1f}, "
                f"p = {a.p_value:.2g}, {a.explained_fraction:.1%} of what {they}")
     if a.significant:
