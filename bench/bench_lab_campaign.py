@@ -5,7 +5,7 @@ Bags: `simulate-bag --scenario campaign` (the variant the lab was developed on) 
 tuned on), EV76C661, 120 frames 320x256 at 10 Hz, one hidden effect per bag at a field-realistic
 strength (plus a clean bag). Each bag is analysed with `--add-effect NAME=fit` for its hidden effect.
 Prints per bag: rms_error_dn (net of the measurement's scatter) and the raw rms, the best candidate, the true effect's rank (candidates the data
-cannot tell apart share one: "1st (equivalent: exposure_error)") and significance, the fitted values (with the range that fits as well for a
+cannot tell apart share one: "1st (equivalent: exposure_error)") and significance, the candidates claimed (and those significant alone but not beyond them), the fitted values (with the range that fits as well for a
 parameter the data do not identify) and the error cut (net and raw), the signed net mean-square error and its standard error; then the summary
 (clean floor, ranks, median and minimum cut) per variant.
 
@@ -86,6 +86,7 @@ def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespa
     row = {"bag": name, "effect": effect, "spec": EFFECTS.get(effect), "analysis_s": round(wall, 1),
            "rms_error_dn": round(s["rms_error_dn"], 4), "rms_error_raw_dn": round(s["rms_error_raw_dn"], 4),
            "measurement_scatter_dn": round(s["measurement_scatter_dn"], 4), "best": names[0], "claimed": claimed,
+           "explained_by": {c["effect"]: c["explained_by"] for c in s["candidates"] if c.get("explained_by")},
            "cells": s["measurement"]["cells"], "not_measured": s["measurement"]["not_measured"]}
     row["net_mse_dn2"], row["net_mse_se_dn2"] = (round(x, 5) for x in net_mse(s["cells"]))
     groups: dict[int, list[str]] = {}
@@ -131,13 +132,15 @@ def main() -> None:
                           f"{row['rms_error_after_raw_dn']:.3f} DN (cut {_pct(row['cut_raw'])}), scatter "
                           f"{row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- {row['net_mse_se_dn2']:.4f} -> "
                           f"{row['net_mse_after_dn2']:+.4f} +- {row['net_mse_after_se_dn2']:.4f} DN^2, rank {ordinal(row['rank'], row['equivalent_to'])}, "
-                          f"significant {row['significant']}, "
+                          f"significant {row['significant']}, claimed {row['claimed'] or 'nothing'} "
+                          f"(significant alone, explained by the claimed: {row['explained_by'] or 'none'}), "
                           f"fitted {row['fitted']}{_ranges(row['fits_as_well'])}, best {row['best']}, groups {row['equivalent_groups'] or 'none'}, "
                           f"{row['analysis_s']:.0f} s", flush=True)
                 else:
                     print(f"{row['bag']:40s} rms (net) {row['rms_error_dn']:.3f} DN, raw {row['rms_error_raw_dn']:.3f} DN, "
                           f"scatter {row['measurement_scatter_dn']:.3f} DN, net mse {row['net_mse_dn2']:+.4f} +- "
-                          f"{row['net_mse_se_dn2']:.4f} DN^2, claimed {row['claimed'] or 'nothing'}, "
+                          f"{row['net_mse_se_dn2']:.4f} DN^2, claimed {row['claimed'] or 'nothing'} (explained by the claimed: "
+                          f"{row['explained_by'] or 'none'}), "
                           f"groups {row['equivalent_groups'] or 'none'}, {row['cells']} cells, {row['analysis_s']:.0f} s",
                           flush=True)
             hidden = [r for r in rows if r["effect"]]

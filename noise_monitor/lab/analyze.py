@@ -106,7 +106,8 @@ def analyze(
     measurement's own scatter: :func:`.compare.rms_error`), ``rms_error_raw_dn`` (the plain rms of the
     residuals), ``measurement_scatter_dn`` (the rms of the cells' standard errors), ``by_condition``,
     ``candidates`` (ranked best first: ``effect``, ``rank``, ``equivalent_to``, ``indistinguishable``,
-    ``significant``, ``explained_fraction``, ``params``, ...), ``diagnosis`` (one line:
+    ``significant`` (claimed), ``significant_alone``, ``explained_by`` and ``beyond`` (the claims' forward
+    selection: :func:`.diagnose.claim`), ``explained_fraction``, ``params``, ...), ``diagnosis`` (one line:
     :func:`.diagnose.diagnosis_line`), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
     no candidate explains a significant residual), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
     ``rms_error_after_dn`` (both net, as ``rms_error_dn``), ``rms_error_before_raw_dn``, ``rms_error_after_raw_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With

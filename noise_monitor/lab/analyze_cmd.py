@@ -57,11 +57,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"  not measured ({what}): {why}")
     top = summary["candidates"][:5]
     for c in top:
-        mark = "*" if c["significant"] else " "
+        mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "
         params = ", ".join(_param_text(k, v, c["param_ranges"].get(k)) for k, v in c["params"].items())
         same = f"  (indistinguishable from {', '.join(c['equivalent_to'])})" if c["equivalent_to"] else ""
         print(f" {mark} {c['rank']:2d} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}{same}")
     print(summary["diagnosis"])
+    refits = {c["rank"]: c["beyond"] for c in summary["candidates"] if c["beyond"]}  # one per group
+    for rank, beyond in refits.items():
+        names = ", ".join(c["effect"] for c in summary["candidates"] if c["rank"] == rank)
+        print(f"{'*' if beyond['significant'] else '~'} {names}: {beyond['reading']}")
     shown = next((c["rank"] for c in summary["candidates"] if c["significant"] and c["equivalent_to"]), None)
     for rank, text in dict.fromkeys((c["rank"], c["indistinguishable"]) for c in top if c["equivalent_to"]):
         if rank != shown:

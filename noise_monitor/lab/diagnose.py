@@ -34,6 +34,24 @@ candidate by BIC that the BIC prefers to no effect; each member must differ from
 group's rank (ranks count explanations: 1, 1, 2, ...) and its best member's significance, and carry
 ``equivalent_to`` and ``indistinguishable`` (:func:`.equivalence.explain`: what they agree on and which
 observation would separate them).
+
+Claims are made by forward selection (:func:`claim`): each candidate is tested alone against the camera's
+model as above, which only says that it reproduces part of the residual; two candidates that reproduce
+the same part would both pass. The groups are taken in rank order: the first group significant alone is
+claimed; every later group significant alone is refitted (its best member) with the claimed explanations
+in the model at their fitted values and claimed only if it is significant beyond them by the same tests,
+all relative to the claimed model (:func:`assess`): F-test of the chi-square drop beyond it (degrees of
+freedom net of every fitted parameter), MIN_EXPLAINED_FRACTION of the chi-square it leaves, the error cut
+in the components the candidate changes and their position pattern against the claimed model's, no
+contradiction the claimed model does not have. Its fit beyond them joins the claimed model for the
+next. A group significant alone but not beyond them is ``explained_by`` them (with the refit's figures
+and a plain reading in ``beyond``). The claimed effects are held at their fitted values rather than
+refitted jointly: the refit then changes only the candidate, so the components it changes, their
+position pattern and a contradiction are its own (refitted jointly, a temperature or exposure error on
+top of a DSNU shifts the DSNU to make up for the dark signal it changes in the fixed-pattern noise and
+passes the own-component cut, where it is read noise that is missing), and it is one fit of the
+candidate's own parameters. Claims can only be withdrawn by this rule, never added: every claim is
+significant alone and the first is today's.
 """
 from __future__ import annotations
 
@@ -126,6 +144,13 @@ class Candidate:
     equivalent_to: list[str] = field(default_factory=list)
     #: what the equivalent candidates agree on and which observation would separate them
     indistinguishable: str = ""
+    #: significant by its own fit against the camera's model (the group's, like ``significant``), before
+    #: the claims' forward selection (:func:`claim`); ``significant`` is the claim
+    significant_alone: bool = False
+    #: the claimed explanations it was refitted on top of when significant alone but not beyond them
+    explained_by: list[str] = field(default_factory=list)
+    #: that refit on top of the claimed explanations (:func:`_beyond`); None when it was not refitted
+    beyond: dict[str, Any] | None = None
     #: the fitted effect instance
     fitted: Effect | None = field(default=None, repr=False, compare=False)
 
@@ -136,6 +161,9 @@ class Candidate:
             "equivalent_to": self.equivalent_to,
             "indistinguishable": self.indistinguishable,
             "significant": self.significant,
+            "significant_alone": self.significant_alone,
+            "explained_by": self.explained_by,
+            "beyond": self.beyond,
             "explained_fraction": round(self.explained_fraction, 6),
             "params": self.params,
             "param_errors": self.param_errors,
@@ -186,10 +214,12 @@ def _decades(lo: float, hi: float) -> int:
     return max(1, int(np.ceil(np.log10(hi / lo))))
 
 
-def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
+def fit(comp: Comparison, specs: Iterable[EffectSpec], given: Sequence[Effect] = ()) -> FitResult:
     """Jointly fit the free parameters of ``specs`` (continuous: coarse log scan, then bounded least
-    squares from the best scan points; integer: grid scan)."""
+    squares from the best scan points; integer: grid scan), with the ``given`` effects in the model at
+    their values (the result holds the effects of ``specs`` only)."""
     specs = list(specs)
+    given = list(given)
     cont: list[tuple[int, Param]] = []
     grid: list[tuple[int, Param]] = []
     for i, s in enumerate(specs):
@@ -219,12 +249,12 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec]) -> FitResult:
 
     def resid(xc: np.ndarray, xg: tuple[float, ...]) -> np.ndarray:
         try:
-            r = comp.residuals(build(xc, xg))
+            r = comp.residuals(given + build(xc, xg))
         except (EffectError, ValueError, FloatingPointError):
             return np.full(n_obs, 1e6)
         return np.where(np.isfinite(r), r, 1e6)
 
-    n_obs = comp.residuals().size
+    n_obs = comp.residuals(given).size
     grids: list[tuple[float, ...]] = [()]
     for _, p in grid:
         grids = [g + (float(v),) for g in grids for v in range(int(p.bounds[0]), int(p.bounds[1]) + 1)]
@@ -367,27 +397,29 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     return bool(own) and all(e0[c] > 0.0 and e1[c] <= (1.0 - MIN_OWN_REDUCTION) * e0[c] for c in own), comps
 
 
-def shapes_position(comp: Comparison, patterns: Mapping[str, dict[str, Any] | None], effect: Effect,
+def shapes_position(comp: Comparison, patterns: Mapping[str, dict[str, Any] | None], extra: Sequence[Effect],
                     own: Iterable[str]) -> tuple[bool, dict[str, float]]:
-    """Whether an added effect removes MIN_OWN_REDUCTION of the amplitude of every significant position
-    pattern (``patterns``: the baseline's, per component) in the components ``own`` it changes; and for
-    each such component the amplitude left (sqrt of the pattern's explained variance after / before). A
-    position-independent effect changes the excess by an intensity law only and leaves the pattern."""
+    """Whether the model with ``extra`` effects removes MIN_OWN_REDUCTION of the amplitude of every
+    significant position pattern (``patterns``: the model's without the tested effect, per component) in
+    the components ``own`` the tested effect changes; and for each such component the amplitude left (sqrt
+    of the pattern's explained variance after / before). A position-independent effect changes the excess
+    by an intensity law only and leaves the pattern."""
     left: dict[str, float] = {}
     for c in own:
         base = patterns.get(c)
         if not base or not base["significant"]:
             continue
-        after = position_pattern(comp, c, [effect], shape=base["shape"])
+        after = position_pattern(comp, c, extra, shape=base["shape"])
         left[c] = math.sqrt(after["strength"] / base["strength"]) if after and base["strength"] > 0 else 0.0
     return all(x <= 1.0 - MIN_OWN_REDUCTION for x in left.values()), left
 
 
-def _contradiction(comp: Comparison, effect: Effect) -> str:
-    """Why a fitted effect is contradicted by a direct observation ('' if it is not): the quantization
-    step it predicts against the output histogram's (e.g. 6-bit quantization standing for the temporal
-    excess of blinking pixels while every 8-bit level is occupied)."""
-    z0, z1 = comp.step_z(), comp.step_z([effect])
+def _contradiction(comp: Comparison, before: Sequence[Effect], after: Sequence[Effect]) -> str:
+    """Why the model with the effects ``after`` (``before`` plus a fitted one) is contradicted by a direct
+    observation where ``before`` is not as much ('' if it is not): the quantization step it predicts
+    against the output histogram's (e.g. 6-bit quantization standing for the temporal excess of blinking
+    pixels while every 8-bit level is occupied)."""
+    z0, z1 = comp.step_z(before), comp.step_z(after)
     if z1 is None or z0 is None or abs(z1) <= MAX_STEP_Z or abs(z1) <= abs(z0):
         return ""
     return (f"the output histogram's quantization step ({comp.meas.quant_step_dn:.2f} +- "
@@ -395,59 +427,178 @@ def _contradiction(comp: Comparison, effect: Effect) -> str:
             "standard errors")
 
 
+@dataclass
+class Given:
+    """The model a candidate is tested against: the baseline plus ``effects`` (claimed explanations at
+    their fitted values, ``n_params`` parameters fitted in all), with what the tests compare with."""
+
+    effects: list[Effect]
+    n_params: int
+    chi2: float
+    n_obs: int
+    rows: list[dict[str, Any]]
+    #: per regional component, the position pattern of the excess over this model
+    patterns: dict[str, dict[str, Any] | None]
+
+    @classmethod
+    def of(cls, comp: Comparison, effects: Sequence[Effect] = (), n_params: int = 0) -> Given:
+        r = comp.residuals(effects)
+        return cls(list(effects), n_params, float(r @ r), r.size, comp.cell_table(extra=effects),
+                   {c: position_pattern(comp, c, effects) for c in REGIONAL})
+
+
+@dataclass
+class Assessment:
+    """A candidate fitted on top of a :class:`Given` model, and the significance tests' results."""
+
+    fit: FitResult
+    chi2_given: float
+    p_value: float
+    explained_fraction: float
+    delta_bic: float
+    rows: list[dict[str, Any]]
+    components: dict[str, dict[str, float]]
+    contradicted: str
+    #: the tests it fails (empty: significant beyond the given model)
+    failed: list[str]
+
+    @property
+    def effect(self) -> Effect:
+        return self.fit.effects[0]
+
+    @property
+    def significant(self) -> bool:
+        return not self.failed
+
+
+def assess(comp: Comparison, given: Given, spec: EffectSpec) -> Assessment:
+    """Fit ``spec`` with the ``given`` model's effects at their values and test whether it is significant
+    beyond that model (module docstring): F-test of the chi-square drop, the fraction of the given model's
+    chi-square it explains, the error cut in the components it changes (against the given model's), the
+    position pattern there, no contradiction by a direct observation."""
+    res = fit(comp, [spec], given.effects)
+    after = [*given.effects, res.effects[0]]
+    k = res.n_free
+    chi1 = min(res.chi2, given.chi2)
+    drop = given.chi2 - chi1
+    dof = max(given.n_obs - given.n_params - k, 1)
+    p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
+    explained = drop / given.chi2 if given.chi2 > 0 else 0.0
+    rows = comp.cell_table(extra=after)
+    cut, comps = cuts_error(given.rows, rows)
+    shaped, left = shapes_position(comp, given.patterns, after, comps)
+    for c, x in left.items():
+        comps[c]["position_pattern_left"] = round(x, 4)
+    contradicted = _contradiction(comp, given.effects, after)
+    tests = (("F-test", p < SIGNIFICANCE_P), ("explained fraction", explained >= MIN_EXPLAINED_FRACTION),
+             ("own-component error", cut), ("position pattern", shaped), ("contradicted", not contradicted))
+    return Assessment(res, given.chi2, p, explained, drop - k * math.log(given.n_obs), rows, comps, contradicted,
+                      [name for name, ok in tests if not ok])
+
+
 def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any = None) -> list[Candidate]:
-    """Fit every candidate, rank by BIC gain (best first) and test significance."""
-    r0 = comp.residuals()
-    chi0 = float(r0 @ r0)
-    rows0 = comp.cell_table()
-    n = r0.size
+    """Fit every candidate alone, rank by BIC gain (best first), test significance, group the candidates
+    the data cannot tell apart, and claim by forward selection (:func:`claim`)."""
+    base = Given.of(comp)
     reg = available()
-    patterns = {c: position_pattern(comp, c) for c in REGIONAL}
     out = []
     for name in names if names is not None else candidate_names():
-        cls = reg[name]
-        spec = EffectSpec.fit_all(cls)
+        spec = EffectSpec.fit_all(reg[name])
         if not spec.free:
             continue
-        res = fit(comp, [spec])
-        k = res.n_free
-        chi1 = min(res.chi2, chi0)
-        drop = chi0 - chi1
-        dof = max(n - k, 1)
-        p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
-        explained = drop / chi0 if chi0 > 0 else 0.0
-        eff = res.effects[0]
-        rows1 = comp.cell_table(extra=[eff])
-        rms1 = rms_error(rows1)
-        cut, comps = cuts_error(rows0, rows1)
-        shaped, left = shapes_position(comp, patterns, eff, comps)
-        for c, x in left.items():
-            comps[c]["position_pattern_left"] = round(x, 4)
-        contradicted = _contradiction(comp, eff)
+        a = assess(comp, base, spec)
         out.append(Candidate(
             effect=name,
-            params=res.values[name],
-            param_errors=res.errors[name],
-            chi2=res.chi2,
-            explained_fraction=explained,
-            delta_bic=drop - k * math.log(n),
-            p_value=p,
-            significant=bool(p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED_FRACTION and cut and shaped
-                             and not contradicted),
-            reading=eff.reading(),
-            rms_error_after_dn=rms1,
-            rms_error_after_raw_dn=rms_error_raw(rows1),
-            contradicted=contradicted,
-            degenerate=(res.degenerate or {}).get(name),
-            param_ranges=(res.ranges or {}).get(name),
-            components=comps,
-            fitted=eff,
+            params=a.fit.values[name],
+            param_errors=a.fit.errors[name],
+            chi2=a.fit.chi2,
+            explained_fraction=a.explained_fraction,
+            delta_bic=a.delta_bic,
+            p_value=a.p_value,
+            significant=a.significant,
+            reading=a.effect.reading(),
+            rms_error_after_dn=rms_error(a.rows),
+            rms_error_after_raw_dn=rms_error_raw(a.rows),
+            contradicted=a.contradicted,
+            degenerate=(a.fit.degenerate or {}).get(name),
+            param_ranges=(a.fit.ranges or {}).get(name),
+            components=a.components,
+            fitted=a.effect,
         ))
         if progress is not None:
             progress.update(1)
     # BIC gains equal to the reported 0.001 tie (floating-point noise of fits that found nothing): by name
     out.sort(key=lambda c: (-round(c.delta_bic, 3), c.effect))
-    return group_equivalent(comp, out)
+    return claim(comp, group_equivalent(comp, out))
+
+
+def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
+    """Claim explanations by forward selection over the groups (ranked best first, significance per
+    group from each candidate's own fit): the first group significant alone is claimed; each later one is
+    refitted (its best member) with the claimed explanations at their fitted values and claimed only if it
+    is significant beyond them by the same tests (:func:`assess`); its fit beyond them then joins the
+    claimed model. A group significant alone but not beyond them is ``explained_by`` them."""
+    model: list[Effect] = []
+    claimed: list[Candidate] = []  # the best member of each claimed group
+    n_params = 0
+    given: Given | None = None
+    for _, members in itertools.groupby(ranked, key=lambda c: c.rank):
+        group = list(members)
+        lead = group[0]
+        for c in group:
+            c.significant_alone = c.significant
+        if not lead.significant or lead.fitted is None:
+            continue
+        if model:
+            if given is None:
+                given = Given.of(comp, model, n_params)
+            a = assess(comp, given, EffectSpec.fit_all(type(lead.fitted)))
+            beyond = _beyond(claimed, a)
+            for c in group:
+                c.significant = a.significant
+                c.beyond = beyond
+                c.explained_by = [] if a.significant else beyond["given"]
+            if not a.significant:
+                continue
+            fitted = a.effect
+        else:
+            fitted = lead.fitted
+        model.append(fitted)
+        claimed.append(lead)
+        n_params += len(lead.params)
+        given = None
+    return ranked
+
+
+def _beyond(claimed: Sequence[Candidate], a: Assessment) -> dict[str, Any]:
+    """A refit on top of the ``claimed`` explanations (each group's best member) for :attr:`Candidate.beyond`,
+    with a plain reading (naming each group's alternatives)."""
+    names = [c.effect for c in claimed]
+    them, they = ("it", "it leaves") if len(names) == 1 else ("them", "they leave")
+    listed = ", ".join(c.effect + (f" (or {', '.join(c.equivalent_to)})" if c.equivalent_to else "") for c in claimed)
+    figures = (f"refitted on top of {them}: chi-square {a.chi2_given:.1f} -> {min(a.fit.chi2, a.chi2_given):.1f}, "
+               f"p = {a.p_value:.2g}, {a.explained_fraction:.1%} of what {they}")
+    if a.significant:
+        reading = f"significant beyond {listed} ({figures})"
+    elif {"F-test", "explained fraction"} & set(a.failed):
+        reading = (f"significant alone, but partly reproduces the same residual as {listed}; nothing significant "
+                   f"beyond {them} ({figures})")
+    else:  # it does explain part of what they leave, but not as an effect of its own
+        why = []
+        for c, e in a.components.items():
+            if "own-component error" in a.failed:
+                why.append(f"{c} error {e['rms_error_before_dn']:.3f} -> {e['rms_error_after_dn']:.3f} DN")
+            if "position pattern" in a.failed and "position_pattern_left" in e:
+                why.append(f"{e['position_pattern_left']:.0%} of the {c} position pattern left")
+        if a.contradicted:
+            why.append(a.contradicted)
+        reading = (f"significant alone; beyond {listed} it lowers the chi-square ({figures}) but fails the "
+                   f"{', '.join(a.failed)} test{'s' if len(a.failed) > 1 else ''} ({'; '.join(why)}): not an effect "
+                   f"of its own beyond {them}")
+    return {"given": list(names), "significant": a.significant, "chi2_given": round(a.chi2_given, 3),
+            "chi2": round(a.fit.chi2, 3), "p_value": a.p_value, "explained_fraction": round(a.explained_fraction, 6),
+            "params": a.fit.values[a.effect.name], "components": a.components, "contradicted": a.contradicted,
+            "failed": a.failed, "reading": reading, "fitted_reading": a.effect.reading()}
 
 
 def group_equivalent(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
@@ -499,12 +650,22 @@ def group_equivalent(comp: Comparison, ranked: list[Candidate]) -> list[Candidat
 
 def diagnosis_line(candidates: Sequence[Mapping[str, Any]]) -> str:
     """The diagnosis in one line (from :meth:`Candidate.as_dict` entries, ranked): the best claimed
-    explanation, as alternatives when the data cannot tell its candidates apart."""
+    explanation, as alternatives when the data cannot tell its candidates apart; then each explanation
+    claimed beyond it (as fitted on top of the ones before)."""
     claimed = [c for c in candidates if c["significant"]]
     if not claimed:
         return "no candidate effect is significant"
     best = claimed[0]
     if not best.get("equivalent_to"):
-        return f"most likely missing effect: {best['reading']}"
-    n = len(best["equivalent_to"]) + 1
-    return f"most likely missing effect, one of {n} alternatives these data cannot tell apart: {best['indistinguishable']}"
+        line = f"most likely missing effect: {best['reading']}"
+    else:
+        n = len(best["equivalent_to"]) + 1
+        line = f"most likely missing effect, one of {n} alternatives these data cannot tell apart: {best['indistinguishable']}"
+    seen = {best["rank"]}
+    for c in claimed:
+        if c["rank"] in seen:
+            continue
+        seen.add(c["rank"])
+        alt = f" (or {', '.join(c['equivalent_to'])}: these data cannot tell them apart)" if c.get("equivalent_to") else ""
+        line = line.rstrip(".") + f"; beyond {'it' if len(seen) == 2 else 'them'}, also missing: {(c.get('beyond') or {}).get('fitted_reading', c['reading'])}{alt}"
+    return line

@@ -267,7 +267,14 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
             f"<li>rank {rank}, {html.escape(', '.join(names))}: "
             f"{'the diagnosis above' if text in line else html.escape(text)}</li>"
             for (rank, text), names in groups.items()) + "</ul></p>")
-    parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "explained_fraction", "delta_bic",
+    beyond = dict.fromkeys((c.rank, c.beyond["reading"]) for c in candidates if c.beyond)
+    if beyond:  # the claims' forward selection: each candidate significant alone, refitted beyond the claimed
+        parts.append("<p>Candidates significant on their own, refitted on top of the explanations claimed before "
+                     "them (claimed only if significant beyond them):<ul>" + "".join(
+                         f"<li>rank {rank}, {html.escape(', '.join(c.effect for c in candidates if c.rank == rank))}: "
+                         f"{html.escape(reading)}</li>" for rank, reading in beyond) + "</ul></p>")
+    parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "significant_alone",
+                                    "explained_by", "explained_fraction", "delta_bic",
                                     "p_value", "params", "param_errors", "degenerate", "param_ranges", "rms_error_after_dn",
                                     "reading"]))
     parts.append(_unexplained_html(summary.get("unexplained")))

@@ -125,5 +125,6 @@ def test_grouping_rule(monkeypatch: pytest.MonkeyPatch) -> None:
     assert b.significant and a.indistinguishable == b.indistinguishable == "alternatives" and not c.indistinguishable
     assert not w1.equivalent_to and not w2.equivalent_to
     assert not n1.equivalent_to and not n2.equivalent_to  # both found nothing: not an explanation
-    line = diagnosis_line([x.as_dict() for x in out])
-    assert line == "most likely missing effect, one of 2 alternatives these data cannot tell apart: alternatives"
+    line = diagnosis_line([x.as_dict() for x in out])  # c, claimed too (as if beyond a), is named after the group
+    assert line == ("most likely missing effect, one of 2 alternatives these data cannot tell apart: alternatives; "
+                    "beyond it, also missing: c")
