@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .analyze import analyze, write_json
+from .measure import fixed_shape_text
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -55,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {n} frame(s) not measured: {reason}")
     for what, why in m["not_measured"].items():
         print(f"  not measured ({what}): {why}")
+    print(f"  {fixed_shape_text(m['fixed_pattern_shape'])}")
     top = summary["candidates"][:5]
     for c in top:
         mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "
@@ -70,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
     for rank, text in dict.fromkeys((c["rank"], c["indistinguishable"]) for c in top if c["equivalent_to"]):
         if rank != shown:
             print(f"rank {rank}, alternatives these data cannot tell apart: {text}")
+    for c in top:
+        if c["contradicted"]:
+            print(f"x {c['effect']}: not claimed, {c['contradicted']}")
     un = summary["unexplained"]
     if un["significant"]:
         print(f"unexplained: {un['reading']}")

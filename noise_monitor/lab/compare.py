@@ -60,6 +60,13 @@ def component_of(effect: Effect, temporal: bool | None = None) -> str | None:
     return f"temporal_{structure}" if temporal else structure
 
 
+def gaussian_fixed(effects: Iterable[Effect]) -> bool:
+    """Whether every fixed pattern of a model is Gaussian per pixel: no mixture with a fixed part (hot pixels,
+    the frame average of telegraph pixels: a few pixels far off)."""
+    return not any(e.distribution == "mixture" and (not e.temporal or type(e).temporal_share is not _Effect.temporal_share)
+                   for e in effects)
+
+
 def is_plain(effect: Effect) -> bool:
     """A Poisson or Gaussian effect the clip-aware tables of ``NoiseModel.predict`` capture exactly:
     position-independent and wholly temporal or wholly fixed."""

@@ -12,8 +12,11 @@ towards a residual it cannot shape (a uniform dark-current change for a glowing 
 nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
 excess (towards a corner, along a gradient, beyond an intensity law per segment:
 :func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
-amplitude. Nor is a fit that a direct observation contradicts (a quantization step the output histogram
-does not show: ``contradicted``).
+amplitude. Nor is a fit that a direct observation contradicts (``contradicted``): a quantization step the
+output histogram does not show, or a Gaussian fixed pattern (PRNU, DSNU, line offsets, or an effect that
+rescales them) standing for a measured fixed pattern that is sparse (a few pixels far off, kurtosis well
+above a Gaussian's 3: :class:`.measure.FixedShape`), such as random telegraph pixels below the outlier
+threshold.
 
 Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain
 (only a product of parameters is identifiable: fraction x amplitude^2; hot pixels saturated in every
@@ -67,7 +70,7 @@ from scipy.stats import f as f_dist
 
 from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
-from .compare import REGIONAL, Comparison, rms_error, rms_error_raw
+from .compare import REGIONAL, Comparison, gaussian_fixed, rms_error, rms_error_raw
 from .equivalence import explain
 from .signature import position_pattern
 
@@ -414,17 +417,25 @@ def shapes_position(comp: Comparison, patterns: Mapping[str, dict[str, Any] | No
     return all(x <= 1.0 - MIN_OWN_REDUCTION for x in left.values()), left
 
 
-def _contradiction(comp: Comparison, before: Sequence[Effect], after: Sequence[Effect]) -> str:
-    """Why the model with the effects ``after`` (``before`` plus a fitted one) is contradicted by a direct
-    observation where ``before`` is not as much ('' if it is not): the quantization step it predicts
-    against the output histogram's (e.g. 6-bit quantization standing for the temporal excess of blinking
-    pixels while every 8-bit level is occupied)."""
+def _contradiction(comp: Comparison, before: Sequence[Effect], after: Sequence[Effect], own: Iterable[str]) -> str:
+    """Why the model with the effects ``after`` (``before`` plus a fitted one that changes the measured
+    components ``own``) is contradicted by a direct observation ('' if it is not): the quantization step it
+    predicts against the output histogram's, where ``before`` is not as far off (e.g. 6-bit quantization
+    standing for the temporal excess of blinking pixels while every 8-bit level is occupied); or, for a fit
+    that changes the fixed pattern while every fixed pattern of ``after`` is Gaussian, the measured pattern's
+    sparseness (e.g. PRNU standing for random telegraph pixels below the outlier threshold)."""
     z0, z1 = comp.step_z(before), comp.step_z(after)
-    if z1 is None or z0 is None or abs(z1) <= MAX_STEP_Z or abs(z1) <= abs(z0):
+    if z1 is not None and z0 is not None and abs(z1) > MAX_STEP_Z and abs(z1) > abs(z0):
+        return (f"the output histogram's quantization step ({comp.meas.quant_step_dn:.2f} +- "
+                f"{comp.meas.quant_step_err_dn:.2f} DN) disagrees with the one this fit predicts by {abs(z1):.0f} "
+                "standard errors")
+    shape = comp.meas.fixed_shape
+    if shape is None or not shape.sparse or "fixed" not in own or not gaussian_fixed(comp.replaced(after)):
         return ""
-    return (f"the output histogram's quantization step ({comp.meas.quant_step_dn:.2f} +- "
-            f"{comp.meas.quant_step_err_dn:.2f} DN) disagrees with the one this fit predicts by {abs(z1):.0f} "
-            "standard errors")
+    return (f"the measured fixed pattern is sparse (kurtosis {shape.kurtosis:.1f} +- {shape.kurtosis_err:.1f}, "
+            f"{shape.excess_z:.0f} standard errors above a Gaussian pattern's 3: a few pixels far off), which "
+            "the Gaussian fixed pattern of this fit cannot produce")
+
 
 
 @dataclass
@@ -489,7 +500,7 @@ def assess(comp: Comparison, given: Given, spec: EffectSpec) -> Assessment:
     shaped, left = shapes_position(comp, given.patterns, after, comps)
     for c, x in left.items():
         comps[c]["position_pattern_left"] = round(x, 4)
-    contradicted = _contradiction(comp, given.effects, after)
+    contradicted = _contradiction(comp, given.effects, after, comps)
     tests = (("F-test", p < SIGNIFICANCE_P), ("explained fraction", explained >= MIN_EXPLAINED_FRACTION),
              ("own-component error", cut), ("position pattern", shaped), ("contradicted", not contradicted))
     return Assessment(res, given.chi2, p, explained, drop - k * math.log(given.n_obs), rows, comps, contradicted,

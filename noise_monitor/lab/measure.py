@@ -19,7 +19,9 @@ energies of a block's hold-mean residual with the same sensor block seen from ot
 (:func:`_cross_views`): the scene moves, the fixed pattern does not; with one pose only they are the
 hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so. Outlier
 pixels count when another view confirms them. Every cell (segment x intensity bin) carries the
-standard error of its mean over blocks.
+standard error of its mean over blocks. The fixed pattern's *shape* (:class:`FixedShape`): its kurtosis
+from four views of each sensor pixel at four camera poses (a Gaussian pattern such as PRNU has 3; a few
+pixels far off, such as random telegraph pixels below the outlier threshold, far more).
 The temporal deviations are split like the residual: white temporal noise (``temporal``) and row/column
 offsets that change from frame to frame (``temporal_row``, ``temporal_column``); single-view column/row
 components have ``temporal_row / K`` (``temporal_column / K``) removed, cross-view ones need not (the
@@ -27,6 +29,7 @@ temporal parts of two holds are independent). Blinking pixels are counted per ho
 """
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -76,6 +79,14 @@ CONFIRM_VIEWS = 2
 #: < 0.1 % of 8 x 8 blocks; 2 % random telegraph pixels: in 4 %; a speckled scene texture has many and
 #: would confirm a speck by chance)
 CONFIRM_MAX_OTHERS = 3
+#: a fixed pattern is sparse (a few pixels far off) when its kurtosis exceeds a Gaussian's by SHAPE_Z standard
+#: errors (the larger of the spread over blocks and the jackknife over segments), is at least SHAPE_KURTOSIS,
+#: and its second moment is SHAPE_SQUARE_Z standard errors above 0 (the pattern exists); both z-scores need
+#: SHAPE_MIN_SEGMENTS segments with four views
+SHAPE_Z = 5.0
+SHAPE_KURTOSIS = 6.0
+SHAPE_SQUARE_Z = 3.0
+SHAPE_MIN_SEGMENTS = 4
 #: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
 #: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
 SPIKE_FACTOR = 5.0
@@ -144,6 +155,10 @@ class SegmentMeasurement:
     #: white temporal noise would give
     temporal_spikes: int = 0
     temporal_spikes_expected: float = 0.0
+    #: (B,) per block, the fixed pattern's fourth moment and the product of two of its second moments from
+    #: four views at distinct poses (:func:`_fourth_moments`; 0 where the block has no three partners)
+    fixed_fourth: np.ndarray | None = None
+    fixed_square: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -166,6 +181,87 @@ class Cell:
     errors: dict[str, float]
 
 
+@dataclass(frozen=True)
+class FixedShape:
+    """The fixed pattern's kurtosis over the segments with four views (:func:`fixed_shape`).
+
+    Per block, with this hold's plane-fit residual A and three partner views B, C, D at mutually distinct
+    poses (each pair :data:`MIN_PARTNER_SHIFT_PX` apart), scene and temporal noise differ between the views
+    and cancel in expectation: mean(A B C D) is the fixed pattern's fourth moment E[P^4], and the product of
+    two cross energies over different pixels (A B at one pixel, C D at another) is E[P^2]^2. Their ratio,
+    pooled over blocks (weighted by the inverse product of the four views' white variances), is the
+    kurtosis: 3 for a Gaussian pattern (PRNU, DSNU, line offsets) at any level, ~1/f for a fraction f of
+    pixels far off. ``excess_z`` tests E[P^4] - 3 E[P^2]^2 > 0, ``square_z`` E[P^2]^2 > 0."""
+
+    kurtosis: float
+    kurtosis_err: float
+    excess_z: float
+    square_z: float
+    segments: int
+    blocks: int
+
+    @property
+    def sparse(self) -> bool:
+        """Whether the pattern is significantly heavier-tailed than a Gaussian one (see SHAPE_Z)."""
+        return (self.segments >= SHAPE_MIN_SEGMENTS and self.square_z >= SHAPE_SQUARE_Z
+                and self.excess_z >= SHAPE_Z and self.kurtosis >= SHAPE_KURTOSIS)
+
+    def summary(self) -> dict[str, Any]:
+        return {"kurtosis": round(self.kurtosis, 3), "kurtosis_err": round(self.kurtosis_err, 3),
+                "excess_z": round(self.excess_z, 2), "square_z": round(self.square_z, 2),
+                "segments": self.segments, "blocks": self.blocks, "sparse": self.sparse}
+
+
+def fixed_shape_text(shape: dict[str, Any]) -> str:
+    """One line for people from :meth:`FixedShape.summary` (or its ``not_measured`` entry)."""
+    if "not_measured" in shape:
+        return f"fixed pattern shape not measured: {shape['not_measured']}"
+    if shape["square_z"] < SHAPE_SQUARE_Z:
+        verdict = "no fixed pattern beyond the measurement's noise"
+    elif shape["sparse"]:
+        verdict = "sparse: a few pixels far off (a Gaussian pattern, e.g. PRNU, has 3)"
+    else:
+        verdict = "consistent with a Gaussian pattern (3)"
+    return (f"fixed pattern shape: kurtosis {shape['kurtosis']:.1f} +- {shape['kurtosis_err']:.1f} over "
+            f"{shape['segments']} holds seen from four poses, {verdict}")
+
+
+def fixed_shape(segments: Iterable[SegmentMeasurement]) -> FixedShape | None:
+    """The fixed pattern's kurtosis (:class:`FixedShape`), None without a segment with four views. Standard
+    errors: the larger of the spread over blocks (delta method) and the jackknife over segments (blocks of
+    one segment share views, segments share the pattern)."""
+    per = [(s.fixed_fourth, s.fixed_square) for s in segments
+           if s.fixed_fourth is not None and s.fixed_square is not None and np.any(s.fixed_square != 0.0)]
+    if not per:
+        return None
+    n4 = np.concatenate([a for a, _ in per])
+    d4 = np.concatenate([b for _, b in per])
+    used = (n4 != 0.0) | (d4 != 0.0)
+    n4, d4 = n4[used], d4[used]
+    nb, m = int(n4.size), len(per)
+    seg_n4 = np.array([float(a.sum()) for a, _ in per])
+    seg_d4 = np.array([float(b.sum()) for _, b in per])
+
+    def jackknife(values: np.ndarray) -> float:
+        """Jackknife standard error over segments of a statistic's leave-one-out values."""
+        return math.sqrt((m - 1) / m * float(np.sum((values - values.mean()) ** 2))) if m >= 2 else math.inf
+
+    def total_se(block: np.ndarray, seg: np.ndarray) -> float:
+        """Standard error of a sum over blocks: the larger of the delta method's and the jackknife's."""
+        return max(math.sqrt(float(block.var()) * nb), jackknife(seg.sum() - seg))
+
+    d_total = float(d4.sum())
+    kurt = float(n4.sum()) / d_total if d_total != 0.0 else math.nan
+    if d_total != 0.0 and np.all(seg_d4.sum() - seg_d4 != 0.0):
+        kurt_err = max(math.sqrt(float((n4 - kurt * d4).var()) * nb) / abs(d_total),
+                       jackknife((seg_n4.sum() - seg_n4) / (seg_d4.sum() - seg_d4)))
+    else:
+        kurt_err = math.inf
+    ex_se, sq_se = total_se(n4 - 3.0 * d4, seg_n4 - 3.0 * seg_d4), total_se(d4, seg_d4)
+    return FixedShape(kurt, kurt_err, float((n4 - 3.0 * d4).sum()) / ex_se if ex_se > 0 else 0.0,
+                      d_total / sq_se if sq_se > 0 else 0.0, m, nb)
+
+
 @dataclass
 class Measurements:
     """Everything measured from a frame sequence, independent of any model."""
@@ -183,9 +279,14 @@ class Measurements:
     shape: tuple[int, int] = (0, 0)
     #: what could not be measured and why (component -> reason); never a silent zero
     not_measured: dict[str, str] = field(default_factory=dict)
+    #: the fixed pattern's kurtosis (None: no segment with three partner views at distinct poses)
+    fixed_shape: FixedShape | None = None
 
     def summary(self) -> dict[str, Any]:
+        shape = (self.fixed_shape.summary() if self.fixed_shape else
+                 {"not_measured": "no hold seen from three other, mutually distinct camera poses"})
         return {
+            "fixed_pattern_shape": shape,
             "frames_total": self.frames_total,
             "frames_used": self.frames_used,
             "frames_skipped": dict(self.skipped),
@@ -451,6 +552,8 @@ class _Full:
     partner_v: np.ndarray | None = None  # (N, P)
     partner_robust: np.ndarray | None = None  # (N, P)
     partner_confirms: np.ndarray | None = None  # (N, P)
+    fourth: np.ndarray | None = None  # (N,) see SegmentMeasurement.fixed_fourth
+    square: np.ndarray | None = None  # (N,)
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -482,6 +585,8 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         partner_confirms=None if f.partner_confirms is None else f.partner_confirms[keep],
         temporal_spikes=int(f.spikes[keep].sum()),
         temporal_spikes_expected=spikes_expected,
+        fixed_fourth=None if f.fourth is None else f.fourth[keep],
+        fixed_square=None if f.square is None else f.square[keep],
     )
 
 
@@ -492,6 +597,34 @@ def _cross_energies(a: np.ndarray, c: np.ndarray, b: int) -> tuple[np.ndarray, n
     col = b * np.sum(a3.mean(axis=1) * c3.mean(axis=1), axis=1)
     row = b * np.sum(a3.mean(axis=2) * c3.mean(axis=2), axis=1)
     return np.sum(a * c, axis=1), col, row
+
+
+def _fourth_moments(f: _Full, cands: list[_Full], valid: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per block of ``f``, the fixed pattern's fourth moment and squared second moment from four views
+    (:class:`FixedShape`): over the triples of partners at mutually distinct poses where the block is flat
+    in all four views, mean(A B C D) and the mean over pixel pairs i != j of A_i B_i C_j D_j (each of the
+    three pairings), weighted by the inverse product of the views' white variances. None without such a
+    triple."""
+    far = [[float(np.hypot(*(g.pose - h.pose))) >= MIN_PARTNER_SHIFT_PX for h in cands] for g in cands]
+    triples = [t for t in itertools.combinations(range(len(cands)), 3)
+               if far[t[0]][t[1]] and far[t[0]][t[2]] and far[t[1]][t[2]]]
+    if not triples:
+        return None
+    a = f.residual
+    npix = a.shape[1]
+    x = [g.residual for g in cands]
+    cross = [np.sum(a * xj, axis=1) for xj in x]  # (N,) per partner: sum_i A_i X_i
+    fourth = np.zeros(a.shape[0])
+    square = np.zeros(a.shape[0])
+    for j, k, m in triples:
+        ok = valid[:, j] * valid[:, k] * valid[:, m]
+        w = ok / np.maximum(f.white * cands[j].white * cands[k].white * cands[m].white, MIN_VAR_ERR_DN2**4)
+        s4 = np.sum(a * x[j] * x[k] * x[m], axis=1)
+        pairs = (cross[j] * np.sum(x[k] * x[m], axis=1) + cross[k] * np.sum(x[j] * x[m], axis=1)
+                 + cross[m] * np.sum(x[j] * x[k], axis=1))
+        fourth += w * s4 / npix
+        square += w * (pairs - 3.0 * s4) / (3.0 * npix * (npix - 1))
+    return fourth, square
 
 
 def _cross_views(fulls: list[_Full], b: int) -> int:
@@ -547,6 +680,9 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         f.partner_v = np.stack([g.v for g in cands], axis=1)
         f.partner_robust = np.stack([g.robust for g in cands], axis=1)
         f.partner_confirms = np.stack(capable, axis=1)
+        moments = _fourth_moments(f, cands, valid * f.keep[:, None])
+        if moments is not None:
+            f.fourth, f.square = moments
         done += 1
     return done
 
@@ -717,6 +853,7 @@ def measure_frames(
                                     "every frame): temporal and fixed-pattern noise are not separated; only "
                                     "single-frame spatial noise in flat regions is measured (component 'single')")
     measured = [_select(s, block) for s in segments]
+    shape_of_fixed = fixed_shape(measured)
     cells = [c for s in measured for c in _cells(s, block)]
     if not cells:
         raise ValueError("no flat, unclipped image regions to measure noise in (every block is textured or clipped)")
@@ -735,4 +872,5 @@ def measure_frames(
         skipped=skipped,
         shape=(shape[0], shape[1]),
         not_measured=not_measured,
+        fixed_shape=shape_of_fixed,
     )

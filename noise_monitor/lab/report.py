@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 from ..physics import NoiseModel  # noqa: E402
 from .compare import Comparison, as_measured, model_curve  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
-from .measure import BLOCK  # noqa: E402
+from .measure import BLOCK, fixed_shape_text  # noqa: E402
 
 CONDITION_LABELS = {
     "intensity_dn": "intensity [DN]",
@@ -246,6 +246,9 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     gaps += [f"{what}: {why}" for what, why in summary["measurement"].get("not_measured", {}).items()]
     if gaps:
         parts.append("<p><b>Not measured</b><ul>" + "".join(f"<li>{html.escape(g)}</li>" for g in gaps) + "</ul></p>")
+    if "fixed_pattern_shape" in summary["measurement"]:
+        text = fixed_shape_text(summary["measurement"]["fixed_pattern_shape"])
+        parts.append(f"<p>{html.escape(text[:1].upper() + text[1:])}.</p>")
     if "rms_error_after_dn" in summary:
         added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "
@@ -273,6 +276,10 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
                      "them (claimed only if significant beyond them):<ul>" + "".join(
                          f"<li>rank {rank}, {html.escape(', '.join(c.effect for c in candidates if c.rank == rank))}: "
                          f"{html.escape(reading)}</li>" for rank, reading in beyond) + "</ul></p>")
+    contradicted = [c for c in candidates if c.contradicted]
+    if contradicted:
+        parts.append("<p>Fits a direct observation contradicts (never claimed):<ul>" + "".join(
+            f"<li>{html.escape(c.effect)}: {html.escape(c.contradicted)}</li>" for c in contradicted) + "</ul></p>")
     parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "significant_alone",
                                     "explained_by", "explained_fraction", "delta_bic",
                                     "p_value", "params", "param_errors", "degenerate", "param_ranges", "rms_error_after_dn",

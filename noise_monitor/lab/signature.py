@@ -10,7 +10,8 @@ block positions on the sensor) the signature says
   an excess towards a sensor corner is fitted with that corner's shape (each cell's mean over its
   blocks), so a scene that happens to be brighter near the corner is not read as an intensity law;
 - **its spatial structure**: rows or columns (fixed, or changing from frame to frame), isolated pixels
-  (outliers of the frame average, or pixels blinking between frames), a corner or a gradient across
+  (outliers of the frame average, a sparse fixed pattern whose kurtosis the model's Gaussian patterns
+  cannot give, or pixels blinking between frames), a corner or a gradient across
   the sensor (block excess vs position), or white pixel-wise noise;
 
 and suggests how a plug-in would express it (distribution, temporal flag, structure, position).
@@ -29,7 +30,7 @@ from scipy.stats import f as f_dist
 
 from ..physics import Effect
 from ..physics.sensor import dark_electrons
-from .compare import Comparison, as_measured
+from .compare import Comparison, as_measured, gaussian_fixed
 
 #: a component's weighted mean excess must be this many standard errors from zero to count
 Z_SIGNIFICANT = 5.0
@@ -310,8 +311,13 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
             stats[name]["significant"] = bool(stats[name]["significant"] or stats[name]["position_significant"])
     counts = _pixel_counts(comp)
     least = MIN_PIXEL_FRACTION * counts["pixels_checked"]
+    # a sparse fixed pattern (kurtosis far above a Gaussian's) the model's Gaussian patterns cannot give: pixels
+    # offset below the outlier threshold
+    shape = comp.meas.fixed_shape
+    sparse = bool(shape is not None and shape.sparse and gaussian_fixed(comp.effects))
+    counts["fixed_pattern_sparse"] = sparse
     isolated_fixed = bool(counts["outlier_z"] >= Z_SIGNIFICANT
-                          and counts["outlier_pixels"] - counts["outlier_pixels_expected"] >= least)
+                          and counts["outlier_pixels"] - counts["outlier_pixels_expected"] >= least) or sparse
     isolated_temporal = bool(counts["temporal_spike_z"] >= Z_SIGNIFICANT
                              and counts["temporal_spikes"] - counts["temporal_spikes_expected"] >= least)
     sig = [k for k, s in stats.items() if s["significant"]]
