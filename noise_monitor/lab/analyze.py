@@ -22,7 +22,7 @@ from .compare import (
     rms_error,
     rms_error_raw,
 )
-from .diagnose import EffectSpec, candidate_names, diagnose, diagnosis_line, fit
+from .diagnose import EffectSpec, candidate_names, component_errors, diagnose, diagnosis_line, fit
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
 from .signature import plugin_skeleton, unexplained
@@ -110,7 +110,11 @@ def analyze(
     selection: :func:`.diagnose.claim`), ``explained_fraction``, ``params``, ...), ``diagnosis`` (one line:
     :func:`.diagnose.diagnosis_line`), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
     no candidate explains a significant residual), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
-    ``rms_error_after_dn`` (both net, as ``rms_error_dn``), ``rms_error_before_raw_dn``, ``rms_error_after_raw_dn`` and ``by_condition_after`` (the extended model, evaluated exactly). With
+    ``rms_error_after_dn`` (both net, as ``rms_error_dn``), ``rms_error_before_raw_dn``, ``rms_error_after_raw_dn``,
+    ``rms_error_by_component_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly).
+    ``rms_error_by_component_dn``: per measured component, the error its variance mismatch makes in the
+    cells' total sigma, net of the scatter (:func:`.diagnose.component_errors`): a weak fixed pattern
+    whose error is lost in the total's statistical noise shows in its own component. With
     ``estimator`` (None: skip), ``estimator``: the monitor's xi and sigma_image per model (``before``,
     ``after``) on the same frames (:func:`.estimate.estimator_views`; ``weights``: e.g. fine-tuned ones).
     """
@@ -139,6 +143,7 @@ def analyze(
         "rms_error_dn": rms_error(rows),
         "rms_error_raw_dn": rms_error_raw(rows),
         "measurement_scatter_dn": measurement_scatter(rows),
+        "rms_error_by_component_dn": _rounded(component_errors(rows)),
         "by_condition": {**by_condition(rows), "region": region_table(comp)},
         "candidates": [c.as_dict() for c in cands],
         "diagnosis": diagnosis_line([c.as_dict() for c in cands]),
@@ -166,6 +171,7 @@ def analyze(
             "rms_error_after_dn": rms_error(rows_after),
             "rms_error_before_raw_dn": out["rms_error_raw_dn"],
             "rms_error_after_raw_dn": rms_error_raw(rows_after),
+            "rms_error_by_component_after_dn": _rounded(component_errors(rows_after)),
             "by_condition_after": {**by_condition(rows_after), "region": region_table(comp_after)},
             "cells_after": _strip(rows_after),
         })
@@ -182,6 +188,17 @@ def analyze(
 
         out["report"] = str(write_report(report_dir, out, comp, cands, after_model))
     return out
+
+
+def component_change_text(summary: dict[str, Any]) -> str:
+    """The per-component errors before -> after ``--add-effect`` for people (the components with an error)."""
+    before, after = summary["rms_error_by_component_dn"], summary["rms_error_by_component_after_dn"]
+    changed = [c for c in before if max(before[c], after.get(c, 0.0)) > 0.0]
+    return "; ".join(f"{c} {before[c]:.4f} -> {after.get(c, 0.0):.4f} DN" for c in changed) or "no component error"
+
+
+def _rounded(values: dict[str, float]) -> dict[str, float]:
+    return {k: round(v, 6) for k, v in values.items()}
 
 
 def _strip(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from .analyze import analyze, write_json
+from .analyze import analyze, component_change_text, write_json
 from .measure import fixed_shape_text
 
 
@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     if "rms_error_after_dn" in summary:
         print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN "
               f"(raw {summary['rms_error_before_raw_dn']:.4f} -> {summary['rms_error_after_raw_dn']:.4f} DN)")
+        print(f"  by component: {component_change_text(summary)}")
     for name, view in summary.get("estimator", {}).items():
         xi = view["xi_dn"]
         if xi["mean"] is not None:

@@ -16,6 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..physics import NoiseModel  # noqa: E402
+from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
 from .measure import BLOCK, fixed_shape_text  # noqa: E402
@@ -253,7 +254,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "
                      f"after {summary['rms_error_after_dn']:.4f} DN</b> (raw {summary['rms_error_before_raw_dn']:.4f} -> "
-                     f"{summary['rms_error_after_raw_dn']:.4f} DN)</p>")
+                     f"{summary['rms_error_after_raw_dn']:.4f} DN); by measured component (the error each one's "
+                     f"mismatch makes in the total sigma): {html.escape(component_change_text(summary))}</p>")
     line = diagnosis_line(cand_rows)
     parts.append("<h2>Diagnosis</h2>")
     parts.append(

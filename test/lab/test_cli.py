@@ -37,6 +37,9 @@ def test_analyze_add_effect_report_and_profile(prnu_bag: Path, tmp_path: Path, c
     assert set(best) >= {"effect", "significant", "explained_fraction", "params"}
     assert best["effect"] == "prnu" and best["significant"]
     assert summary["rms_error_after_dn"] < 0.5 * summary["rms_error_before_dn"]
+    # PRNU is a fixed pattern: its error shows in the fixed component, which the fit cuts
+    fixed_before, fixed_after = (summary[k]["fixed"] for k in ("rms_error_by_component_dn", "rms_error_by_component_after_dn"))
+    assert fixed_after < 0.3 * fixed_before and f"fixed {fixed_before:.4f} -> {fixed_after:.4f} DN" in out
     html = (report / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 5 and "<table>" in html and "Estimator on the same frames" in html
     # the estimator sees the hidden PRNU as noise the paper's model lacks (xi < 0); with it added, xi moves
