@@ -41,14 +41,15 @@ observation would separate them).
 Claims are made by forward selection (:func:`claim`): each candidate is tested alone against the camera's
 model as above, which only says that it reproduces part of the residual; two candidates that reproduce
 the same part would both pass. The groups are taken in rank order: the first group significant alone is
-claimed; every later group significant alone is refitted (its best member) with the claimed explanations
+claimed; every later group is refitted (its best member) with the claimed explanations
 in the model at their fitted values and claimed only if it is significant beyond them by the same tests,
 all relative to the claimed model (:func:`assess`): F-test of the chi-square drop beyond it (degrees of
 freedom net of every fitted parameter), MIN_EXPLAINED_FRACTION of the chi-square it leaves, the error cut
 in the components the candidate changes and their position pattern against the claimed model's, no
 contradiction the claimed model does not have. Its fit beyond them joins the claimed model for the
 next. A group significant alone but not beyond them is ``explained_by`` them (with the refit's figures
-and a plain reading in ``beyond``). The claimed effects are held at their fitted values rather than
+and a plain reading in ``beyond``); one not significant alone but significant beyond them (an effect whose
+part of the residual the first one's masked, e.g. 10 e- of extra read noise beside a DSNU) is claimed. The claimed effects are held at their fitted values rather than
 refitted jointly: the refit then changes only the candidate, so the components it changes, their
 position pattern and a contradiction are its own (refitted jointly, a temperature or exposure error on
 top of a DSNU shifts the DSNU to make up for the dark signal it changes in the fixed-pattern noise and
@@ -545,10 +546,11 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
 
 def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     """Claim explanations by forward selection over the groups (ranked best first, significance per
-    group from each candidate's own fit): the first group significant alone is claimed; each later one is
-    refitted (its best member) with the claimed explanations at their fitted values and claimed only if it
-    is significant beyond them by the same tests (:func:`assess`); its fit beyond them then joins the
-    claimed model. A group significant alone but not beyond them is ``explained_by`` them."""
+    group from each candidate's own fit): the first group significant alone is claimed; each later one
+    (significant alone or not) is refitted (its best member) with the claimed explanations at their fitted
+    values and claimed only if it is significant beyond them by the same tests (:func:`assess`); its fit
+    beyond them then joins the claimed model. A group significant alone but not beyond them is
+    ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None."""
     model: list[Effect] = []
     claimed: list[Candidate] = []  # the best member of each claimed group
     n_params = 0
@@ -558,13 +560,15 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
         lead = group[0]
         for c in group:
             c.significant_alone = c.significant
-        if not lead.significant or lead.fitted is None:
+        if lead.fitted is None or not (lead.significant or model):
             continue
         if model:
             if given is None:
                 given = Given.of(comp, model, n_params)
             a = assess(comp, given, EffectSpec.fit_all(type(lead.fitted)))
-            beyond = _beyond(claimed, a)
+            if not (a.significant or lead.significant):
+                continue  # nothing alone, nothing beyond: not reported as refitted
+            beyond = _beyond(claimed, a, alone=lead.significant)
             for c in group:
                 c.significant = a.significant
                 c.beyond = beyond
@@ -581,16 +585,18 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     return ranked
 
 
-def _beyond(claimed: Sequence[Candidate], a: Assessment) -> dict[str, Any]:
+def _beyond(claimed: Sequence[Candidate], a: Assessment, alone: bool = True) -> dict[str, Any]:
     """A refit on top of the ``claimed`` explanations (each group's best member) for :attr:`Candidate.beyond`,
-    with a plain reading (naming each group's alternatives)."""
+    with a plain reading (naming each group's alternatives); ``alone``: whether the candidate was
+    significant on its own (else it was masked by their residual)."""
     names = [c.effect for c in claimed]
     them, they = ("it", "it leaves") if len(names) == 1 else ("them", "they leave")
     listed = ", ".join(c.effect + (f" (or {', '.join(c.equivalent_to)})" if c.equivalent_to else "") for c in claimed)
     figures = (f"refitted on top of {them}: chi-square {a.chi2_given:.1f} -> {min(a.fit.chi2, a.chi2_given):.1f}, "
                f"p = {a.p_value:.2g}, {a.explained_fraction:.1%} of what {they}")
     if a.significant:
-        reading = f"significant beyond {listed} ({figures})"
+        masked = "" if alone else f", though not alone: {'its' if len(names) == 1 else 'their'} residual masked it"
+        reading = f"significant beyond {listed} ({figures}){masked}"
     elif {"F-test", "explained fraction"} & set(a.failed):
         reading = (f"significant alone, but partly reproduces the same residual as {listed}; nothing significant "
                    f"beyond {them} ({figures})")

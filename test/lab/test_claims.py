@@ -1,7 +1,8 @@
 """Claims by forward selection: a candidate significant alone is claimed only if it is significant beyond the
 explanations claimed before it. Two effects present together are both claimed; a built-in that only
 partly reproduces the residual of an effect outside the library (with the user's plug-in for it) is
-not, and is reported as explained by the plug-in, in the JSON, the CLI and the HTML report."""
+not, and is reported as explained by the plug-in, in the JSON, the CLI and the HTML report. An effect that
+its residual masks alone (10 e- of read noise beside a DSNU) is claimed beyond the first claim."""
 from __future__ import annotations
 
 import importlib.util
@@ -50,6 +51,19 @@ def test_two_effects_present_together_are_both_claimed(hidden: tuple[str, str], 
     later = next(c for c in claimed if c["rank"] == second)
     assert later["beyond"]["significant"] and later["beyond"]["reading"].startswith("significant beyond ")
     assert later["beyond"]["given"] == [next(c["effect"] for c in claimed if c["rank"] == min(ranks))]
+
+
+def test_an_effect_masked_by_the_first_is_claimed_beyond_it(tmp_path: Path) -> None:
+    """10 e- of extra read noise beside a DSNU of 0.3: alone the read noise is not significant (the DSNU's
+    residual dominates every cell), on top of the claimed DSNU it is, and fitted right."""
+    bag = simulate_bag(tmp_path / "masked.mcap", PROFILE, "campaign", effects=["extra_read_noise=10", "dsnu=0.3"],
+                       fps=10.0, **SMALL)
+    cands = {c["effect"]: c for c in analyze(bag, PROFILE, estimator=None)["candidates"]}
+    dsnu, read = cands["dsnu"], cands["extra_read_noise"]
+    assert dsnu["rank"] == 1 and dsnu["significant"] and dsnu["significant_alone"]
+    assert read["significant"] and not read["significant_alone"] and not read["explained_by"]
+    assert read["beyond"]["given"] == ["dsnu"] and read["beyond"]["params"]["sigma_e"] == pytest.approx(10.0, rel=0.1)
+    assert read["beyond"]["reading"].endswith("though not alone: its residual masked it")
 
 
 @pytest.mark.parametrize("effect, partial", [("nonlinearity", "gain_error")])
