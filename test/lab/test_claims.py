@@ -5,9 +5,9 @@ not, and is reported as explained by the plug-in, in the JSON, the CLI and the H
 its residual masks alone (10 e- of read noise beside a DSNU) is claimed beyond the first claim."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 import torch
@@ -15,26 +15,14 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
-from noise_monitor.physics.effects import registry
 
 torch.set_num_threads(1)
-
-_spec = importlib.util.spec_from_file_location("outside_effects", Path(__file__).with_name("outside_effects.py"))
-outside = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(outside)
 
 PROFILE = "ev76c661"
 #: a small campaign: 64 frames of 160x128 (about 6 holds), seeded
 SMALL = {"frames": 64, "width": 160, "height": 128, "seed": 1}
 
-#: the effects registered at import (collection time): the library's own, before any test's plug-ins
-_BUILTINS = dict(registry._REGISTRY)
-
-
-@pytest.fixture(autouse=True)
-def _builtins_only(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Candidates are the library's effects (plus the plug-in loaded here), whatever other tests registered."""
-    monkeypatch.setattr(registry, "_REGISTRY", dict(_BUILTINS))
+pytestmark = pytest.mark.usefixtures("builtins_only")
 
 
 @pytest.mark.parametrize("hidden", [("prnu=1", "column_offsets=2"), ("extra_read_noise=15", "dsnu=0.3")])
@@ -67,7 +55,7 @@ def test_an_effect_masked_by_the_first_is_claimed_beyond_it(tmp_path: Path) -> N
 
 
 @pytest.mark.parametrize("effect, partial", [("nonlinearity", "gain_error")])
-def test_a_partial_explanation_is_not_claimed(effect: str, partial: str, tmp_path: Path,
+def test_a_partial_explanation_is_not_claimed(outside: ModuleType, effect: str, partial: str, tmp_path: Path,
                                               capsys: pytest.CaptureFixture) -> None:
     """A lower gain reproduces part of a compressing response's missing noise: significant alone, nothing
     beyond the plug-in. (A PRNU standing for telegraph pixels below the outlier threshold, the other partial

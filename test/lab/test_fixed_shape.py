@@ -4,10 +4,9 @@ threshold: a few pixels far off), so a Gaussian built-in is not claimed for a sp
 ``unexplained`` signature names isolated pixels even where too few stand out as outliers."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
-from types import SimpleNamespace
+from types import ModuleType, SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,23 +16,13 @@ from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
 from noise_monitor.lab.measure import _fourth_moments, fixed_shape
-from noise_monitor.physics.effects import registry
 
 torch.set_num_threads(1)
-
-_spec = importlib.util.spec_from_file_location("outside_effects", Path(__file__).with_name("outside_effects.py"))
-outside = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(outside)
 
 PROFILE = "ev76c661"
 #: a small campaign: 64 frames of 160x128 (about 7 holds), seeded
 SMALL = {"frames": 64, "width": 160, "height": 128, "seed": 1}
-_BUILTINS = dict(registry._REGISTRY)
-
-
-@pytest.fixture(autouse=True)
-def _builtins_only(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(registry, "_REGISTRY", dict(_BUILTINS))
+pytestmark = pytest.mark.usefixtures("builtins_only")
 
 
 def _views(pattern: np.ndarray, rng: np.random.Generator, n_views: int = 6, noise: float = 1.0) -> list:
@@ -71,7 +60,7 @@ def test_fourth_moments_give_the_kurtosis_of_the_fixed_pattern() -> None:
     assert sparse.excess_z > 10
 
 
-def test_a_gaussian_pattern_is_not_claimed_for_telegraph_pixels(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_a_gaussian_pattern_is_not_claimed_for_telegraph_pixels(outside: ModuleType, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """2 % telegraph pixels toggling by 16 DN on a small campaign: most stay below the outlier threshold and
     leave a fixed pattern a 0.9 % PRNU partly reproduces (it was claimed). Its shape contradicts PRNU and
     DSNU (JSON, CLI, HTML report); nothing is claimed and the signature names isolated pixels offset in

@@ -14,7 +14,6 @@ import torch
 
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.lab import analyze
-from noise_monitor.physics.effects import registry
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
 torch.set_num_threads(1)
@@ -27,14 +26,7 @@ _spec.loader.exec_module(outside)
 CAMPAIGN = {"scenario": "campaign", "seed": 3, "frames": 64, "width": 160, "height": 128}
 
 
-#: the effects registered at import (collection time): the library's own, before any test's plug-ins
-_BUILTINS = dict(registry._REGISTRY)
-
-
-@pytest.fixture(autouse=True)
-def _builtins_only(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Candidates are the library's effects (plus the plug-in loaded here), whatever other tests registered."""
-    monkeypatch.setattr(registry, "_REGISTRY", dict(_BUILTINS))
+pytestmark = pytest.mark.usefixtures("builtins_only")
 
 
 def test_the_hook_acts_in_sensor_coordinates_with_the_true_metadata(tmp_path: Path) -> None:
