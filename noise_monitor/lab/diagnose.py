@@ -550,7 +550,10 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     (significant alone or not) is refitted (its best member) with the claimed explanations at their fitted
     values and claimed only if it is significant beyond them by the same tests (:func:`assess`); its fit
     beyond them then joins the claimed model. A group significant alone but not beyond them is
-    ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None."""
+    ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None, and so does
+    one whose own fit a direct observation contradicts (``contradicted``: refitted beyond a model with a
+    sparse fixed pattern of its own, a Gaussian pattern would escape the shape test and take up the part of
+    the sparse pattern that model does not describe, e.g. PRNU beside telegraph pixels)."""
     model: list[Effect] = []
     claimed: list[Candidate] = []  # the best member of each claimed group
     n_params = 0
@@ -560,8 +563,8 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
         lead = group[0]
         for c in group:
             c.significant_alone = c.significant
-        if lead.fitted is None or not (lead.significant or model):
-            continue
+        if lead.fitted is None or not (lead.significant or (model and not lead.contradicted)):
+            continue  # a fit a direct observation contradicts is not refitted as a masked effect
         if model:
             if given is None:
                 given = Given.of(comp, model, n_params)
