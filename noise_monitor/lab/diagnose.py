@@ -86,6 +86,10 @@ MIN_OWN_REDUCTION = 0.5
 #: a candidate whose fit puts the measured quantization step (output histogram) further than this many
 #: standard errors from the model's is contradicted by a direct observation and never claimed
 MAX_STEP_Z = 5.0
+#: a candidate not significant alone is refitted beyond the claimed explanations (an effect their residual
+#: masks alone) only if its own fit found something at this p-value (the F-test's): one that found nothing
+#: alone would find nothing on top of them either, and each refit costs a fit
+MASKED_P = 0.05
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
 #: smallest total sigma (DN) a component's variance mismatch is scaled by (8-bit rounding alone: 0.29)
@@ -550,8 +554,9 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     (significant alone or not) is refitted (its best member) with the claimed explanations at their fitted
     values and claimed only if it is significant beyond them by the same tests (:func:`assess`); its fit
     beyond them then joins the claimed model. A group significant alone but not beyond them is
-    ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None, and so does
-    one whose own fit a direct observation contradicts (``contradicted``: refitted beyond a model with a
+    ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None, and so do one
+    whose fit alone found nothing (F-test p >= MASKED_P: not refitted) and one whose own fit a direct
+    observation contradicts (``contradicted``: refitted beyond a model with a
     sparse fixed pattern of its own, a Gaussian pattern would escape the shape test and take up the part of
     the sparse pattern that model does not describe, e.g. PRNU beside telegraph pixels)."""
     model: list[Effect] = []
@@ -563,8 +568,9 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
         lead = group[0]
         for c in group:
             c.significant_alone = c.significant
-        if lead.fitted is None or not (lead.significant or (model and not lead.contradicted)):
-            continue  # a fit a direct observation contradicts is not refitted as a masked effect
+        masked = bool(model) and not lead.contradicted and lead.p_value < MASKED_P
+        if lead.fitted is None or not (lead.significant or masked):
+            continue  # a fit that found nothing alone, or one a direct observation contradicts, is not refitted
         if model:
             if given is None:
                 given = Given.of(comp, model, n_params)
