@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .analyze import analyze, component_change_text, write_json
-from .measure import fixed_shape_text
+from .shape import fixed_shape_text
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,7 +15,7 @@ excess (towards a corner, along a gradient, beyond an intensity law per segment:
 amplitude. Nor is a fit that a direct observation contradicts (``contradicted``): a quantization step the
 output histogram does not show, or a Gaussian fixed pattern (PRNU, DSNU, line offsets, or an effect that
 rescales them) standing for a measured fixed pattern that is sparse (a few pixels far off, kurtosis well
-above a Gaussian's 3: :class:`.measure.FixedShape`), such as random telegraph pixels below the outlier
+above a Gaussian's 3: :class:`.shape.FixedShape`), such as random telegraph pixels below the outlier
 threshold.
 
 Parameter errors come from the Jacobian at the optimum; along directions the data do not constrain

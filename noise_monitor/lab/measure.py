@@ -19,9 +19,9 @@ energies of a block's hold-mean residual with the same sensor block seen from ot
 (:func:`_cross_views`): the scene moves, the fixed pattern does not; with one pose only they are the
 hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so. Outlier
 pixels count when another view confirms them. Every cell (segment x intensity bin) carries the
-standard error of its mean over blocks. The fixed pattern's *shape* (:class:`FixedShape`): its kurtosis
-from four views of each sensor pixel at four camera poses (a Gaussian pattern such as PRNU has 3; a few
-pixels far off, such as random telegraph pixels below the outlier threshold, far more).
+standard error of its mean over blocks. The fixed pattern's *shape* (:class:`.shape.FixedShape`): its
+kurtosis from four views of each sensor pixel at four camera poses (a Gaussian pattern such as PRNU has
+3; a few pixels far off, such as random telegraph pixels below the outlier threshold, far more).
 The temporal deviations are split like the residual: white temporal noise (``temporal``) and row/column
 offsets that change from frame to frame (``temporal_row``, ``temporal_column``); single-view column/row
 components have ``temporal_row / K`` (``temporal_column / K``) removed, cross-view ones need not (the
@@ -29,7 +29,6 @@ temporal parts of two holds are independent). Blinking pixels are counted per ho
 """
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -43,6 +42,7 @@ from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, camera_shift
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
+from .shape import FixedShape, fixed_shape, fourth_moments
 
 BLOCK = 8
 BIN_WIDTH_DN = 16.0
@@ -79,14 +79,6 @@ CONFIRM_VIEWS = 2
 #: < 0.1 % of 8 x 8 blocks; 2 % random telegraph pixels: in 4 %; a speckled scene texture has many and
 #: would confirm a speck by chance)
 CONFIRM_MAX_OTHERS = 3
-#: a fixed pattern is sparse (a few pixels far off) when its kurtosis exceeds a Gaussian's by SHAPE_Z standard
-#: errors (the larger of the spread over blocks and the jackknife over segments), is at least SHAPE_KURTOSIS,
-#: and its second moment is SHAPE_SQUARE_Z standard errors above 0 (the pattern exists); both z-scores need
-#: SHAPE_MIN_SEGMENTS segments with four views
-SHAPE_Z = 5.0
-SHAPE_KURTOSIS = 6.0
-SHAPE_SQUARE_Z = 3.0
-SHAPE_MIN_SEGMENTS = 4
 #: a pixel whose own temporal variance exceeds this multiple of its block's typical one is a temporal
 #: spike (a blinking / random telegraph pixel); counted against the chi-square expectation
 SPIKE_FACTOR = 5.0
@@ -156,7 +148,7 @@ class SegmentMeasurement:
     temporal_spikes: int = 0
     temporal_spikes_expected: float = 0.0
     #: (B,) per block, the fixed pattern's fourth moment and the product of two of its second moments from
-    #: four views at distinct poses (:func:`_fourth_moments`; 0 where the block has no three partners)
+    #: four views at distinct poses (:func:`.shape.fourth_moments`; 0 where the block has no three partners)
     fixed_fourth: np.ndarray | None = None
     fixed_square: np.ndarray | None = None
 
@@ -179,87 +171,6 @@ class Cell:
     block_index: np.ndarray  # indices into the segment's block arrays
     values: dict[str, float]
     errors: dict[str, float]
-
-
-@dataclass(frozen=True)
-class FixedShape:
-    """The fixed pattern's kurtosis over the segments with four views (:func:`fixed_shape`).
-
-    Per block, with this hold's plane-fit residual A and three partner views B, C, D at mutually distinct
-    poses (each pair :data:`MIN_PARTNER_SHIFT_PX` apart), scene and temporal noise differ between the views
-    and cancel in expectation: mean(A B C D) is the fixed pattern's fourth moment E[P^4], and the product of
-    two cross energies over different pixels (A B at one pixel, C D at another) is E[P^2]^2. Their ratio,
-    pooled over blocks (weighted by the inverse product of the four views' white variances), is the
-    kurtosis: 3 for a Gaussian pattern (PRNU, DSNU, line offsets) at any level, ~1/f for a fraction f of
-    pixels far off. ``excess_z`` tests E[P^4] - 3 E[P^2]^2 > 0, ``square_z`` E[P^2]^2 > 0."""
-
-    kurtosis: float
-    kurtosis_err: float
-    excess_z: float
-    square_z: float
-    segments: int
-    blocks: int
-
-    @property
-    def sparse(self) -> bool:
-        """Whether the pattern is significantly heavier-tailed than a Gaussian one (see SHAPE_Z)."""
-        return (self.segments >= SHAPE_MIN_SEGMENTS and self.square_z >= SHAPE_SQUARE_Z
-                and self.excess_z >= SHAPE_Z and self.kurtosis >= SHAPE_KURTOSIS)
-
-    def summary(self) -> dict[str, Any]:
-        return {"kurtosis": round(self.kurtosis, 3), "kurtosis_err": round(self.kurtosis_err, 3),
-                "excess_z": round(self.excess_z, 2), "square_z": round(self.square_z, 2),
-                "segments": self.segments, "blocks": self.blocks, "sparse": self.sparse}
-
-
-def fixed_shape_text(shape: dict[str, Any]) -> str:
-    """One line for people from :meth:`FixedShape.summary` (or its ``not_measured`` entry)."""
-    if "not_measured" in shape:
-        return f"fixed pattern shape not measured: {shape['not_measured']}"
-    if shape["square_z"] < SHAPE_SQUARE_Z:
-        verdict = "no fixed pattern beyond the measurement's noise"
-    elif shape["sparse"]:
-        verdict = "sparse: a few pixels far off (a Gaussian pattern, e.g. PRNU, has 3)"
-    else:
-        verdict = "consistent with a Gaussian pattern (3)"
-    return (f"fixed pattern shape: kurtosis {shape['kurtosis']:.1f} +- {shape['kurtosis_err']:.1f} over "
-            f"{shape['segments']} holds seen from four poses, {verdict}")
-
-
-def fixed_shape(segments: Iterable[SegmentMeasurement]) -> FixedShape | None:
-    """The fixed pattern's kurtosis (:class:`FixedShape`), None without a segment with four views. Standard
-    errors: the larger of the spread over blocks (delta method) and the jackknife over segments (blocks of
-    one segment share views, segments share the pattern)."""
-    per = [(s.fixed_fourth, s.fixed_square) for s in segments
-           if s.fixed_fourth is not None and s.fixed_square is not None and np.any(s.fixed_square != 0.0)]
-    if not per:
-        return None
-    n4 = np.concatenate([a for a, _ in per])
-    d4 = np.concatenate([b for _, b in per])
-    used = (n4 != 0.0) | (d4 != 0.0)
-    n4, d4 = n4[used], d4[used]
-    nb, m = int(n4.size), len(per)
-    seg_n4 = np.array([float(a.sum()) for a, _ in per])
-    seg_d4 = np.array([float(b.sum()) for _, b in per])
-
-    def jackknife(values: np.ndarray) -> float:
-        """Jackknife standard error over segments of a statistic's leave-one-out values."""
-        return math.sqrt((m - 1) / m * float(np.sum((values - values.mean()) ** 2))) if m >= 2 else math.inf
-
-    def total_se(block: np.ndarray, seg: np.ndarray) -> float:
-        """Standard error of a sum over blocks: the larger of the delta method's and the jackknife's."""
-        return max(math.sqrt(float(block.var()) * nb), jackknife(seg.sum() - seg))
-
-    d_total = float(d4.sum())
-    kurt = float(n4.sum()) / d_total if d_total != 0.0 else math.nan
-    if d_total != 0.0 and np.all(seg_d4.sum() - seg_d4 != 0.0):
-        kurt_err = max(math.sqrt(float((n4 - kurt * d4).var()) * nb) / abs(d_total),
-                       jackknife((seg_n4.sum() - seg_n4) / (seg_d4.sum() - seg_d4)))
-    else:
-        kurt_err = math.inf
-    ex_se, sq_se = total_se(n4 - 3.0 * d4, seg_n4 - 3.0 * seg_d4), total_se(d4, seg_d4)
-    return FixedShape(kurt, kurt_err, float((n4 - 3.0 * d4).sum()) / ex_se if ex_se > 0 else 0.0,
-                      d_total / sq_se if sq_se > 0 else 0.0, m, nb)
 
 
 @dataclass
@@ -599,34 +510,6 @@ def _cross_energies(a: np.ndarray, c: np.ndarray, b: int) -> tuple[np.ndarray, n
     return np.sum(a * c, axis=1), col, row
 
 
-def _fourth_moments(f: _Full, cands: list[_Full], valid: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per block of ``f``, the fixed pattern's fourth moment and squared second moment from four views
-    (:class:`FixedShape`): over the triples of partners at mutually distinct poses where the block is flat
-    in all four views, mean(A B C D) and the mean over pixel pairs i != j of A_i B_i C_j D_j (each of the
-    three pairings), weighted by the inverse product of the views' white variances. None without such a
-    triple."""
-    far = [[float(np.hypot(*(g.pose - h.pose))) >= MIN_PARTNER_SHIFT_PX for h in cands] for g in cands]
-    triples = [t for t in itertools.combinations(range(len(cands)), 3)
-               if far[t[0]][t[1]] and far[t[0]][t[2]] and far[t[1]][t[2]]]
-    if not triples:
-        return None
-    a = f.residual
-    npix = a.shape[1]
-    x = [g.residual for g in cands]
-    cross = [np.sum(a * xj, axis=1) for xj in x]  # (N,) per partner: sum_i A_i X_i
-    fourth = np.zeros(a.shape[0])
-    square = np.zeros(a.shape[0])
-    for j, k, m in triples:
-        ok = valid[:, j] * valid[:, k] * valid[:, m]
-        w = ok / np.maximum(f.white * cands[j].white * cands[k].white * cands[m].white, MIN_VAR_ERR_DN2**4)
-        s4 = np.sum(a * x[j] * x[k] * x[m], axis=1)
-        pairs = (cross[j] * np.sum(x[k] * x[m], axis=1) + cross[k] * np.sum(x[j] * x[m], axis=1)
-                 + cross[m] * np.sum(x[j] * x[k], axis=1))
-        fourth += w * s4 / npix
-        square += w * (pairs - 3.0 * s4) / (3.0 * npix * (npix - 1))
-    return fourth, square
-
-
 def _cross_views(fulls: list[_Full], b: int) -> int:
     """Fixed-pattern, column and row components from what stays in sensor coordinates while the scene
     moves: per block, the cross energies of the hold-mean residuals of this hold and of up to
@@ -680,7 +563,7 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         f.partner_v = np.stack([g.v for g in cands], axis=1)
         f.partner_robust = np.stack([g.robust for g in cands], axis=1)
         f.partner_confirms = np.stack(capable, axis=1)
-        moments = _fourth_moments(f, cands, valid * f.keep[:, None])
+        moments = fourth_moments(f, cands, valid * f.keep[:, None], MIN_PARTNER_SHIFT_PX, MIN_VAR_ERR_DN2)
         if moments is not None:
             f.fourth, f.square = moments
         done += 1

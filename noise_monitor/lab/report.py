@@ -19,7 +19,8 @@ from ..physics import NoiseModel  # noqa: E402
 from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
-from .measure import BLOCK, fixed_shape_text  # noqa: E402
+from .measure import BLOCK  # noqa: E402
+from .shape import fixed_shape_text  # noqa: E402
 
 CONDITION_LABELS = {
     "intensity_dn": "intensity [DN]",

@@ -15,7 +15,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
-from noise_monitor.lab.measure import _fourth_moments, fixed_shape
+from noise_monitor.lab.shape import fixed_shape, fourth_moments
 
 torch.set_num_threads(1)
 
@@ -39,7 +39,7 @@ def _views(pattern: np.ndarray, rng: np.random.Generator, n_views: int = 6, nois
 def _shape(pattern: np.ndarray, rng: np.random.Generator):
     """The FixedShape of ``pattern`` from six views, its blocks split into five segments."""
     views = _views(pattern, rng)
-    fourth, square = _fourth_moments(views[0], views[1:], np.ones((pattern.shape[0], len(views) - 1)))
+    fourth, square = fourth_moments(views[0], views[1:], np.ones((pattern.shape[0], len(views) - 1)), 16.0, 0.01)
     return fixed_shape([SimpleNamespace(fixed_fourth=f, fixed_square=q)
                         for f, q in zip(np.array_split(fourth, 5), np.array_split(square, 5))])
 
