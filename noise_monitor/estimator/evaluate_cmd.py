@@ -27,8 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "variant's training size; the paper's protocol is 128)")
     p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
     p.add_argument("--heldout", nargs="+", default=["benchmark"], choices=list(HELDOUT_SETS),
-                   help="held-out sets: benchmark (matplotlib images + dead leaves) and/or photos (matplotlib + "
-                        "PyWavelets images only); one run per set and patch size")
+                   help="held-out sets: benchmark (matplotlib images + dead leaves), photos (matplotlib + PyWavelets "
+                        "images only, 2x downsampled) and/or photos_native (the same at native resolution); one run per "
+                        "set and patch size")
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
     p.add_argument("--cache", type=Path, default=Path("out/estimator_eval"), help="held-out data cache directory")

@@ -153,9 +153,10 @@ def rotate_inscribed(img: np.ndarray, angle_deg: float) -> np.ndarray:
 def jpeg_compress(img: np.ndarray, quality: int) -> np.ndarray:
     """The image (DN) after a JPEG round trip at ``quality`` (cv2; rounded to 8 bits first)."""
     ok, buf = cv2.imencode(".jpg", np.clip(np.rint(img), 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise RuntimeError("JPEG encoding failed")
-    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(np.float32)
+    decoded = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE) if ok else None
+    if decoded is None:
+        raise RuntimeError("JPEG round trip failed")
+    return decoded.astype(np.float32)
 
 
 def photo_variants(rng: np.random.Generator, per_photo: int, imagery: Imagery | None = None) -> list[np.ndarray]:

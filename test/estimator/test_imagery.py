@@ -147,3 +147,13 @@ def test_evaluate_compare_weights_side_by_side(tmp_path, capsys):
     assert rows["full_meta"]["xi"] == rows["full_meta_old"]["xi"]  # the same weights on the same data
     bad = cli_main(["evaluate", "--weights-dir", str(weights), "--variants", "full_meta", "--compare", "full_meta=x.pt"])
     assert bad == 2 and "already used" in capsys.readouterr().err
+
+
+def test_model_card_describes_the_varied_imagery():
+    from noise_monitor.estimator.card import _procedural, _variants
+
+    plain = {"photo_variants": 3, "procedural": 40}
+    assert "1.5-4x downscale" in _variants(plain) and "man-made" not in _procedural(plain)
+    varied = {"photo_variants": 4, "procedural": 0, "imagery": VARIED.as_dict()}
+    assert "50% rotated" in _variants(varied) and "50% at native resolution" in _variants(varied)
+    assert "2 man-made procedural scenes" in _procedural(varied) and "50% of the source images JPEG" in _procedural(varied)
