@@ -1,12 +1,13 @@
 """Where the per-patch xi error sits: the estimator's xi error per source image of a held-out or tuning set.
 
-The held-out photos (``evaluate.HELDOUT_SETS["photos"]``: matplotlib and PyWavelets images) and the tuning
-crops of the training photographs (``estimator_tuning.py``'s ``tune`` set) are regenerated bit-exact from their
+The held-out photos (``evaluate.HELDOUT_SETS["photos"]`` and ``["photos_native"]``: matplotlib and PyWavelets
+images, 2x downsampled / native) and the tuning crops of the training photographs (``estimator_tuning.py``'s
+``tune`` and ``tune_native`` sets) are regenerated bit-exact from their
 seeds (or read from ``--cache``); each patch's source image is recorded by the generator (``source_index``).
 Per image and part: patches, xi RMS and mean error over every patch, and the coverage and xi RMS of the
 patches the confidence head accepts (``measurable``), plus the median true sigma_image.
 
-Usage: .venv/bin/python bench/estimator_per_image.py [--sets photos tune] [--parts a b c] [--patch-size 64]
+Usage: .venv/bin/python bench/estimator_per_image.py [--sets photos tune (photos_native tune_native)] [--parts a b c] [--patch-size 64]
        [--cache out/estimator_eval] [--weights W.pt]
 Prints figures; asserts nothing.
 """
@@ -23,19 +24,22 @@ from noise_monitor.estimator.data import metas_of
 from noise_monitor.estimator.evaluate import heldout
 from noise_monitor.estimator.inference import load
 
-NAMES = {"photos": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS, "tune": images.SKIMAGE_PHOTOS}
+NAMES = {"photos": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS,
+         "photos_native": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS,
+         "tune": images.SKIMAGE_PHOTOS, "tune_native": images.SKIMAGE_PHOTOS}
+HELDOUT = ("photos", "photos_native")
 N = 600
 
 
 def dataset(name: str, part: str, size: int, cache: Path) -> dict[str, np.ndarray]:
     """The set's data of a part, regenerated when the cached copy predates ``source_index``."""
     def make() -> dict[str, np.ndarray]:
-        if name == "photos":
-            return heldout(part, N, size, cache, progress=False, heldout_set="photos")
+        if name in HELDOUT:
+            return heldout(part, N, size, cache, progress=False, heldout_set=name)
         return tuning_set(name, part, size, cache)
     data = make()
     if "source_index" not in data:
-        for path in cache.glob(f"{'photos' if name == 'photos' else name}_{part}_p{size}_n{N}.npz"):
+        for path in cache.glob(f"{name}_{part}_p{size}_n{N}.npz"):
             path.unlink()
         data = make()
     return data
@@ -47,7 +51,7 @@ def rms(x: np.ndarray) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sets", nargs="+", default=list(NAMES), choices=list(NAMES))
+    ap.add_argument("--sets", nargs="+", default=["photos", "tune"], choices=list(NAMES))
     ap.add_argument("--parts", nargs="+", default=["a", "b", "c"], choices=["a", "b", "c"])
     ap.add_argument("--patch-size", type=int, default=64)
     ap.add_argument("--cache", type=Path, default=Path("out/estimator_eval"))

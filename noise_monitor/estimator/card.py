@@ -7,7 +7,7 @@ from pathlib import Path
 import torch
 
 from .evaluate import HELDOUT_SETS
-from .images import PHOTO_DOWNSCALE
+from .images import JPEG_QUALITY, PHOTO_DOWNSCALE
 from .networks import count_parameters, network_from_checkpoint
 
 ROWS = ("pn", "dcsn", "rn", "sigma_image", "xi")
@@ -63,12 +63,24 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
 
 def _variants(train: dict) -> str:
     n = train.get("photo_variants", 0)
+    im = train.get("imagery") or {}
+    if n and im and (tuple(im.get("photo_scales", PHOTO_DOWNSCALE)) != PHOTO_DOWNSCALE or im.get("photo_native")
+                     or im.get("photo_rotate")):
+        lo, hi = im.get("photo_scales", PHOTO_DOWNSCALE)
+        return (f" (each {n}x: {im.get('photo_rotate', 0):.0%} rotated by an arbitrary angle, {im.get('photo_native', 0):.0%} "
+                f"at native resolution, else a random {lo:g}-{hi:g}x downscale; random gamma)")
     return f" (each {n}x at a random {PHOTO_DOWNSCALE[0]}-{PHOTO_DOWNSCALE[1]:g}x downscale and gamma)" if n else ""
 
 
 def _procedural(train: dict) -> str:
     n = train.get("procedural", 0)
-    return f" + {n} procedural images of pixel-scale structure (hillshades, gratings, fabric, halftone, text)" if n else ""
+    im = train.get("imagery") or {}
+    text = f" + {n} procedural images of pixel-scale structure (hillshades, gratings, fabric, halftone, text)" if n else ""
+    if im.get("manmade"):
+        text += f" + {im['manmade']} man-made procedural scenes (dead leaves of polygons, periodic bars)"
+    if im.get("jpeg"):
+        text += f"; {im['jpeg']:.0%} of the source images JPEG-compressed (quality {JPEG_QUALITY[0]}-{JPEG_QUALITY[1]})"
+    return text
 
 
 def _stages(train: dict) -> list[dict]:

@@ -30,7 +30,7 @@ from tqdm import tqdm
 from ..physics import CameraMetadata, NoiseModel, factor_to_db, sample_metadata
 from ..physics.effects import effect_class
 from ..physics.metadata import NUMERIC_FIELDS, STATIC_FIELDS
-from .images import sample_clean_patches, source_images
+from .images import Imagery, sample_clean_patches, source_images
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior
 
 TRUTH_KEYS = ("pn", "dcsn", "rn", EXTRA, "sigma_model", "sigma_image", "xi")
@@ -93,18 +93,19 @@ def _metadata(rng: np.random.Generator, sensor: Mapping[str, Any] | None) -> Cam
 def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: Scheme = Scheme(),
              group: int = 8, progress: bool = True, effects: EffectSpecs | None = None,
              sensor: Mapping[str, Any] | None = None, photo_variants: int = 0,
-             procedural: int = 0) -> dict[str, np.ndarray]:
+             procedural: int = 0, imagery: Imagery = Imagery()) -> dict[str, np.ndarray]:
     """A seeded dataset of ``n`` noisy patches with truths, metadata and the analytic tables per group.
 
     ``effects``: effect specs beyond the paper's sources (name -> parameters); ``sensor``: static
     metadata fields that replace the random sensor (operating conditions stay random);
-    ``photo_variants``, ``procedural``: see ``images.source_images``.
+    ``photo_variants``, ``procedural``, ``imagery``: see ``images.source_images`` (the defaults keep
+    every earlier dataset bit-identical).
     """
     if n < 1 or patch_size < 8:
         raise ValueError("need n >= 1 patches of at least 8x8 px")
     rng = np.random.default_rng(seed)
     prior = PhysicsPrior(camera_model(effects))  # validates the specs before any work
-    images = source_images(split, rng, variants=photo_variants, procedural=procedural)
+    images = source_images(split, rng, variants=photo_variants, procedural=procedural, imagery=imagery)
     n_groups = -(-n // group)
     clean, source = sample_clean_patches(images, rng, n, patch_size)
     noisy = np.empty_like(clean)
@@ -145,7 +146,7 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
         "tables": np.stack(tables), "overridden": overridden, "unexpected": unexpected,
         "effects_json": np.array(json.dumps(_plain(effects), sort_keys=True)),
         "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)), "photo_variants": np.array(photo_variants),
-        "procedural": np.array(procedural),
+        "procedural": np.array(procedural), "imagery_json": np.array(imagery.to_json()),
         **{f"truth_{k}": v for k, v in truth.items()},
     }
 
@@ -167,6 +168,11 @@ def photo_variants_of(data: dict[str, np.ndarray]) -> int:
 def procedural_of(data: dict[str, np.ndarray]) -> int:
     """Procedural images a dataset was generated with (0 for datasets older than the option)."""
     return int(data["procedural"]) if "procedural" in data else 0
+
+
+def imagery_of(data: dict[str, np.ndarray]) -> Imagery:
+    """The training imagery options a dataset was generated with (the defaults for datasets older than them)."""
+    return Imagery.from_dict(json.loads(str(data["imagery_json"]))) if "imagery_json" in data else Imagery()
 
 
 def save(data: dict[str, np.ndarray], path: Path) -> None:

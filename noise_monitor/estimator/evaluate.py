@@ -2,7 +2,8 @@
 
 Held-out images come from other packages than training: the benchmark uses matplotlib's sample
 images plus dead-leaves images (most of its patches), the ``photos`` set matplotlib's and PyWavelets'
-sample images only; noise and crops come from seeds never used in training. Metrics are the paper's:
+sample images only (2x downsampled like every photograph), ``photos_native`` the same images at their
+native resolution (an unknown camera's scale may be either); noise and crops come from seeds never used in training. Metrics are the paper's:
 Bias = |mean(est - truth)|, Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). Alarms: false alarms = |xi| > 1 DN on (a); hits on
 (b)/(c) = |xi| > 1 DN with the true sign, among patches with |xi_true| > 2 DN. Peers measure sigma_image
 (xi = physics sigma_model - their estimate). With a confidence output (``measurable``), ``declined``
@@ -41,6 +42,9 @@ HELDOUT_SETS = {
     "benchmark": HeldoutSet("heldout", {"a": 1001, "b": 1002, "c": 1003}, "matplotlib sample images + unseen dead leaves"),
     "photos": HeldoutSet("photos", {"a": 2001, "b": 2002, "c": 2003},
                          "matplotlib + PyWavelets sample images only (no dead leaves)"),
+    "photos_native": HeldoutSet("photos_native", {"a": 2201, "b": 2202, "c": 2203},
+                                "matplotlib + PyWavelets sample images at native resolution (no 2x downsample, "
+                                "no dead leaves)"),
 }
 ALARM_DN = 1.0
 HIT_TRUTH_DN = 2.0

@@ -18,14 +18,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variants", nargs="+", default=None, choices=NAMES,
                    help="estimators to evaluate (default: every one with weights)")
     p.add_argument("--weights-dir", type=Path, default=WEIGHTS_DIR)
+    p.add_argument("--compare", nargs="+", default=[], metavar="LABEL=WEIGHTS",
+                   help="also evaluate these full_meta weights in the same run, reported as LABEL (e.g. "
+                        "full_meta_old=old/full_meta.pt: old and new weights side by side on the same data)")
     p.add_argument("--patches", type=int, default=600, help="held-out patches per part")
     p.add_argument("--patch-size", type=int, nargs="+", default=None,
                    help="evaluate every variant on patches of this size, one benchmark per size given (default: each "
                         "variant's training size; the paper's protocol is 128)")
     p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
     p.add_argument("--heldout", nargs="+", default=["benchmark"], choices=list(HELDOUT_SETS),
-                   help="held-out sets: benchmark (matplotlib images + dead leaves) and/or photos (matplotlib + "
-                        "PyWavelets images only); one run per set and patch size")
+                   help="held-out sets: benchmark (matplotlib images + dead leaves), photos (matplotlib + PyWavelets "
+                        "images only, 2x downsampled) and/or photos_native (the same at native resolution); one run per "
+                        "set and patch size")
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
     p.add_argument("--cache", type=Path, default=Path("out/estimator_eval"), help="held-out data cache directory")
@@ -43,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
     estimators = {n: load(n, args.device, weights=args.weights_dir / f"{n}.pt") for n in names}
+    for label, path in compared(args.compare, names).items():
+        estimators[label] = load("full_meta", args.device, weights=path)
     runs = {_label(size, hs): evaluate(estimators, args, size, hs)
             for hs in args.heldout for size in args.patch_size or [None]}
     for label, results in runs.items():
@@ -57,6 +63,21 @@ def run(args: argparse.Namespace) -> int:
         for name in names:
             print(f"model card: {write_card(name, args.weights_dir, runs, command)}")
     return 0
+
+
+def compared(specs: list[str], names: list[str]) -> dict[str, Path]:
+    """``LABEL=WEIGHTS`` pairs of ``--compare`` (labels distinct from the evaluated names; files must exist)."""
+    out: dict[str, Path] = {}
+    for spec in specs:
+        label, sep, path = spec.partition("=")
+        if not sep or not label or not path:
+            raise ValueError(f"--compare wants LABEL=WEIGHTS, got {spec!r}")
+        if label in names or label in out or label in NAMES:
+            raise ValueError(f"--compare label {label!r} is already used; choose another")
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"--compare: weights {path} not found")
+        out[label] = Path(path)
+    return out
 
 
 def _label(size: int | None, heldout_set: str) -> str:

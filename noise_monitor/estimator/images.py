@@ -3,11 +3,17 @@
 Training photographs come from scikit-image's bundled samples; held-out photographs from
 matplotlib's bundled sample data (a different package, never used in training) and, for the
 images-only check, also PyWavelets' bundled photographs. Only images that load offline are listed.
-Photographs are downsampled 2x (area) to suppress their own noise.
+Photographs are downsampled 2x (area) to suppress their own noise (the ``photos_native`` split keeps the
+held-out ones at their native resolution). :class:`Imagery` describes the training imagery beyond the
+paper-style recipe: photographs at 1x and arbitrary rotations, JPEG-compressed sources and man-made
+procedural scenes (``procedural.manmade_images``).
 """
 from __future__ import annotations
 
 import gzip
+import json
+import math
+from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
@@ -21,11 +27,67 @@ MATPLOTLIB_PHOTOS = ("grace_hopper.jpg", "s1045.ima.gz", "jacksboro_fault_dem.np
 #: PyWavelets' bundled photographs (its ``camera`` is scikit-image's, a training image: not listed).
 PYWAVELETS_PHOTOS = ("aero", "ascent")
 #: train: scikit-image photos + dead leaves; heldout: matplotlib images + dead leaves (the benchmark);
-#: photos: matplotlib + PyWavelets images only (no dead leaves; generalisation to photographs).
-SPLITS = ("train", "heldout", "photos")
+#: photos: matplotlib + PyWavelets images only (no dead leaves; generalisation to photographs);
+#: photos_native: the same images at their native resolution (no 2x downsample: the scale is unknown).
+SPLITS = ("train", "heldout", "photos", "photos_native")
 #: Ranges (log-uniform) of the area downscale and gamma of ``photo_variants``.
 PHOTO_DOWNSCALE = (1.5, 4.0)
 PHOTO_GAMMA = (0.6, 1.6)
+#: Range of the JPEG quality of ``Imagery.jpeg`` (uniform integers, inclusive).
+JPEG_QUALITY = (40, 95)
+
+
+@dataclass(frozen=True)
+class Imagery:
+    """What the training imagery holds beyond the paper-style recipe; the defaults add nothing, so a
+    dataset generated with them is bit-identical to one generated before the option existed.
+
+    - ``photo_scales``: log-uniform range of the area downscale of the photo variants (``photo_variants``);
+      1 = native resolution;
+    - ``photo_native``: probability that a photo variant is kept at its native resolution (no resampling);
+    - ``photo_rotate``: probability that a photo variant is rotated by an arbitrary angle (Lanczos, at
+      native resolution before the downscale; cropped to the largest axis-aligned rectangle inside);
+    - ``jpeg``: probability that a clean source image (any kind) is JPEG-compressed at a quality in
+      ``JPEG_QUALITY`` before cropping (blocking and ringing as scene content);
+    - ``manmade``: man-made procedural scenes added (``procedural.manmade_images``: dead leaves of
+      polygons, periodic bars).
+    """
+
+    photo_scales: tuple[float, float] = PHOTO_DOWNSCALE
+    photo_native: float = 0.0
+    photo_rotate: float = 0.0
+    jpeg: float = 0.0
+    manmade: int = 0
+
+    def __post_init__(self) -> None:
+        lo, hi = self.photo_scales
+        if not 1.0 <= lo <= hi:
+            raise ValueError(f"photo scales must be 1 <= low <= high, got {self.photo_scales}")
+        for name in ("photo_native", "photo_rotate", "jpeg"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)}")
+        if self.manmade < 0:
+            raise ValueError(f"manmade images must be >= 0, got {self.manmade}")
+
+    @property
+    def default_photos(self) -> bool:
+        """True when the photo variants are drawn as before the option (``photo_variants`` alone)."""
+        return (tuple(self.photo_scales) == PHOTO_DOWNSCALE and self.photo_native == 0.0
+                and self.photo_rotate == 0.0)
+
+    def is_default(self) -> bool:
+        return self == Imagery()
+
+    def as_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    def to_json(self) -> str:
+        return json.dumps(self.as_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Imagery:
+        return cls(**{**d, "photo_scales": tuple(d.get("photo_scales", PHOTO_DOWNSCALE))})
+
 
 
 def to_gray_dn(img: np.ndarray) -> np.ndarray:
@@ -48,7 +110,8 @@ def _downsample(a: np.ndarray) -> np.ndarray:
     return cv2.resize(a, (a.shape[1] // 2, a.shape[0] // 2), interpolation=cv2.INTER_AREA)
 
 
-def _skimage_originals() -> list[np.ndarray]:
+def skimage_originals() -> list[np.ndarray]:
+    """The training photographs at their native resolution (grayscale DN)."""
     import skimage.data
 
     out = []
@@ -59,15 +122,52 @@ def _skimage_originals() -> list[np.ndarray]:
 
 
 def skimage_photos() -> list[np.ndarray]:
-    return [_downsample(img) for img in _skimage_originals()]
+    return [_downsample(img) for img in skimage_originals()]
 
 
-def photo_variants(rng: np.random.Generator, per_photo: int) -> list[np.ndarray]:
+def inscribed_size(w: int, h: int, angle: float) -> tuple[int, int]:
+    """Width and height of the largest axis-aligned rectangle inside a w x h rectangle rotated by
+    ``angle`` (radians) about its centre (floored, 1 px margin)."""
+    sin_a, cos_a = abs(math.sin(angle)), abs(math.cos(angle))
+    long_side, short_side = max(w, h), min(w, h)
+    if short_side <= 2.0 * sin_a * cos_a * long_side or abs(sin_a - cos_a) < 1e-10:
+        x = 0.5 * short_side  # half-constrained: two corners touch the longer sides
+        wr, hr = (x / sin_a, x / cos_a) if w >= h else (x / cos_a, x / sin_a)
+    else:
+        cos_2a = cos_a * cos_a - sin_a * sin_a
+        wr, hr = (w * cos_a - h * sin_a) / cos_2a, (h * cos_a - w * sin_a) / cos_2a
+    return max(int(wr) - 2, 1), max(int(hr) - 2, 1)
+
+
+def rotate_inscribed(img: np.ndarray, angle_deg: float) -> np.ndarray:
+    """``img`` rotated by ``angle_deg`` about its centre (Lanczos, at its own resolution) and cropped to
+    the largest axis-aligned rectangle inside the rotated image (no border fill), clipped to 0..255."""
+    h, w = img.shape
+    rot = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), angle_deg, 1.0)
+    out = cv2.warpAffine(img, rot, (w, h), flags=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REFLECT)
+    cw, ch = inscribed_size(w, h, math.radians(angle_deg))
+    y0, x0 = (h - ch) // 2, (w - cw) // 2
+    return np.clip(out[y0:y0 + ch, x0:x0 + cw], 0.0, 255.0)
+
+
+def jpeg_compress(img: np.ndarray, quality: int) -> np.ndarray:
+    """The image (DN) after a JPEG round trip at ``quality`` (cv2; rounded to 8 bits first)."""
+    ok, buf = cv2.imencode(".jpg", np.clip(np.rint(img), 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    decoded = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE) if ok else None
+    if decoded is None:
+        raise RuntimeError("JPEG round trip failed")
+    return decoded.astype(np.float32)
+
+
+def photo_variants(rng: np.random.Generator, per_photo: int, imagery: Imagery | None = None) -> list[np.ndarray]:
     """``per_photo`` versions of every training photograph, each area-downsampled by a random factor
     (``PHOTO_DOWNSCALE``, for originals of at least 256 px) and with a random gamma (``PHOTO_GAMMA``):
-    the same scenes with texture at other scales and contrasts than the fixed 2x of ``skimage_photos``."""
+    the same scenes with texture at other scales and contrasts than the fixed 2x of ``skimage_photos``.
+    With ``imagery`` (non-default photo options): :func:`diverse_photo_variants`."""
+    if imagery is not None and not imagery.default_photos:
+        return diverse_photo_variants(rng, per_photo, imagery)
     out = []
-    for img in _skimage_originals():
+    for img in skimage_originals():
         for _ in range(per_photo):
             f = float(np.exp(rng.uniform(*np.log(PHOTO_DOWNSCALE)))) if min(img.shape) >= 256 else 1.0
             im = img if f == 1.0 else cv2.resize(img, (int(img.shape[1] / f), int(img.shape[0] / f)),
@@ -77,7 +177,31 @@ def photo_variants(rng: np.random.Generator, per_photo: int) -> list[np.ndarray]
     return out
 
 
-def matplotlib_photos() -> list[np.ndarray]:
+def diverse_photo_variants(rng: np.random.Generator, per_photo: int, imagery: Imagery) -> list[np.ndarray]:
+    """``per_photo`` versions of every training photograph: with probability ``imagery.photo_rotate``
+    rotated by an arbitrary angle (:func:`rotate_inscribed`, at native resolution); then kept at native
+    resolution with probability ``imagery.photo_native`` or else area-downsampled by a log-uniform factor
+    in ``imagery.photo_scales`` (originals of at least 256 px; smaller ones stay native); and a random
+    gamma (``PHOTO_GAMMA``). Scenes at the photos' own scale (where their fine content and grain sit at
+    pixel scale) and with edges at every angle."""
+    out = []
+    lo, hi = np.log(imagery.photo_scales)
+    for img in skimage_originals():
+        for _ in range(per_photo):
+            im = img
+            if rng.random() < imagery.photo_rotate:
+                im = rotate_inscribed(im, float(rng.uniform(0.0, 360.0)))
+            native = rng.random() < imagery.photo_native
+            f = float(np.exp(rng.uniform(lo, hi)))
+            if not native and f > 1.0 and min(img.shape) >= 256:
+                im = cv2.resize(im, (max(int(im.shape[1] / f), 1), max(int(im.shape[0] / f), 1)),
+                                interpolation=cv2.INTER_AREA)
+            gamma = np.exp(rng.uniform(*np.log(PHOTO_GAMMA)))
+            out.append((255.0 * (np.clip(im, 0.0, 255.0) / 255.0) ** gamma).astype(np.float32))
+    return out
+
+
+def matplotlib_photos(native: bool = False) -> list[np.ndarray]:
     import matplotlib.cbook as cbook
     import matplotlib.image as mimage
     from matplotlib.colors import LightSource
@@ -93,14 +217,15 @@ def matplotlib_photos() -> list[np.ndarray]:
             img = LightSource(azdeg=315, altdeg=45).hillshade(dem, vert_exag=0.05)  # shaded relief
         else:
             img = mimage.imread(path)
-        out.append(_downsample(to_gray_dn(img)))
+        out.append(to_gray_dn(img) if native else _downsample(to_gray_dn(img)))
     return out
 
 
-def pywavelets_photos() -> list[np.ndarray]:
+def pywavelets_photos(native: bool = False) -> list[np.ndarray]:
     import pywt.data
 
-    return [_downsample(to_gray_dn(getattr(pywt.data, name)())) for name in PYWAVELETS_PHOTOS]
+    imgs = [to_gray_dn(getattr(pywt.data, name)()) for name in PYWAVELETS_PHOTOS]
+    return imgs if native else [_downsample(im) for im in imgs]
 
 
 def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) -> np.ndarray:
@@ -115,26 +240,41 @@ def dead_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 600) ->
 
 
 def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
-                  variants: int = 0, procedural: int = 0) -> list[np.ndarray]:
+                  variants: int = 0, procedural: int = 0, imagery: Imagery = Imagery()) -> list[np.ndarray]:
     """Clean images of a split (see ``SPLITS``): its photographs plus ``n_dead_leaves`` dead-leaves images
-    from ``rng`` (none for ``photos``). ``variants`` > 0 (train only): the training photographs as
-    ``photo_variants(rng, variants)`` instead of once at 2x; ``procedural`` > 0 (train only): that many
-    images of pixel-scale structure from ``procedural.procedural_images`` besides."""
+    from ``rng`` (none for ``photos`` and ``photos_native``). ``variants`` > 0 (train only): the training
+    photographs as ``photo_variants(rng, variants, imagery)`` instead of once at 2x; ``procedural`` > 0
+    (train only): that many images of pixel-scale structure from ``procedural.procedural_images`` besides;
+    ``imagery`` (train only; :class:`Imagery`): ``imagery.manmade`` man-made scenes besides, then each
+    image JPEG-compressed with probability ``imagery.jpeg``. The draws of ``imagery`` come after all
+    others, so its defaults leave every earlier dataset bit-identical."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     if variants < 0 or (variants and split != "train"):
         raise ValueError(f"photo variants must be >= 0 and only for the train split, got {variants} for {split!r}")
     if procedural < 0 or (procedural and split != "train"):
         raise ValueError(f"procedural images must be >= 0 and only for the train split, got {procedural} for {split!r}")
-    if split == "photos":
-        return matplotlib_photos() + pywavelets_photos()
+    if not imagery.is_default() and split != "train":
+        raise ValueError(f"imagery options are only for the train split, got {imagery} for {split!r}")
+    if not imagery.default_photos and not variants:
+        raise ValueError("the photo options of the imagery (scales, native, rotate) need photo variants (variants >= 1)")
+    if split in ("photos", "photos_native"):
+        native = split == "photos_native"
+        return matplotlib_photos(native) + pywavelets_photos(native)
     if variants:
-        photos = photo_variants(rng, variants)
+        photos = photo_variants(rng, variants, imagery)
     else:
         photos = skimage_photos() if split == "train" else matplotlib_photos()
-    from .procedural import procedural_images
+    from .procedural import manmade_images, procedural_images
 
-    return photos + [dead_leaves(rng) for _ in range(n_dead_leaves)] + procedural_images(rng, procedural)
+    images = photos + [dead_leaves(rng) for _ in range(n_dead_leaves)] + procedural_images(rng, procedural)
+    if imagery.manmade:
+        images += manmade_images(rng, imagery.manmade)
+    if imagery.jpeg:
+        lo, hi = JPEG_QUALITY
+        images = [jpeg_compress(im, int(rng.integers(lo, hi + 1))) if rng.random() < imagery.jpeg else im
+                  for im in images]
+    return images
 
 
 def sample_clean_patches(images: list[np.ndarray], rng: np.random.Generator, n: int, size: int,

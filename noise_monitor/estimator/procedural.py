@@ -104,3 +104,114 @@ def procedural_images(rng: np.random.Generator, n: int, size: int = SIZE) -> lis
     """``n`` images (float32 DN, clipped to 0..255), the kinds of :data:`KINDS` in turn."""
     kinds = list(KINDS.values())
     return [np.clip(kinds[i % len(kinds)](rng, size), 0.0, 255.0).astype(np.float32) for i in range(n)]
+
+
+# --- man-made scenes: straight edges at arbitrary angles ------------------------------------------
+#: Supersampling factor of the man-made scenes (anti-aliasing by area downsampling).
+SUPERSAMPLE = 4
+#: Periods (px) of the periodic bars (stairs, fences, blinds; log-uniform).
+BAR_PERIODS = (4.0, 30.0)
+#: Contrast (DN) of a shape's edge or a bar against its neighbours (log-uniform).
+EDGE_CONTRAST = (3.0, 150.0)
+
+
+def _ramp(rng: np.random.Generator, h: int, w: int, level: float, slope_dn: float) -> np.ndarray:
+    """A linear shading ramp over an h x w box: ``level`` at its centre, changing by up to ``slope_dn`` DN
+    across the box in a random direction."""
+    angle = rng.uniform(0, 2 * np.pi)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    u = (np.cos(angle) * (xx - w / 2) + np.sin(angle) * (yy - h / 2)) / max(h, w, 1)
+    return level + float(rng.uniform(-slope_dn, slope_dn)) * u
+
+
+def _finish(rng: np.random.Generator, hi_res: np.ndarray) -> np.ndarray:
+    """Area-downsample a supersampled scene (anti-aliased edges) and blur it slightly half the time."""
+    size = hi_res.shape[0] // SUPERSAMPLE
+    img = cv2.resize(hi_res, (size, size), interpolation=cv2.INTER_AREA)
+    if rng.random() < 0.5:
+        img = cv2.GaussianBlur(img, (0, 0), float(rng.uniform(0.3, 0.8)))
+    return img
+
+
+def _random_polygon(rng: np.random.Generator, centre: np.ndarray, radius: float) -> np.ndarray:
+    """Vertices (K, 2) of a rotated rectangle, a thin stripe or a convex polygon of about ``radius``."""
+    kind = rng.choice(3, p=(0.45, 0.2, 0.35))
+    angle = rng.uniform(0, np.pi)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    if kind == 0:  # rectangle of random aspect
+        half = radius * np.array([1.0, float(np.exp(rng.uniform(np.log(0.2), 0.0)))])
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+    elif kind == 1:  # stripe: long and thin (a pole, a rail, a window frame)
+        half = np.array([radius * rng.uniform(1.5, 4.0), float(rng.uniform(0.75, 4.0)) * SUPERSAMPLE])
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+    else:  # convex polygon: sorted random angles on an ellipse
+        k = int(rng.integers(3, 9))
+        t = np.sort(rng.uniform(0, 2 * np.pi, k))
+        corners = np.stack([np.cos(t), rng.uniform(0.4, 1.0) * np.sin(t)], axis=1) * radius
+    return centre + corners @ rot.T
+
+
+def polygon_leaves(rng: np.random.Generator, size: int = SIZE, leaves: int | None = None) -> np.ndarray:
+    """Dead leaves of polygons: occluding rotated rectangles, stripes and convex polygons at arbitrary
+    angles (log-uniform sizes, drawn in random order), each filled with a smooth shading ramp; anti-aliased by 4x supersampling,
+    slightly blurred half the time. Man-made content (walls, windows, furniture, stairs seen from afar):
+    large flat areas separated by straight edges, which disks do not have. ``leaves``: shapes drawn
+    (default 120 per 256 x 256 px)."""
+    leaves = leaves if leaves is not None else max(int(round(120 * (size / SIZE) ** 2)), 1)
+    s = size * SUPERSAMPLE
+    img = _ramp(rng, s, s, float(rng.uniform(0, 255)), float(rng.uniform(0, 80)))
+    radii = np.exp(rng.uniform(np.log(1.5 * SUPERSAMPLE), np.log(s / 3.0), leaves))
+    for radius in radii:
+        poly = _random_polygon(rng, rng.uniform(0, s, 2), float(radius))
+        x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int), 0)
+        x1, y1 = np.minimum(np.ceil(poly.max(axis=0)).astype(int) + 1, s)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        cv2.fillPoly(mask, [np.round(poly - [x0, y0]).astype(np.int32)], 1)
+        shade = _ramp(rng, y1 - y0, x1 - x0, float(rng.uniform(0, 255)), float(rng.uniform(0, 60)))
+        box = img[y0:y1, x0:x1]
+        box[mask > 0] = shade[mask > 0]
+    return _finish(rng, img)
+
+
+def bars(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
+    """Periodic bars (stairs, fences, blinds) of 4-30 px periods at arbitrary angles over a shaded
+    background: one to three groups, each a rotated window of bars with a random duty cycle, alternating
+    lit / shaded faces (stairs: tread and riser) and a shading ramp along the bars; anti-aliased by 4x
+    supersampling, slightly blurred half the time."""
+    s = size * SUPERSAMPLE
+    img = _ramp(rng, s, s, float(rng.uniform(0, 255)), float(rng.uniform(0, 100)))
+    yy, xx = np.mgrid[0:s, 0:s].astype(np.float32)
+    for _ in range(int(rng.integers(1, 4))):
+        period = float(np.exp(rng.uniform(*np.log(BAR_PERIODS)))) * SUPERSAMPLE
+        angle = rng.uniform(0, np.pi)
+        u = np.cos(angle) * xx + np.sin(angle) * yy
+        v = -np.sin(angle) * xx + np.cos(angle) * yy
+        phase = np.mod(u / period + rng.uniform(0, 1), 1.0)
+        duty = rng.uniform(0.2, 0.8)
+        base = float(rng.uniform(0, 255))
+        contrast = float(np.exp(rng.uniform(*np.log(EDGE_CONTRAST)))) * rng.choice([-1.0, 1.0])
+        along = float(rng.uniform(-40, 40)) * v / s  # shading along the bars
+        across = float(rng.uniform(-0.3, 0.3)) * contrast * phase  # a ramp over each face (lit stair treads)
+        group = np.where(phase < duty, base + contrast, base) + along + across
+        # the group's window: a rotated rectangle of 30-120 % of the image's side
+        cx, cy = rng.uniform(0.2 * s, 0.8 * s, 2)
+        half = rng.uniform(0.15 * s, 0.6 * s, 2)
+        wa = rng.uniform(0, np.pi)
+        wu = np.abs(np.cos(wa) * (xx - cx) + np.sin(wa) * (yy - cy))
+        wv = np.abs(-np.sin(wa) * (xx - cx) + np.cos(wa) * (yy - cy))
+        inside = (wu < half[0]) & (wv < half[1])
+        img[inside] = group[inside]
+    return _finish(rng, img)
+
+
+MANMADE_KINDS: dict[str, Callable[[np.random.Generator, int], np.ndarray]] = {
+    "polygons": polygon_leaves, "bars": bars}
+
+
+def manmade_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
+    """``n`` man-made procedural scenes (float32 DN, clipped to 0..255), the kinds of :data:`MANMADE_KINDS`
+    in turn: straight anti-aliased edges at arbitrary angles, flat shaded faces, periodic bars."""
+    kinds = list(MANMADE_KINDS.values())
+    return [np.clip(kinds[i % len(kinds)](rng, size), 0.0, 255.0).astype(np.float32) for i in range(n)]

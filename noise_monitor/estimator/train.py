@@ -32,6 +32,8 @@ class TrainSettings:
     checkpoint_every: int = 250
     #: full_meta only, with ``init``: add a confidence head and train it alone (the measurement frozen)
     confidence: bool = False
+    #: also keep every checkpoint's weights as ``step_<N>.pt`` (to choose one on tuning sets)
+    keep_checkpoints: bool = False
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -174,6 +176,10 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
             ck = _checkpoint(net, settings, step, time.time() - t0, opt, sched, rng)
             torch.save({**ck, "prior_steps": prior_steps, "prior_elapsed_s": prior_s, "effects": effects,
                         "sensor": sensor}, ckpt_path)
+            if settings.keep_checkpoints:
+                torch.save({**_checkpoint(net, settings, step, time.time() - t0), "prior_steps": prior_steps,
+                            "prior_elapsed_s": prior_s, "effects": effects, "sensor": sensor},
+                           out_dir / f"step_{step}.pt")
     bar.close()
     final = {**_checkpoint(net, settings, step, time.time() - t0), "prior_steps": prior_steps, "prior_elapsed_s": prior_s,
              "effects": effects, "sensor": sensor}

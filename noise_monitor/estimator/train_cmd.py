@@ -9,8 +9,8 @@ from pathlib import Path
 from ..physics import load_profile
 from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
-from .data import Scheme, camera_of, generate, load, photo_variants_of, procedural_of, save
-from .images import PHOTO_DOWNSCALE
+from .data import Scheme, camera_of, generate, imagery_of, load, photo_variants_of, procedural_of, save
+from .images import JPEG_QUALITY, PHOTO_DOWNSCALE, Imagery
 from .networks import VARIANTS
 from .train import TrainSettings, train
 
@@ -34,10 +34,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--procedural", type=int, default=0,
                    help="add N procedural images of pixel-scale structure to the training images (fractal hillshades, "
                         "gratings, fabric, halftone, text; the shipped confidence head uses 40)")
+    p.add_argument("--photo-scales", type=float, nargs=2, default=list(PHOTO_DOWNSCALE), metavar=("LOW", "HIGH"),
+                   help="with --photo-variants: log-uniform range of the photos' area downscale (1 = native; default "
+                        f"{PHOTO_DOWNSCALE[0]} {PHOTO_DOWNSCALE[1]:g})")
+    p.add_argument("--photo-native", type=float, default=0.0, metavar="P",
+                   help="with --photo-variants: probability that a variant keeps the photo's native resolution")
+    p.add_argument("--photo-rotate", type=float, default=0.0, metavar="P",
+                   help="with --photo-variants: probability that a variant is rotated by an arbitrary angle")
+    p.add_argument("--jpeg", type=float, default=0.0, metavar="P",
+                   help=f"probability that a clean source image is JPEG-compressed (quality {JPEG_QUALITY[0]}-"
+                        f"{JPEG_QUALITY[1]}) before cropping")
+    p.add_argument("--manmade", type=int, default=0, metavar="N",
+                   help="add N man-made procedural scenes (dead leaves of polygons, periodic bars: straight edges at "
+                        "arbitrary angles)")
     p.add_argument("--width", type=int, default=None, help="conv features (default: 16)")
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint.pt")
+    p.add_argument("--checkpoint-every", type=int, default=250, help="steps between checkpoints")
+    p.add_argument("--keep-checkpoints", action="store_true",
+                   help="also keep the weights of every checkpoint as <out>/step_<N>.pt (to choose one on tuning sets)")
     p.add_argument("--init", type=Path, default=None, help="start from these weights (<variant>.pt; fine-tuning)")
     p.add_argument("--confidence", action="store_true",
                    help="full_meta with --init: add a confidence head (the measurement's predicted error; patches "
@@ -58,8 +74,13 @@ def _check(args: argparse.Namespace) -> None:
     for name in ("steps", "batch", "patches", "threads"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1")
-    if args.photo_variants < 0 or args.procedural < 0:
-        raise ValueError("--photo-variants and --procedural must be >= 0")
+    if args.photo_variants < 0 or args.procedural < 0 or args.manmade < 0:
+        raise ValueError("--photo-variants, --procedural and --manmade must be >= 0")
+    if args.checkpoint_every < 1:
+        raise ValueError("--checkpoint-every must be >= 1")
+    imagery(args)  # validates the imagery options
+    if not imagery(args).default_photos and not args.photo_variants:
+        raise ValueError("--photo-scales, --photo-native and --photo-rotate need --photo-variants >= 1")
     if args.patch_size < 16:
         raise ValueError("--patch-size must be >= 16")
     if args.lr <= 0:
@@ -75,9 +96,18 @@ def _command(args: argparse.Namespace) -> str:
         if key.startswith("_") or key in ("command", "json") or value is None or value is False:
             continue
         flag = "--" + key.replace("_", "-")
+        if key == "photo_scales":  # one option of two values
+            parts.append(f"{flag} {' '.join(f'{float(v):g}' for v in value)}")
+            continue
         for v in value if isinstance(value, list) else [value]:
             parts.append(flag if v is True else f"{flag} {v}")
     return " ".join(parts)
+
+
+def imagery(args: argparse.Namespace) -> Imagery:
+    """The training imagery options of the command line."""
+    return Imagery(photo_scales=(float(args.photo_scales[0]), float(args.photo_scales[1])),
+                   photo_native=args.photo_native, photo_rotate=args.photo_rotate, jpeg=args.jpeg, manmade=args.manmade)
 
 
 def camera(profile: str | None) -> tuple[dict, dict]:
@@ -107,17 +137,22 @@ def run(args: argparse.Namespace) -> int:
         if procedural_of(data) != args.procedural:
             raise ValueError(f"dataset {data_path} was generated with --procedural {procedural_of(data)}, not "
                              f"{args.procedural}; give a new --data path")
+        if imagery_of(data) != imagery(args):
+            raise ValueError(f"dataset {data_path} was generated with other imagery options "
+                             f"({imagery_of(data).to_json()}) than {imagery(args).to_json()}; give a new --data path")
     else:
         data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme(), effects=effects, sensor=sensor,
-                        photo_variants=args.photo_variants, procedural=args.procedural)
+                        photo_variants=args.photo_variants, procedural=args.procedural, imagery=imagery(args))
         save(data, data_path)
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
-                             width=args.width, depth=args.depth, confidence=args.confidence)
+                             width=args.width, depth=args.depth, confidence=args.confidence,
+                             checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),
                "photo_variants": args.photo_variants, "procedural": args.procedural,
+               **({"imagery": imagery(args).as_dict()} if not imagery(args).is_default() else {}),
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
                "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
                "settings": vars(settings)}
