@@ -46,47 +46,69 @@ def _bands(h: int, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
     return window, high, high & (r < LOW_SUB), r >= HIGH_SUB, np.broadcast_to(sector, r.shape)
 
 
+@cache
+def _plane(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """(basis (h*w, 3), its pseudo-inverse (3, h*w)) of a least-squares plane on an h x w patch."""
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    basis = np.stack([np.ones(h * w), (yy.ravel() - yy.mean()) / h, (xx.ravel() - xx.mean()) / w], axis=1)
+    return basis, np.linalg.pinv(basis)
+
+
 def _detrend(x: np.ndarray) -> np.ndarray:
     """Each patch minus its least-squares plane."""
     n, h, w = x.shape
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    basis = np.stack([np.ones(h * w), (yy.ravel() - yy.mean()) / h, (xx.ravel() - xx.mean()) / w], axis=1)
+    basis, pinv = _plane(h, w)
     flat = x.reshape(n, -1).astype(np.float64)
-    coef, *_ = np.linalg.lstsq(basis, flat.T, rcond=None)
-    return (flat - (basis @ coef).T).reshape(n, h, w)
+    return (flat - (flat @ pinv.T) @ basis.T).reshape(n, h, w)
+
+
+@cache
+def _band_means(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """(indices of the high band in the flattened rfft2 grid, (band cells, 6) weights: the means over the
+    high band, the lower and upper sub-bands and the four orientation sectors, as one matrix product)."""
+    _, high, low_sub, high_sub, sector = _bands(h, w)
+    idx = np.flatnonzero(high)
+    masks = [high, low_sub, high_sub] + [high & (sector == k) for k in range(4)]
+    cols = [m.ravel()[idx].astype(np.float64) for m in masks]
+    return idx, np.stack([c / c.sum() for c in cols], axis=1)
 
 
 def _spectral(x: np.ndarray) -> np.ndarray:
     """Statistics 0-3 of the module docstring, uncalibrated, (N, 4)."""
     n, h, w = x.shape
-    window, high, low_sub, high_sub, sector = _bands(h, w)
+    window = _bands(h, w)[0]
+    idx, weights = _band_means(h, w)
     out = np.empty((n, 4))
     for i in range(0, n, _CHUNK):
-        p = np.abs(np.fft.rfft2(_detrend(x[i:i + _CHUNK]) * window)) ** 2 + 1e-12
-        ph = p[:, high]
-        mean = ph.mean(axis=1)
-        out[i:i + _CHUNK, 0] = np.log(mean) - np.log(ph).mean(axis=1)
-        out[i:i + _CHUNK, 1] = np.log(p[:, low_sub].mean(axis=1) / p[:, high_sub].mean(axis=1))
-        out[i:i + _CHUNK, 2] = np.log(ph.max(axis=1) / mean)
-        sec = np.stack([p[:, high & (sector == k)].mean(axis=1) for k in range(4)], axis=1)
+        f = np.fft.rfft2(_detrend(x[i:i + _CHUNK]) * window)
+        ph = (f.real**2 + f.imag**2).reshape(f.shape[0], -1)[:, idx] + 1e-12  # high-band power
+        m = ph @ weights  # means: high band, lower / upper sub-band, four sectors
+        out[i:i + _CHUNK, 0] = np.log(m[:, 0]) - np.log(ph).mean(axis=1)
+        out[i:i + _CHUNK, 1] = np.log(m[:, 1] / m[:, 2])
+        out[i:i + _CHUNK, 2] = np.log(ph.max(axis=1) / m[:, 0])
+        sec = m[:, 3:]
         out[i:i + _CHUNK, 3] = np.log(sec.max(axis=1) / sec.min(axis=1))
     return out
 
 
-def _spatial(x: np.ndarray, shape: np.ndarray | None) -> np.ndarray:
+def _spatial(x: np.ndarray, shape: np.ndarray | None, fine: np.ndarray | None = None,
+             shaped: np.ndarray | None = None) -> np.ndarray:
     """Statistics 4-5 of the module docstring, uncalibrated, (N, 2); block energies divided by the model's
-    sigma shape when given (noise whose level follows the intensity is not texture)."""
+    sigma shape when given (noise whose level follows the intensity is not texture). ``fine``: the
+    patches' Immerkaer residual, ``shaped``: its block energies divided by the shape, if already computed."""
     n, h, w = x.shape
-    e1 = np.mean(np.square(immerkaer(x), dtype=np.float64), axis=(1, 2))
+    fine = immerkaer(x) if fine is None else fine
+    e1 = np.mean(np.square(fine, dtype=np.float64), axis=(1, 2))
     binned = x[:, :h // 2 * 2, :w // 2 * 2].reshape(n, h // 2, 2, w // 2, 2).mean(axis=(2, 4)).astype(np.float32)
     e2 = np.mean(np.square(immerkaer(binned), dtype=np.float64), axis=(1, 2))
-    blocks = block_energies(immerkaer(x) / (1.0 if shape is None else shape), BLOCK)
+    blocks = block_energies(fine / (1.0 if shape is None else shape), BLOCK) if shaped is None else shaped
     spread = np.log(blocks.mean(axis=1) + 1e-9) - np.log(np.quantile(blocks, 0.1, axis=1) + 1e-9)
     return np.stack([0.5 * np.log((4.0 * e2 + 1e-9) / (e1 + 1e-9)), spread], axis=1)
 
 
-def _raw(x: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray:
-    return np.concatenate([_spectral(x), _spatial(x, shape)], axis=1)
+def _raw(x: np.ndarray, shape: np.ndarray | None = None, fine: np.ndarray | None = None,
+         shaped: np.ndarray | None = None) -> np.ndarray:
+    return np.concatenate([_spectral(x), _spatial(x, shape, fine, shaped)], axis=1)
 
 
 @cache
@@ -97,12 +119,15 @@ def white_reference(h: int, w: int) -> np.ndarray:
     return _raw(noise).mean(axis=0)
 
 
-def texture_evidence(patches: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray:
+def texture_evidence(patches: np.ndarray, shape: np.ndarray | None = None, fine: np.ndarray | None = None,
+                     shaped: np.ndarray | None = None) -> np.ndarray:
     """(N, N_EVIDENCE) float32: each statistic of the module docstring minus its white-noise mean.
-    ``shape``: the model's per-pixel sigma shape (N, H, W) (``features.compact_inputs``), or None."""
+    ``shape``: the model's per-pixel sigma shape (N, H, W) (``features.compact_inputs``), or None;
+    ``fine`` (the patches' Immerkaer residual) and ``shaped`` (its block energies divided by ``shape``):
+    computed here unless given (the measurement's features share them)."""
     x = np.asarray(patches, dtype=np.float32)
     if x.ndim != 3 or min(x.shape[1:]) < 2 * BLOCK:
         raise ValueError(f"texture evidence needs (N, H, W) patches of at least {2 * BLOCK} px, got {x.shape}")
-    return (_raw(x, shape) - white_reference(*x.shape[1:])).astype(np.float32)
+    return (_raw(x, shape, fine, shaped) - white_reference(*x.shape[1:])).astype(np.float32)
 
 

@@ -44,11 +44,14 @@ def unit_noise_quantile(h: int, w: int) -> float:
     return float(np.quantile(block_energies(immerkaer(noise)), REFERENCE_QUANTILE, axis=1).mean())
 
 
-def reference_sigma(noisy: np.ndarray, shape: np.ndarray) -> np.ndarray:
+def reference_sigma(noisy: np.ndarray, shape: np.ndarray, shaped_energies: np.ndarray | None = None) -> np.ndarray:
     """Noise scale (DN) from the image alone: a low quantile of the block energies of the Immerkaer
-    residual divided by the model's sigma shape, corrected by its value on white noise."""
+    residual divided by the model's sigma shape (``shaped_energies``, computed here if None), corrected by
+    its value on white noise."""
     n, h, w = noisy.shape
-    q = np.quantile(block_energies(immerkaer(noisy) / shape), REFERENCE_QUANTILE, axis=1)
+    if shaped_energies is None:
+        shaped_energies = block_energies(immerkaer(noisy) / shape)
+    q = np.quantile(shaped_energies, REFERENCE_QUANTILE, axis=1)
     return np.maximum(np.sqrt(q / unit_noise_quantile(h, w)), SIGMA_MODEL_FLOOR)
 
 
@@ -66,18 +69,20 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
     sigma_map = np.maximum(phys.pop("sigma_map"), SIGMA_MAP_FLOOR)
-    shape = sigma_map / np.sqrt(np.mean(np.square(sigma_map, dtype=np.float64), axis=(1, 2), keepdims=True)).astype(np.float32)
-    ref = reference_sigma(noisy, shape)
+    shape = sigma_map / np.sqrt(np.mean(np.square(sigma_map), axis=(1, 2), keepdims=True))
+    fine = immerkaer(noisy)  # shared by the reference and the texture evidence
+    shaped = block_energies(fine / shape)
+    ref = reference_sigma(noisy, shape, shaped)
     norm = shape * ref.astype(np.float32)[:, None, None]
     resid = (noisy - smooth) / norm
     lap = laplacian(noisy) / (np.sqrt(LAPLACIAN_GAIN, dtype=np.float32) * norm)
     maps = np.stack([resid, lap, noisy / 255.0 - 0.5], axis=1).astype(np.float32)
     total = np.maximum(phys["total"], SIGMA_MODEL_FLOOR)
     shares = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1) / total[:, None] ** 2
-    energy = [np.log(np.mean(r.astype(np.float64) ** 2, axis=(1, 2)) + 1e-6)[:, None] for r in (resid, lap)]
+    energy = [np.log(np.mean(np.square(r), axis=(1, 2)).astype(np.float64) + 1e-6)[:, None] for r in (resid, lap)]
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
                               energy[1], block_energy_quantiles(lap)], axis=1).astype(np.float32)
     phys["reference"] = ref
     if evidence:
-        phys["evidence"] = texture_evidence(noisy, shape)
+        phys["evidence"] = texture_evidence(noisy, shape, fine, shaped)
     return maps, scalars, phys

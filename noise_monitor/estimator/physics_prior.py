@@ -102,7 +102,7 @@ def shrink_noise(smooth: np.ndarray, sigma: np.ndarray, k: int = SMOOTH_KERNEL) 
 
 
 def clean_level(smooth: np.ndarray, m1: np.ndarray) -> np.ndarray:
-    """Clean intensity (DN, float64) whose expected noisy value equals the smoothed value.
+    """Clean intensity (DN, float32) whose expected noisy value equals the smoothed value.
 
     Clipping at 0 and 255 biases the noisy mean by E[n | v] (the sum of the sources' tabulated means),
     so a smoothed flat patch at 0 DN reads a few DN; inverting v -> v + sum E[n | v] removes that bias
@@ -113,7 +113,7 @@ def clean_level(smooth: np.ndarray, m1: np.ndarray) -> np.ndarray:
     grid = np.arange(m1.shape[-1]) * TABLE_STEP_DN
     offset = np.interp(grid, np.maximum.accumulate(grid + m1.sum(axis=0)), grid) - grid
     level = np.clip(smooth, 0.0, 255.0).astype(np.float32)
-    return np.clip(level + _nearest(offset, level), 0.0, 255.0).astype(np.float64)
+    return np.clip(level + _nearest(offset, level), 0.0, 255.0)
 
 
 def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
@@ -141,12 +141,13 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
             level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float32)
             level = clean_level(shrink_noise(level, _nearest(sigma_level, level)), m1)
         else:
-            level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float64)
+            level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float32)
         i0, frac = grid_position(level, g)
         hist = histogram(i0, frac, g)
         sig[idx] = np.sqrt(np.maximum(hist @ m2.T - (hist @ m1.T) ** 2, 0.0))
         if sigma_map is not None:
-            sigma_map[idx] = sigma_level[i0] * (1.0 - frac) + sigma_level[i0 + 1] * frac
+            low = sigma_level.astype(np.float32)
+            sigma_map[idx] = low[i0] + np.diff(low, append=low[-1])[i0] * frac
     out = {s: sig[:, j] for j, s in enumerate(names)}
     out["total"] = np.sqrt((sig**2).sum(axis=1))
     if sigma_map is not None:

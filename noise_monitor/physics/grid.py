@@ -14,16 +14,20 @@ GRID_LEN = int(round(DN_MAX / TABLE_STEP_DN)) + 1
 
 
 def grid_position(levels: np.ndarray, g: int = GRID_LEN) -> tuple[np.ndarray, np.ndarray]:
-    """Lower grid index and interpolation weight of each level (DN, within 0..255) on a grid of ``g`` points."""
+    """Lower grid index and interpolation weight of each level (DN, within 0..255) on a grid of ``g`` points
+    (the weight in the levels' floating-point type: float32 levels stay float32)."""
     pos = levels / TABLE_STEP_DN
-    i0 = np.minimum(pos.astype(np.int64), g - 2)
-    return i0, pos - i0
+    i0 = np.minimum(pos.astype(np.intp), g - 2)
+    return i0, pos - i0.astype(pos.dtype)
 
 
 def histogram(i0: np.ndarray, frac: np.ndarray, g: int = GRID_LEN) -> np.ndarray:
-    """(N, g) linear-weight histograms of N maps (``i0``, ``frac`` of shape (N, ...)); rows sum to 1."""
+    """(N, g) linear-weight histograms of N maps (``i0`` <= g - 2, ``frac`` of shape (N, ...)); rows sum to 1."""
     n = i0.shape[0]
     rows = (np.arange(n) * g).reshape((n,) + (1,) * (i0.ndim - 1))
-    hist = np.bincount((i0 + rows).ravel(), (1.0 - frac).ravel(), n * g)
-    hist += np.bincount((i0 + 1 + rows).ravel(), frac.ravel(), n * g)
+    idx = (i0 + rows).ravel()
+    w1 = frac.ravel()
+    hist = np.bincount(idx, 1.0 - w1, n * g)
+    upper = np.bincount(idx, w1, n * g)  # weight of the grid point above: shifted by one (never past a row)
+    hist[1:] += upper[:-1]
     return hist.reshape(n, g) / (i0.size // max(n, 1))
