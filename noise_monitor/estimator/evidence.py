@@ -21,6 +21,7 @@ from __future__ import annotations
 from functools import cache
 
 import numpy as np
+import scipy.fft
 
 from .residuals import BLOCK, block_energies, immerkaer
 
@@ -51,14 +52,14 @@ def _plane(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     """(basis (h*w, 3), its pseudo-inverse (3, h*w)) of a least-squares plane on an h x w patch."""
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     basis = np.stack([np.ones(h * w), (yy.ravel() - yy.mean()) / h, (xx.ravel() - xx.mean()) / w], axis=1)
-    return basis, np.linalg.pinv(basis)
+    return basis.astype(np.float32), np.linalg.pinv(basis).astype(np.float32)
 
 
 def _detrend(x: np.ndarray) -> np.ndarray:
-    """Each patch minus its least-squares plane."""
+    """Each patch minus its least-squares plane (float32)."""
     n, h, w = x.shape
     basis, pinv = _plane(h, w)
-    flat = x.reshape(n, -1).astype(np.float64)
+    flat = x.reshape(n, -1).astype(np.float32)
     return (flat - (flat @ pinv.T) @ basis.T).reshape(n, h, w)
 
 
@@ -80,8 +81,8 @@ def _spectral(x: np.ndarray) -> np.ndarray:
     idx, weights = _band_means(h, w)
     out = np.empty((n, 4))
     for i in range(0, n, _CHUNK):
-        f = np.fft.rfft2(_detrend(x[i:i + _CHUNK]) * window)
-        ph = (f.real**2 + f.imag**2).reshape(f.shape[0], -1)[:, idx] + 1e-12  # high-band power
+        f = scipy.fft.rfft2(_detrend(x[i:i + _CHUNK]) * window)  # float32 (scipy keeps the precision)
+        ph = (f.real**2 + f.imag**2).reshape(f.shape[0], -1)[:, idx].astype(np.float64) + 1e-12  # high-band power
         m = ph @ weights  # means: high band, lower / upper sub-band, four sectors
         out[i:i + _CHUNK, 0] = np.log(m[:, 0]) - np.log(ph).mean(axis=1)
         out[i:i + _CHUNK, 1] = np.log(m[:, 1] / m[:, 2])
