@@ -14,7 +14,7 @@ import numpy as np
 
 from .evidence import texture_evidence
 from .physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
-from .residuals import BLOCK, block_energies, immerkaer, laplacian
+from .residuals import BLOCK, block_energies, immerkaer, laplacian, quantiles
 
 #: Floor of the reference scale and of sigma_model (DN).
 SIGMA_MODEL_FLOOR = 0.05
@@ -33,7 +33,7 @@ def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
     Texture raises the energy of some blocks; the flattest blocks carry the noise alone, so low
     quantiles measure noise where the whole-patch energy would read texture as noise.
     """
-    return np.log(np.quantile(block_energies(resid, block), BLOCK_QUANTILES, axis=1).T + 1e-6)
+    return np.log(quantiles(block_energies(resid, block), BLOCK_QUANTILES) + 1e-6)
 
 
 @cache
@@ -41,7 +41,7 @@ def unit_noise_quantile(h: int, w: int) -> float:
     """The ``REFERENCE_QUANTILE`` of the Immerkaer block energies of unit white noise on an h x w patch
     (the order statistic's bias in :func:`reference_sigma`; seeded Monte-Carlo over 256 patches)."""
     noise = np.random.default_rng(20240).standard_normal((256, h, w)).astype(np.float32)
-    return float(np.quantile(block_energies(immerkaer(noise)), REFERENCE_QUANTILE, axis=1).mean())
+    return float(quantiles(block_energies(immerkaer(noise)), (REFERENCE_QUANTILE,)).mean())
 
 
 def reference_sigma(noisy: np.ndarray, shape: np.ndarray, shaped_energies: np.ndarray | None = None) -> np.ndarray:
@@ -51,7 +51,7 @@ def reference_sigma(noisy: np.ndarray, shape: np.ndarray, shaped_energies: np.nd
     n, h, w = noisy.shape
     if shaped_energies is None:
         shaped_energies = block_energies(immerkaer(noisy) / shape)
-    q = np.quantile(shaped_energies, REFERENCE_QUANTILE, axis=1)
+    q = quantiles(shaped_energies, (REFERENCE_QUANTILE,))[:, 0]
     return np.maximum(np.sqrt(q / unit_noise_quantile(h, w)), SIGMA_MODEL_FLOOR)
 
 

@@ -39,6 +39,9 @@ MIN_PATCH = 16
 #: (README, "Declining what one image cannot measure").
 MEASURABLE_ERROR_DN = 0.3
 MEASURABLE_RELATIVE_ERROR = 0.3
+#: Pixels per chunk of a Full-Meta batch on the CPU: the features' per-pixel passes stay in the cache (256
+#: patches in one pass ran 20-30 % slower per patch than in chunks of 16-32 at 64 px, 8-32 at 128 px).
+CHUNK_PIXELS = 2**17
 
 
 def validate_patches(patches_dn, min_size: int = MIN_PATCH) -> np.ndarray:
@@ -201,6 +204,14 @@ class FullMetaEstimator(_Base):
     def predict(self, patches_dn: np.ndarray, metas: CameraMetadata | Sequence[CameraMetadata]) -> dict[str, np.ndarray]:
         x = validate_patches(patches_dn)
         ms = validate_metas(metas, len(x))
+        step = max(1, CHUNK_PIXELS // (x.shape[1] * x.shape[2]))
+        if len(x) <= step or not str(self.device).startswith("cpu"):  # a GPU takes the batch whole
+            return self._predict(x, ms)
+        parts = [self._predict(x[i:i + step], ms[i:i + step]) for i in range(0, len(x), step)]
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def _predict(self, x: np.ndarray, ms: Sequence[CameraMetadata]) -> dict[str, np.ndarray]:
+        """:meth:`predict` of validated patches in one pass."""
         groups = group_by_meta(ms)
         tables = np.stack([self.prior.tables(m) for m in groups])
         group_of = np.empty(len(x), dtype=np.int64)

