@@ -74,9 +74,10 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     shaped = block_energies(fine / shape)
     ref = reference_sigma(noisy, shape, shaped)
     norm = shape * ref.astype(np.float32)[:, None, None]
-    resid = (noisy - smooth) / norm
-    lap = laplacian(noisy) / (np.sqrt(LAPLACIAN_GAIN, dtype=np.float32) * norm)
-    maps = np.stack([resid, lap, noisy / 255.0 - 0.5], axis=1).astype(np.float32)
+    maps = np.empty((noisy.shape[0], 3) + noisy.shape[1:], dtype=np.float32)  # filled in place
+    resid = np.divide(np.subtract(noisy, smooth, out=maps[:, 0]), norm, out=maps[:, 0])
+    lap = np.divide(laplacian(noisy), np.sqrt(LAPLACIAN_GAIN, dtype=np.float32) * norm, out=maps[:, 1])
+    np.subtract(np.divide(noisy, np.float32(255.0), out=maps[:, 2]), np.float32(0.5), out=maps[:, 2])
     total = np.maximum(phys["total"], SIGMA_MODEL_FLOOR)
     shares = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1) / total[:, None] ** 2
     energy = [np.log(np.mean(np.square(r), axis=(1, 2)).astype(np.float64) + 1e-6)[:, None] for r in (resid, lap)]
