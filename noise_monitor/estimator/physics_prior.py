@@ -83,7 +83,7 @@ class PhysicsPrior:
 
 def _nearest(table: np.ndarray, level: np.ndarray) -> np.ndarray:
     """``table`` (on the intensity grid) at the grid point nearest each level (float32 gather)."""
-    return table.astype(np.float32)[(level * np.float32(1.0 / TABLE_STEP_DN) + np.float32(0.5)).astype(np.intp)]
+    return np.take(table.astype(np.float32), (level * np.float32(1.0 / TABLE_STEP_DN) + np.float32(0.5)).astype(np.intp))
 
 
 def shrink_noise(smooth: np.ndarray, sigma: np.ndarray, k: int = SMOOTH_KERNEL) -> np.ndarray:
@@ -147,7 +147,7 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
         sig[idx] = np.sqrt(np.maximum(hist @ m2.T - (hist @ m1.T) ** 2, 0.0))
         if sigma_map is not None:
             low = sigma_level.astype(np.float32)
-            sigma_map[idx] = low[i0] + np.diff(low, append=low[-1])[i0] * frac
+            sigma_map[idx] = np.take(low, i0) + np.take(np.diff(low, append=low[-1]), i0) * frac
     out = {s: sig[:, j] for j, s in enumerate(names)}
     out["total"] = np.sqrt((sig**2).sum(axis=1))
     if sigma_map is not None:

@@ -26,8 +26,7 @@ def histogram(i0: np.ndarray, frac: np.ndarray, g: int = GRID_LEN) -> np.ndarray
     n = i0.shape[0]
     rows = (np.arange(n) * g).reshape((n,) + (1,) * (i0.ndim - 1))
     idx = (i0 + rows).ravel()
-    w1 = frac.ravel()
-    hist = np.bincount(idx, 1.0 - w1, n * g)
-    upper = np.bincount(idx, w1, n * g)  # weight of the grid point above: shifted by one (never past a row)
+    upper = np.bincount(idx, frac.ravel(), n * g)  # weight of the grid point above: shifted by one (never past a row)
+    hist = np.bincount(idx, None, n * g) - upper  # the lower point's weights 1 - frac, summed
     hist[1:] += upper[:-1]
     return hist.reshape(n, g) / (i0.size // max(n, 1))
