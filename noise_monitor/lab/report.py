@@ -69,7 +69,7 @@ def _nlf_plot(summary: dict[str, Any], comp: Comparison, after: NoiseModel | Non
 
 def _condition_plot(summary: dict[str, Any]) -> str:
     keys = [k for k in CONDITION_LABELS if k in summary["by_condition"]]
-    fig, axes = plt.subplots(1, len(keys), figsize=(3.8 * len(keys), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(keys), figsize=(3.8 * len(keys), 3.4), squeeze=False, layout="constrained")
     after = summary.get("by_condition_after")
     for ax, key in zip(axes[0], keys):
         rows = summary["by_condition"][key]
@@ -125,16 +125,33 @@ def _residual_plot(summary: dict[str, Any]) -> str:
 
 
 def _component_plot(summary: dict[str, Any]) -> str:
+    """Measured vs model sigma per component: the temporal noise on its own axis, the small fixed-pattern
+    and line components on theirs (on one axis they would be invisible beside it)."""
     rows = summary["by_condition"]["component"]
-    fig, ax = plt.subplots(figsize=(6, 3.4))
-    x = np.arange(len(rows))
-    ax.bar(x - 0.2, [r["measured_sigma_dn"] for r in rows], 0.4, color="0.3", label="measured")
-    ax.bar(x + 0.2, [r["model_sigma_dn"] for r in rows], 0.4, color="tab:red", label="model")
-    ax.set_xticks(x, [r["component"] for r in rows])
-    ax.set_ylabel("sigma [DN] (signed: sign(var) sqrt|var|)")
-    ax.set_title("Temporal vs fixed-pattern (white, column, row) noise")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3, axis="y")
+    after = {r["component"]: r for r in (summary.get("by_condition_after") or {}).get("component", [])}
+    groups = [[r for r in rows if r["component"] == "temporal"], [r for r in rows if r["component"] != "temporal"]]
+    groups = [g for g in groups if g]
+    fig, axes = plt.subplots(1, len(groups), figsize=(2.2 + 1.1 * len(rows), 3.6), squeeze=False,
+                             width_ratios=[max(len(g), 1) + 0.6 for g in groups], layout="constrained")
+    for ax, group in zip(axes[0], groups):
+        x = np.arange(len(group))
+        bars = [("measured", "0.3", [r["measured_sigma_dn"] for r in group]),
+                ("model", "tab:red", [r["model_sigma_dn"] for r in group])]
+        if after:
+            bars.append(("model + added", "tab:green",
+                         [after.get(r["component"], {}).get("model_sigma_dn", np.nan) for r in group]))
+        width = 0.8 / len(bars)
+        for i, (label, color, values) in enumerate(bars):
+            b = ax.bar(x + (i - (len(bars) - 1) / 2) * width, values, width, color=color, label=label)
+            ax.bar_label(b, labels=["" if np.isnan(v) else "0" if abs(v) < 0.005 else f"{v:.2f}" for v in values], fontsize=7, padding=1)
+        ax.set_xticks(x, [r["component"].replace("_", "\n") for r in group], fontsize=8)
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel("sigma [DN] (signed: sign(var) sqrt|var|)")
+        ax.grid(alpha=0.3, axis="y")
+        ax.margins(y=0.15)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8)
+    fig.suptitle("Temporal vs fixed-pattern (white, column, row) noise: measured vs model")
     return _png(fig)
 
 
