@@ -846,6 +846,17 @@ def _group_key(row: dict[str, Any], key: str, time_edges: np.ndarray) -> Any:
     raise KeyError(key)
 
 
+def _clustered_se(values: np.ndarray, clusters: Sequence[Any]) -> float:
+    """Standard error of ``values.mean()`` when values of one cluster (a segment's cells, which share its
+    frames) are correlated: from the spread of the cluster sums (cluster-robust; 0 with one cluster)."""
+    keys = sorted(set(clusters), key=str)
+    if len(keys) < 2:
+        return 0.0
+    index = {k: i for i, k in enumerate(keys)}
+    sums = np.bincount([index[c] for c in clusters], values - values.mean(), len(keys))
+    return float(np.sqrt(len(keys) / (len(keys) - 1) * np.sum(sums**2)) / len(values))
+
+
 def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
     """Where the model fails: residual tables per intensity, gain, exposure, temperature, time and
     per component (temporal vs fixed-pattern vs column / row structure)."""
@@ -885,6 +896,7 @@ def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
             "component": comp,
             "cells": len(g),
             "measured_var_dn2": float(mv.mean()),
+            "measured_var_err_dn2": _clustered_se(mv - pv, [r["segment"] for r in g]),
             "model_var_dn2": float(pv.mean()),
             # mean and spread of (measured - model) / standard error: (0, 1) when the model is right
             "z_mean": float(np.mean((mv - pv) / ev)),

@@ -125,8 +125,9 @@ def _residual_plot(summary: dict[str, Any]) -> str:
 
 
 def _component_plot(summary: dict[str, Any]) -> str:
-    """Measured vs model sigma per component: the temporal noise on its own axis, the small fixed-pattern
-    and line components on theirs (on one axis they would be invisible beside it)."""
+    """Measured (+- one standard error of its mean difference from the model, segments as clusters) vs model
+    sigma per component: the temporal noise on its own axis, the small fixed-pattern and line components on
+    theirs (invisible beside it on one)."""
     rows = summary["by_condition"]["component"]
     after = {r["component"]: r for r in (summary.get("by_condition_after") or {}).get("component", [])}
     groups = [[r for r in rows if r["component"] == "temporal"], [r for r in rows if r["component"] != "temporal"]]
@@ -141,8 +142,13 @@ def _component_plot(summary: dict[str, Any]) -> str:
             bars.append(("model + added", "tab:green",
                          [after.get(r["component"], {}).get("model_sigma_dn", np.nan) for r in group]))
         width = 0.8 / len(bars)
+        mv = np.array([r["measured_var_dn2"] for r in group])
+        se = np.array([r.get("measured_var_err_dn2", 0.0) for r in group])
+        signed = np.sign(mv) * np.sqrt(np.abs(mv))
+        yerr = [signed - np.sign(mv - se) * np.sqrt(np.abs(mv - se)), np.sign(mv + se) * np.sqrt(np.abs(mv + se)) - signed]
         for i, (label, color, values) in enumerate(bars):
-            b = ax.bar(x + (i - (len(bars) - 1) / 2) * width, values, width, color=color, label=label)
+            b = ax.bar(x + (i - (len(bars) - 1) / 2) * width, values, width, color=color, label=label,
+                       yerr=yerr if i == 0 else None, capsize=3, ecolor="0.5")
             ax.bar_label(b, labels=["" if np.isnan(v) else "0" if abs(v) < 0.005 else f"{v:.2f}" for v in values], fontsize=7, padding=1)
         ax.set_xticks(x, [r["component"].replace("_", "\n") for r in group], fontsize=8)
         ax.axhline(0.0, color="k", lw=0.6)
@@ -151,7 +157,7 @@ def _component_plot(summary: dict[str, Any]) -> str:
         ax.margins(y=0.15)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8)
-    fig.suptitle("Temporal vs fixed-pattern (white, column, row) noise: measured vs model")
+    fig.suptitle("Temporal vs fixed-pattern (white, column, row) noise: measured (± 1 standard error) vs model")
     return _png(fig)
 
 

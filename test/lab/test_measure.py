@@ -126,3 +126,19 @@ def test_short_noisy_holds_are_not_selected_on_their_own_noise() -> None:
     truth = 400.0 + 1.0 / 12.0  # + 8-bit rounding (clipping at 0, 4 sigma away, takes < 0.1 %)
     se = float(temporal.std(ddof=1)) / np.sqrt(temporal.size)  # ~0.5 %
     assert abs(float(temporal.mean()) - truth) < 3.0 * se
+
+
+def test_component_error_counts_a_segment_once():
+    """The components table's error of the mean treats a segment's cells (which share its frames) as one
+    draw: the same values repeated within 8 segments are 8 draws, not 64."""
+    from noise_monitor.lab.compare import _clustered_se
+
+    rng = np.random.default_rng(3)
+    draws = rng.normal(0.0, 1.0, 8)
+    repeated = np.repeat(draws, 8)
+    clustered = _clustered_se(repeated, np.repeat(np.arange(8), 8).tolist())
+    naive = _clustered_se(repeated, list(range(64)))
+    assert clustered == pytest.approx(np.sqrt(8 / 7) * draws.std() / np.sqrt(8), rel=1e-9)
+    assert naive == pytest.approx(np.sqrt(64 / 63) * draws.std() / 8, rel=1e-9)  # 64 independent cells
+    assert clustered > 2.9 * naive
+    assert _clustered_se(repeated, [0] * 64) == 0.0
