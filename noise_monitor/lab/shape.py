@@ -139,15 +139,29 @@ def fourth_moments(f: View, cands: Sequence[View], valid: np.ndarray, min_shift_
     a = f.residual
     npix = a.shape[1]
     x = [g.residual for g in cands]
-    cross = [np.sum(a * xj, axis=1) for xj in x]  # (N,) per partner: sum_i A_i X_i
+    cross = [np.einsum("ij,ij->i", a, xj) for xj in x]  # (N,) per partner: sum_i A_i X_i
+    ax = [a * xj for xj in x]
+    dots: dict[tuple[int, int], np.ndarray] = {}
+
+    def dot(p: int, q: int) -> np.ndarray:
+        """sum_i X_p,i X_q,i per block (cached)."""
+        if (p, q) not in dots:
+            dots[p, q] = np.einsum("ij,ij->i", x[p], x[q])
+        return dots[p, q]
+
+    by_pair: dict[tuple[int, int], list[int]] = {}
+    for j, k, m in triples:  # grouped by the last two partners: their product is formed once
+        by_pair.setdefault((k, m), []).append(j)
     fourth = np.zeros(a.shape[0])
     square = np.zeros(a.shape[0])
-    for j, k, m in triples:
-        ok = valid[:, j] * valid[:, k] * valid[:, m]
-        w = ok / np.maximum(f.white * cands[j].white * cands[k].white * cands[m].white, min_var**4)
-        s4 = np.sum(a * x[j] * x[k] * x[m], axis=1)
-        pairs = (cross[j] * np.sum(x[k] * x[m], axis=1) + cross[k] * np.sum(x[j] * x[m], axis=1)
-                 + cross[m] * np.sum(x[j] * x[k], axis=1))
-        fourth += w * s4 / npix
-        square += w * (pairs - 3.0 * s4) / (3.0 * npix * (npix - 1))
+    for (k, m), js in by_pair.items():
+        xkm = x[k] * x[m]
+        dkm = xkm.sum(axis=1)
+        for j in js:
+            ok = valid[:, j] * valid[:, k] * valid[:, m]
+            w = ok / np.maximum(f.white * cands[j].white * cands[k].white * cands[m].white, min_var**4)
+            s4 = np.einsum("ij,ij->i", ax[j], xkm)
+            pairs = cross[j] * dkm + cross[k] * dot(j, m) + cross[m] * dot(j, k)
+            fourth += w * s4 / npix
+            square += w * (pairs - 3.0 * s4) / (3.0 * npix * (npix - 1))
     return fourth, square
