@@ -82,8 +82,8 @@ class PhysicsPrior:
 
 
 def _nearest(table: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """``table`` (on the intensity grid) at the grid point nearest each level (float32 gather)."""
-    return np.take(table.astype(np.float32), (level * np.float32(1.0 / TABLE_STEP_DN) + np.float32(0.5)).astype(np.intp))
+    """``table`` (on the intensity grid) at the grid point nearest each level (a gather in the table's type)."""
+    return np.take(table, (level * np.float32(1.0 / TABLE_STEP_DN) + np.float32(0.5)).astype(np.intp))
 
 
 def shrink_noise(smooth: np.ndarray, sigma: np.ndarray, k: int = SMOOTH_KERNEL) -> np.ndarray:
@@ -113,7 +113,7 @@ def clean_level(smooth: np.ndarray, m1: np.ndarray) -> np.ndarray:
     grid = np.arange(m1.shape[-1]) * TABLE_STEP_DN
     offset = np.interp(grid, np.maximum.accumulate(grid + m1.sum(axis=0)), grid) - grid
     level = np.clip(smooth, 0.0, 255.0).astype(np.float32)
-    return np.clip(level + _nearest(offset, level), 0.0, 255.0)
+    return np.clip(level + _nearest(offset.astype(np.float32), level), 0.0, 255.0)
 
 
 def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
@@ -136,18 +136,15 @@ def predict_from_tables(smooth: np.ndarray, tables: np.ndarray, group_of: np.nda
     for k in np.unique(group_of):
         idx = np.flatnonzero(group_of == k)
         m1, m2 = tables[k]
-        sigma_level = np.sqrt(np.maximum(m2 - m1**2, 0.0).sum(axis=0))
+        sigma_level = np.sqrt(np.maximum(m2 - m1**2, 0.0).sum(axis=0)).astype(np.float32)
+        level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float32)
         if debias:
-            level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float32)
             level = clean_level(shrink_noise(level, _nearest(sigma_level, level)), m1)
-        else:
-            level = np.clip(smooth[idx], 0.0, 255.0).astype(np.float32)
         i0, frac = grid_position(level, g)
         hist = histogram(i0, frac, g)
         sig[idx] = np.sqrt(np.maximum(hist @ m2.T - (hist @ m1.T) ** 2, 0.0))
         if sigma_map is not None:
-            low = sigma_level.astype(np.float32)
-            sigma_map[idx] = np.take(low, i0) + np.take(np.diff(low, append=low[-1]), i0) * frac
+            sigma_map[idx] = np.take(sigma_level, i0) + np.take(np.diff(sigma_level, append=sigma_level[-1]), i0) * frac
     out = {s: sig[:, j] for j, s in enumerate(names)}
     out["total"] = np.sqrt((sig**2).sum(axis=1))
     if sigma_map is not None:

@@ -846,6 +846,13 @@ def _group_key(row: dict[str, Any], key: str, time_edges: np.ndarray) -> Any:
     raise KeyError(key)
 
 
+def signed_sigma(var: np.ndarray | float) -> np.ndarray:
+    """sign(var) sqrt|var| (DN): a zero-mean noisy variance estimate of 0 stays near 0 instead of reading
+    as a positive noise level."""
+    v = np.asarray(var, dtype=float)
+    return np.sign(v) * np.sqrt(np.abs(v))
+
+
 def _clustered_se(values: np.ndarray, clusters: Sequence[Any]) -> float:
     """Standard error of ``values.mean()`` when values of one cluster (a segment's cells, which share its
     frames) are correlated: from the spread of the cluster sums (cluster-robust; 0 with one cluster)."""
@@ -890,7 +897,7 @@ def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
         mv = np.asarray([r["measured_var_dn2"][comp] for r in g])
         pv = np.asarray([r["model_var_dn2"][comp] for r in g])
         ev = np.maximum([r["measured_var_err_dn2"][comp] for r in g], 1e-12)
-        ms = np.sign(mv) * np.sqrt(np.abs(mv))  # signed: a zero-mean noisy estimate of 0 stays near 0
+        ms = signed_sigma(mv)
         mm = np.sqrt(np.maximum(pv, 0.0))
         comp_table.append({
             "component": comp,
@@ -901,7 +908,7 @@ def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
             # mean and spread of (measured - model) / standard error: (0, 1) when the model is right
             "z_mean": float(np.mean((mv - pv) / ev)),
             "z_std": float(np.std((mv - pv) / ev)),
-            "measured_sigma_dn": float(np.sign(mv.mean()) * math.sqrt(abs(mv.mean()))),
+            "measured_sigma_dn": float(signed_sigma(mv.mean())),
             "model_sigma_dn": float(math.sqrt(max(pv.mean(), 0.0))),
             "mean_residual_dn": float(np.mean(ms - mm)),
             "rms_residual_dn": float(np.sqrt(np.mean((ms - mm) ** 2))),

@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 
 from ..physics import NoiseModel  # noqa: E402
 from .analyze import component_change_text  # noqa: E402
-from .compare import Comparison, as_measured, model_curve  # noqa: E402
+from .compare import Comparison, as_measured, model_curve, signed_sigma  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
 from .measure import BLOCK  # noqa: E402
 from .shape import fixed_shape_text  # noqa: E402
@@ -143,9 +143,9 @@ def _component_plot(summary: dict[str, Any]) -> str:
                          [after.get(r["component"], {}).get("model_sigma_dn", np.nan) for r in group]))
         width = 0.8 / len(bars)
         mv = np.array([r["measured_var_dn2"] for r in group])
-        se = np.array([r.get("measured_var_err_dn2", 0.0) for r in group])
-        signed = np.sign(mv) * np.sqrt(np.abs(mv))
-        yerr = [signed - np.sign(mv - se) * np.sqrt(np.abs(mv - se)), np.sign(mv + se) * np.sqrt(np.abs(mv + se)) - signed]
+        se = np.array([r["measured_var_err_dn2"] for r in group])
+        measured = np.array(bars[0][2])
+        yerr = [measured - signed_sigma(mv - se), signed_sigma(mv + se) - measured]
         for i, (label, color, values) in enumerate(bars):
             b = ax.bar(x + (i - (len(bars) - 1) / 2) * width, values, width, color=color, label=label,
                        yerr=yerr if i == 0 else None, capsize=3, ecolor="0.5")
