@@ -10,9 +10,11 @@ Bias = |mean(est - truth)|, Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). 
 scores the same patches with the unmeasurable ones declined: coverage, xi on the accepted patches, and
 alarm rates where a declined patch is never a false alarm nor a hit (hits also among accepted candidates);
 ``decided`` counts alarms also on the unmeasurable patches whose alarm decision is clear given their
-predicted error (| |xi| - 1 DN | > ``CLEAR_DECISION_K`` errors, relative error within the limit): a noisy
-patch measured to 0.6 DN with xi = -4 DN alarms whatever its error. The top-level figures stay those of
-every patch.
+predicted error (``inference.clear_decisions``: | |xi| - 1 DN | > 2 errors, relative error within the limit): a noisy
+patch measured to 0.6 DN with xi = -4 DN alarms whatever its error; and those whose image-only bound proves
+the alarm (``xi_lower`` > 1 DN: the model predicts more noise than the patch can hold, whatever its
+content; :mod:`.bound`), alarming with xi = max(xi, xi_lower). The top-level figures stay those of every
+patch.
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from tqdm import tqdm
 from ..physics import CameraMetadata, NoiseModel
 from ..physics.sensitivity import SWEEP_INTENSITIES, SWEEPS, reference_metadata
 from .data import PARTS, generate, load, metas_of, save
-from .inference import MEASURABLE_RELATIVE_ERROR
+from .inference import clear_decisions
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
 
@@ -49,9 +51,6 @@ HELDOUT_SETS = {
 ALARM_DN = 1.0
 HIT_TRUTH_DN = 2.0
 SENSITIVITY_FLAG_DN = 1.0
-#: Predicted errors by which |xi| must clear the alarm threshold for an unmeasurable patch's decision to count
-#: (chosen on the tuning sets, README).
-CLEAR_DECISION_K = 2.0
 
 
 def stats(est: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -100,15 +99,10 @@ def score(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -
             ok = np.asarray(pred["measurable"], dtype=bool)
             out["declined"] = _declined(xi, xi_true, ok, part)
             if "sigma_image_error" in pred:
-                out["decided"] = _declined(xi, xi_true, ok | clear_decisions(pred), part)
+                proven = ~ok & (pred["xi_lower"] > ALARM_DN) if "xi_lower" in pred else np.zeros_like(ok)
+                xi_d = np.where(proven, np.maximum(xi, pred.get("xi_lower", xi)), xi)
+                out["decided"] = _declined(xi_d, xi_true, ok | clear_decisions(pred, ALARM_DN) | proven, part)
     return out
-
-
-def clear_decisions(pred: dict[str, np.ndarray]) -> np.ndarray:
-    """Patches whose alarm decision is clear given their predicted error (see the module docstring)."""
-    err = np.asarray(pred["sigma_image_error"], dtype=float)
-    return (np.abs(np.abs(pred["xi"]) - ALARM_DN) > CLEAR_DECISION_K * err) & (
-        err <= MEASURABLE_RELATIVE_ERROR * np.asarray(pred["sigma_image"], dtype=float))
 
 
 def _declined(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray, part: str) -> dict:

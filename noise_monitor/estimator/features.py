@@ -12,6 +12,7 @@ from functools import cache
 
 import numpy as np
 
+from .bound import noise_upper_bound
 from .evidence import texture_evidence
 from .physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
 from .residuals import BLOCK, block_energies, immerkaer, laplacian, quantiles
@@ -56,7 +57,7 @@ def reference_sigma(noisy: np.ndarray, shape: np.ndarray, shaped_energies: np.nd
 
 
 def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
-                   evidence: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+                   evidence: bool = False, upper: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(maps (N, 3, H, W), scalars (N, 12), physics prediction + ``reference``) for noisy patches in DN.
 
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
@@ -65,6 +66,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     scalars: log reference, the sources' shares of sigma_model^2 (3), per residual the log mean
     square and its block quantiles (2 x 4). No metadata scale: see the module docstring.
     ``evidence``: also the texture evidence of the confidence head (``evidence.texture_evidence``).
+    ``upper``: also ``phys["upper"]``, the image-only upper bound of the noise (``bound.noise_upper_bound``).
     """
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
@@ -84,6 +86,8 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
                               energy[1], block_energy_quantiles(lap)], axis=1).astype(np.float32)
     phys["reference"] = ref
+    if upper:
+        phys["upper"] = noise_upper_bound(noisy, shaped)
     if evidence:
         phys["evidence"] = texture_evidence(noisy, shape, fine, shaped)
     return maps, scalars, phys

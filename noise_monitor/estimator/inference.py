@@ -6,7 +6,10 @@ sigma_image = the compact network's measurement of the noise actually in the pat
 sigma_image; total = sigma_model (the paper's total without xi). Weights with a confidence head also give
 ``sigma_image_error`` (the measurement's predicted error, DN) and ``measurable`` (that error <=
 ``MEASURABLE_ERROR_DN`` and <= ``MEASURABLE_RELATIVE_ERROR`` of sigma_image: a patch whose noise the image
-cannot reveal, e.g. under dense pixel-scale texture, is declined rather than read). The head of the
+cannot reveal, e.g. under dense pixel-scale texture, is declined rather than read; :func:`clear_decisions`
+tells the declined patches whose alarm decision is clear anyway). Every patch also gets
+``sigma_image_upper``, an upper bound of its noise from the image alone that holds on any content
+(:mod:`.bound`), and ``xi_lower = sigma_model - sigma_image_upper``. The head of the
 shipped weights also sees the patch's texture evidence (:mod:`.evidence`). With a camera model of more effects
 (``model``, or the effects a network was fine-tuned with), ``extra`` is their joint sigma and sigma_model
 includes it. The paper-family variants return their branch outputs (``drne``: total only).
@@ -39,9 +42,21 @@ MIN_PATCH = 16
 #: (README, "Declining what one image cannot measure").
 MEASURABLE_ERROR_DN = 0.3
 MEASURABLE_RELATIVE_ERROR = 0.3
+#: Predicted errors by which |xi| must clear an alarm threshold for a declined patch's decision to be clear
+#: (chosen on the tuning sets, README).
+CLEAR_DECISION_K = 2.0
 #: Pixels per chunk of a Full-Meta batch on the CPU: the features' per-pixel passes stay in the cache (256
 #: patches in one pass ran 20-30 % slower per patch than in chunks of 16-32 at 64 px, 8-32 at 128 px).
 CHUNK_PIXELS = 2**17
+
+
+def clear_decisions(pred: dict[str, np.ndarray], threshold_dn: float) -> np.ndarray:
+    """Patches whose alarm decision (|xi| > ``threshold_dn``) is clear given their predicted error, measurable
+    or not: | |xi| - threshold | > ``CLEAR_DECISION_K`` errors and the relative error within
+    ``MEASURABLE_RELATIVE_ERROR`` (a noisy patch measured to 0.6 DN with xi = -4 DN alarms whatever its error)."""
+    err = np.asarray(pred["sigma_image_error"], dtype=float)
+    return (np.abs(np.abs(pred["xi"]) - threshold_dn) > CLEAR_DECISION_K * err) & (
+        err <= MEASURABLE_RELATIVE_ERROR * np.asarray(pred["sigma_image"], dtype=float))
 
 
 def validate_patches(patches_dn, min_size: int = MIN_PATCH) -> np.ndarray:
@@ -217,14 +232,14 @@ class FullMetaEstimator(_Base):
         group_of = np.empty(len(x), dtype=np.int64)
         for g, idx in enumerate(groups.values()):
             group_of[idx] = g
-        maps, scalars, phys = compact_inputs(x, tables, group_of, evidence=self._wants_evidence)
+        maps, scalars, phys = compact_inputs(x, tables, group_of, evidence=self._wants_evidence, upper=True)
         inputs = (maps, scalars) + ((phys.pop("evidence"),) if self._wants_evidence else ())
         raw = self._run_net(*inputs).astype(np.float64)
         r = np.clip(raw[:, 0] if raw.ndim == 2 else raw, -6.0, 6.0)
         sigma_image = phys.pop("reference") * np.exp(r)
         out = {s: phys[s] for s in SOURCES + ((EXTRA,) if EXTRA in phys else ())}
         out.update(sigma_model=phys["total"], sigma_image=sigma_image, xi=phys["total"] - sigma_image,
-                   total=phys["total"].copy())
+                   total=phys["total"].copy(), sigma_image_upper=phys["upper"], xi_lower=phys["total"] - phys["upper"])
         if raw.ndim == 2:  # confidence head: log-space error std -> DN (first order)
             relative = np.exp(np.clip(raw[:, 1], -8.0, 4.0))
             out["sigma_image_error"] = sigma_image * relative

@@ -14,6 +14,7 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 
+from noise_monitor.estimator.inference import clear_decisions
 from noise_monitor.physics import CameraMetadata, EffectError, NoiseModel
 from noise_monitor.physics.constants import PAPER_EFFECTS as SOURCES
 from noise_monitor.physics.constants import SMOOTH_KERNEL
@@ -70,6 +71,7 @@ class FrameResult:
     xi_filtered: float | None = None
     xi_model: float | None = None  # analytic sigma_model (this model, these patches) - estimated image noise
     xi_image: float | None = None  # the single-image measurement's xi (per Monitor.xi_source)
+    xi_bound: float | None = None  # median over the patches of sigma_model - the image-only noise bound: xi >= it
     xi_temporal: float | None = None  # the model's temporal noise - the frame differences' (static holds)
     temporal_weight: float = 0.0  # share of xi_temporal in xi (inverse-variance weights)
     temporal_frames: int = 0  # frames of the current static hold measured
@@ -100,6 +102,8 @@ class FrameResult:
         out["sigma_image"] = self.sigma["image"]
         out["xi_model"] = float(self.xi_model)
         out["xi_image"] = float(self.xi_image if self.xi_image is not None else self.xi)
+        if self.xi_bound is not None:
+            out["xi_bound"] = float(self.xi_bound)
         if self.xi_temporal is not None:
             out["xi_temporal"] = float(self.xi_temporal)
             out["sigma_temporal"] = self.sigma["temporal"]
@@ -248,10 +252,8 @@ class Monitor:
             model_pp = predict_patches(self.model, smooth, meta, cfg.model_mode)
         except EffectError as exc:  # e.g. a plug-in effect of the profile failing for this metadata
             return self._skip(frame, f"evaluation failed: {exc}")
-        # medians over the patches the estimator can measure (its confidence output; all patches when it has
-        # none or declines every patch: then as before, ``patches_measurable`` = 0 tells)
         ok = np.asarray(est["measurable"], dtype=bool).reshape(-1) if "measurable" in est else np.ones(len(patches), bool)
-        use = ok if ok.any() else np.ones_like(ok)
+        use, bounded_only = self._patches_to_use(est, ok)
         sigma = {k: float(np.median(v[use])) for k, v in per_patch.items()}
         model = {k: float(np.median(v[use])) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
@@ -259,6 +261,11 @@ class Monitor:
         sigma["image"] = float(np.median(image_pp[use]))
         xi_model = float(np.median((model_pp["total"] - image_pp)[use]))
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
+        xi_bound = self._xi_bound(est, per_patch["total"] if self.xi_source == "estimator" else model_pp["total"])
+        if xi_bound is not None and bounded_only:
+            # texture hides the noise in every patch: the image proves only xi >= xi_bound (content adds
+            # pixel-scale energy, never removes noise), so "image noisier" is left to the static holds
+            xi_image = max(xi_bound, 0.0)
         xi, xi_t, weight, held, xi_err = xi_image, None, 0.0, 0, cfg.image_xi_error_dn
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         if tm is not None:
@@ -280,15 +287,42 @@ class Monitor:
         state = self.alarm.update(xi_f, xi, xi_err)
         self.counters["frames_processed"] += 1
         level, message = self._status(xi, xi_f, meta)
+        if xi_bound is not None and bounded_only and weight < 0.5:
+            message += f"; no patch measurable (texture hides the noise): the image proves only xi >= {xi_bound:+.2f} DN"
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
-            xi_model=xi_model, xi_image=xi_image, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
+            xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
             xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],
             patches_measurable=int(ok.sum()) if "measurable" in est else None,
             processing_ms=(time.perf_counter() - t0) * 1e3,
         )
+
+    def _patches_to_use(self, est: dict[str, np.ndarray], ok: np.ndarray) -> tuple[np.ndarray, bool]:
+        """(patches the frame's medians use, whether xi rests on the image-only bound alone).
+
+        The patches the estimator can measure (its confidence output), else every patch
+        (``patches_measurable`` = 0 tells). When it declines every one, the frame's median reading still
+        decides when its alarm decision is clear given the median predicted error (a high noise level's
+        larger error in DN); otherwise texture hides the noise: xi is what the image proves
+        (:meth:`_xi_bound`)."""
+        if ok.any():
+            return ok, False
+        if "sigma_image_error" not in est or "sigma_image_upper" not in est:
+            return np.ones_like(ok), False
+        frame = {k: np.array([np.median(np.asarray(est[k], dtype=np.float64))]) for k in ("xi", "sigma_image_error", "sigma_image")}
+        return np.ones_like(ok), not bool(clear_decisions(frame, self.config.xi_threshold_dn)[0])
+
+    @staticmethod
+    def _xi_bound(est: dict[str, np.ndarray], sigma_model: np.ndarray) -> float | None:
+        """Median over the patches of sigma_model - the estimator's image-only upper bound of the noise
+        (``sigma_image_upper``): the frame's xi is at least this whatever the scene. None without a bound."""
+        if "sigma_image_upper" not in est:
+            return None
+        lower = sigma_model - np.asarray(est["sigma_image_upper"], dtype=np.float64).reshape(-1)
+        lower = lower[np.isfinite(lower)]  # a patch clipped everywhere has no bound
+        return float(np.median(lower)) if lower.size else None
 
     def _new_view(self, meta: CameraMetadata) -> bool:
         """Whether this processed frame starts a new view: a gain or exposure step from the previous one."""

@@ -324,7 +324,8 @@ def test_auto_xi_source_uses_the_model_when_the_profile_adds_effects(rng):
 
 def test_medians_over_the_patches_the_estimator_can_measure(rng):
     """With the shipped estimator's confidence output the frame's sigmas and xi are medians over its
-    measurable patches only; a frame of fine texture everywhere falls back to every patch."""
+    measurable patches only; a frame of fine texture everywhere falls back to every patch for the sigmas and
+    to the image-only bound for xi."""
     from noise_monitor.estimator import load
 
     est = load("full_meta", device="cpu", model=MODEL)
@@ -341,5 +342,39 @@ def test_medians_over_the_patches_the_estimator_can_measure(rng):
         assert res.numeric()["patches_measurable"] == ok.sum() == res.patches_measurable
         use = ok if ok.any() else np.ones_like(ok)
         assert res.sigma["image"] == pytest.approx(float(np.median(out["sigma_image"][use])), rel=1e-5)
-        assert res.xi_image == pytest.approx(float(np.median(out["xi"][use])), abs=1e-5)
+        if ok.any():
+            assert res.xi_image == pytest.approx(float(np.median(out["xi"][use])), abs=1e-5)
+        else:  # texture everywhere: the image proves only a lower bound of xi
+            assert res.xi_image == pytest.approx(max(float(np.median(out["xi_lower"])), 0.0), abs=1e-5)
         assert (0 < ok.sum() < len(ok)) if some_declined else not ok.any()
+
+
+@pytest.mark.parametrize("stated_gain_db", [18.0, 30.0])
+def test_texture_everywhere_proves_only_a_lower_bound_of_xi(stated_gain_db):
+    """A camera panning over pixel-scale texture: every patch declined, and the network's reading of the
+    texture is off by more than the threshold (it raised alarms with the true metadata before). The image
+    proves only xi >= xi_bound (texture adds pixel-scale energy, never removes noise): with the true gain no
+    alarm, with a gain stated 12 dB high (the model far noisier than the image) the bound alarms."""
+    from noise_monitor.estimator import load
+
+    rng = np.random.default_rng(8)
+    mon = Monitor(MonitorConfig(min_patches=4), load("full_meta", device="cpu", model=MODEL), MODEL, "cam", "icx285/cam")
+    stated = load_profile("icx285").metadata(gain_db=stated_gain_db, exposure_time_s=0.01, sensor_temperature_c=40.0)
+    true_meta = load_profile("icx285").metadata(gain_db=18.0, exposure_time_s=0.01, sensor_temperature_c=40.0)
+    results = []
+    for k in range(10):  # new texture every frame: no static hold
+        fine = 40.0 * cv2.GaussianBlur(rng.standard_normal((256, 256)).astype(np.float32), (0, 0), 0.8)
+        noisy, _ = MODEL.simulate(np.clip(100.0 + fine, 5, 250).astype(np.float32), true_meta, rng)
+        results.append(mon.process(Frame(k * 100_000_000, mono8(noisy), stated)))
+    for res in results:
+        assert res.processed and res.patches_measurable == 0 and res.temporal_weight == 0.0
+        assert res.xi_bound is not None and res.xi == pytest.approx(max(res.xi_bound, 0.0))
+        assert "the image proves only xi >=" in res.message and "xi_bound" in res.numeric()
+    raw = np.median([r.sigma["xi"] for r in results])
+    true_xi = float(MODEL.predict(100.0, stated)["total"] - MODEL.predict(100.0, true_meta)["total"])
+    if stated_gain_db == 18.0:
+        assert raw > 2.0  # the network under-reads this texture: a false alarm before the bound
+        assert not any(r.alarm_active for r in results)
+    else:
+        assert all(1.0 < r.xi_bound <= true_xi + 0.2 for r in results), (true_xi, [r.xi_bound for r in results])
+        assert all(r.alarm_active and r.cause == CAUSE_MODEL_NOISIER for r in results[1:])
