@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from functools import cache
 
-import cv2
 import numpy as np
+import scipy.ndimage
 
 from ..physics.constants import DN_MAX
 from .residuals import BLOCK, block_energies, immerkaer
@@ -52,8 +52,7 @@ def usable_blocks(noisy: np.ndarray, block: int = BLOCK) -> np.ndarray:
     clipped = (noisy <= 0.0) | (noisy >= DN_MAX)
     if not clipped.any():
         return np.ones((noisy.shape[0], (noisy.shape[1] // block) * (noisy.shape[2] // block)), dtype=bool)
-    kernel = np.ones((3, 3), np.uint8)
-    grown = np.stack([cv2.dilate(c.astype(np.uint8), kernel) for c in clipped]).astype(np.float32)
+    grown = scipy.ndimage.maximum_filter(clipped.astype(np.float32), size=(1, 3, 3), mode="constant")
     return block_energies(grown, block) == 0.0
 
 

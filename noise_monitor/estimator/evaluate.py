@@ -99,8 +99,9 @@ def score(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -
             ok = np.asarray(pred["measurable"], dtype=bool)
             out["declined"] = _declined(xi, xi_true, ok, part)
             if "sigma_image_error" in pred:
-                proven = ~ok & (pred["xi_lower"] > ALARM_DN) if "xi_lower" in pred else np.zeros_like(ok)
-                xi_d = np.where(proven, np.maximum(xi, pred.get("xi_lower", xi)), xi)
+                lower = pred.get("xi_lower", np.full(len(xi), -np.inf))
+                proven = ~ok & (lower > ALARM_DN)  # the image-only bound proves the alarm
+                xi_d = np.where(proven, np.maximum(xi, lower), xi)
                 out["decided"] = _declined(xi_d, xi_true, ok | clear_decisions(pred, ALARM_DN) | proven, part)
     return out
 
