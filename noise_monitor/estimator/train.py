@@ -13,7 +13,8 @@ from tqdm import tqdm
 from .device import resolve_device
 from .evidence import N_EVIDENCE
 from .features import compact_inputs
-from .networks import SIGMA_SCALE, ImageNoiseNet, build_network
+from .inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR
+from .networks import SIGMA_SCALE, ImageNoiseNet, build_network, network_from_checkpoint
 
 HUBER_DELTA_DN = 1.0
 #: Hidden sizes of the confidence head added by ``TrainSettings.confidence``.
@@ -34,6 +35,10 @@ class TrainSettings:
     confidence: bool = False
     #: also keep every checkpoint's weights as ``step_<N>.pt`` (to choose one on tuning sets)
     keep_checkpoints: bool = False
+    #: full_meta fine-tune from ``init`` with a confidence head: weight of a pull (squared log difference) of the
+    #: measurement toward the init's reading on the patches the init declines, so that fine-tuning on new
+    #: imagery does not move the reading of content no single image can measure (0 = off)
+    anchor: float = 0.0
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -60,10 +65,12 @@ def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Te
     return t
 
 
-def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor], anchor: float = 0.0) -> torch.Tensor:
     """Training loss. full_meta: Huber on sigma_image plus, with a confidence head, the Gaussian NLL of
     the measurement's log-space residual under the head's predicted error; a batch of the frozen
-    measurement's cached outputs (``z``, ``mu``: :func:`head_tensors`) trains the head alone."""
+    measurement's cached outputs (``z``, ``mu``: :func:`head_tensors`) trains the head alone. With
+    ``anchor`` and a batch of the init's readings (``anchor_mu``, ``anchor_w``: :func:`anchor_tensors`),
+    plus ``anchor`` x the mean weighted squared log difference to them."""
     if variant == "full_meta":
         log_err: torch.Tensor | None
         if "z" in batch:  # the confidence head alone on the frozen measurement's cached outputs
@@ -74,6 +81,8 @@ def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor]) 
             r, log_err = (out[:, 0], out[:, 1]) if out.ndim == 2 else (out, None)
             est = batch["reference"] * torch.exp(r.clamp(-6.0, 6.0))
             loss = torch.nn.functional.huber_loss(est, batch["target"], delta=HUBER_DELTA_DN)
+            if anchor:
+                loss = loss + anchor * (batch["anchor_w"] * (r - batch["anchor_mu"]) ** 2).mean()
         if log_err is not None:
             resid = torch.log(batch["target"] / batch["reference"]) - r.detach()
             log_err = log_err.clamp(-8.0, 4.0)
@@ -102,11 +111,17 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     torch.manual_seed(settings.seed)
     if settings.confidence and (settings.variant != "full_meta" or init is None):
         raise ValueError("a confidence head is trained on a full_meta network given by --init")
+    if settings.anchor < 0 or (settings.anchor and settings.confidence):
+        raise ValueError("--anchor must be >= 0 and is for fine-tuning the measurement, not with --confidence")
     ck_init = None
     if init is not None:
         if not Path(init).is_file():
             raise FileNotFoundError(f"--init: {init} not found")
         ck_init = torch.load(init, map_location=dev, weights_only=True)
+        if settings.anchor and not (ck_init.get("variant") == "full_meta" and ck_init["config"].get("confidence")):
+            raise ValueError(f"--anchor: {init} is not full_meta weights with a confidence head (what it declines)")
+    elif settings.anchor:
+        raise ValueError("--anchor needs --init (the weights whose readings it keeps)")
     net: Any = build_network(settings.variant, patch_size, settings.width, settings.depth)
     # a head of the init weights is kept (and trained along: its loss sees the detached measurement);
     # --confidence trains a new head with the texture evidence in its place
@@ -155,6 +170,8 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     tensors = tensors_for(settings.variant, data)
     if settings.confidence:
         tensors = head_tensors(net, tensors, dev)
+    if settings.anchor and ck_init is not None:
+        tensors.update(anchor_tensors(network_from_checkpoint(ck_init).to(dev), tensors, dev))
     n = len(data["noisy"])
     net.train()
     t0 = time.time() - elapsed
@@ -163,7 +180,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     while step < settings.steps:
         idx = torch.from_numpy(rng.integers(0, n, settings.batch))
         batch = {k: v[idx].to(dev) for k, v in tensors.items()}
-        loss = loss_of(settings.variant, net, batch)
+        loss = loss_of(settings.variant, net, batch, settings.anchor)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -204,6 +221,21 @@ def head_tensors(net: ImageNoiseNet, tensors: dict[str, torch.Tensor], dev: Any,
     net.train()
     return {"z": torch.cat([p[1] for p in parts]).cpu(), "mu": torch.cat([p[0] for p in parts]).cpu(),
             **{k: tensors[k] for k in ("evidence", "reference", "target")}}
+
+
+@torch.no_grad()
+def anchor_tensors(init_net: ImageNoiseNet, tensors: dict[str, torch.Tensor], dev: Any, chunk: int = 512) -> dict[str, torch.Tensor]:
+    """The init network's log-space reading ``anchor_mu`` of every patch and ``anchor_w`` = 1 where its
+    confidence head declines the patch (the inference rule), else 0."""
+    init_net.eval()
+    out = torch.cat([init_net(tensors["maps"][i:i + chunk].to(dev), tensors["scalars"][i:i + chunk].to(dev),
+                              tensors["evidence"][i:i + chunk].to(dev)).cpu()
+                     for i in range(0, len(tensors["maps"]), chunk)])
+    r = out[:, 0].clamp(-6.0, 6.0)
+    relative = out[:, 1].clamp(-8.0, 4.0).exp()
+    error_dn = tensors["reference"] * r.exp() * relative
+    declined = (error_dn > MEASURABLE_ERROR_DN) | (relative > MEASURABLE_RELATIVE_ERROR)
+    return {"anchor_mu": r, "anchor_w": declined.float()}
 
 
 @torch.no_grad()

@@ -58,6 +58,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--confidence", action="store_true",
                    help="full_meta with --init: add a confidence head (the measurement's predicted error; patches "
                         "it cannot measure are declined) and train it alone, the measurement frozen")
+    p.add_argument("--anchor", type=float, default=0.0, metavar="W",
+                   help="full_meta with --init (weights with a confidence head): pull the measurement toward the "
+                        "init's reading on the patches the init declines, with weight W (keeps the reading of content "
+                        "one image cannot measure from drifting while fine-tuning on new imagery; 0 = off)")
     p.add_argument("--profile", default=None,
                    help="camera profile (YAML or bundled name): its effects are simulated and enter the physics "
                         "prior, and its sensor fields replace the random sensor (e.g. a profile written by "
@@ -147,7 +151,8 @@ def run(args: argparse.Namespace) -> int:
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth, confidence=args.confidence,
-                             checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints)
+                             checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints,
+                             anchor=args.anchor)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),

@@ -137,3 +137,29 @@ def test_pixel_scale_gratings_are_declined_or_measured_right(meta):
     assert not np.any(out["measurable"] & wrong), np.flatnonzero(out["measurable"] & wrong)
     assert wrong[:-3].sum() >= 10  # the gratings do fool the measurement: the head is what protects
     assert np.all(out["measurable"][-3:])
+
+
+def test_anchor_keeps_the_reading_of_declined_patches(tmp_path):
+    """``anchor`` pulls the fine-tuned measurement toward the init's reading on the patches the init declines."""
+    from noise_monitor.estimator.inference import WEIGHTS_DIR
+
+    init = WEIGHTS_DIR / "full_meta.pt"
+    data = generate(96, 32, seed=11, group=8, procedural=4, progress=False)
+    with pytest.raises(ValueError, match="--init"):
+        train(TrainSettings("full_meta", steps=1, anchor=1.0), data, tmp_path / "x", threads=1, progress=False)
+    with pytest.raises(ValueError, match="--confidence"):
+        train(TrainSettings("full_meta", steps=1, anchor=1.0, confidence=True), data, tmp_path / "x", threads=1,
+              progress=False, init=init)
+    old = load("full_meta", device="cpu", weights=init, backend="torch").predict(data["noisy"], metas_of(data))
+    declined = ~old["measurable"]
+    assert 10 <= declined.sum() <= 86
+    drift = {}
+    for w in (0.0, 100.0):
+        path = train(TrainSettings("full_meta", steps=40, batch=32, lr=1e-3, anchor=w), data, tmp_path / f"a{w:g}",
+                     threads=1, progress=False, init=init)
+        new = load("full_meta", device="cpu", weights=path, backend="torch").predict(data["noisy"], metas_of(data))
+        d = np.log(new["sigma_image"] / old["sigma_image"])
+        drift[w] = (np.sqrt(np.mean(d[declined] ** 2)), np.sqrt(np.mean(d[~declined] ** 2)))
+    assert drift[0.0][0] > 0.2  # without it the truth of the training data moves them (log units)
+    assert drift[100.0][0] < 0.3 * drift[0.0][0]  # with it they keep their reading
+    assert drift[100.0][1] > 0.2 * drift[0.0][1]  # while the accepted ones still learn
