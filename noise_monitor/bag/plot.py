@@ -40,6 +40,9 @@ def plot_replay(table: FrameTable, episodes: list[dict[str, Any]], path: Path, t
     t, v = table.series("xi_filtered")
     if t.size:
         ax_x.plot(t, v, "-", color="tab:purple", lw=1.6, label="xi filtered")
+    t, v = table.series("xi_bound")
+    if np.any(v > 0):  # what the image alone proves on any content: xi >= xi_bound (drawn where that says xi > 0)
+        ax_x.plot(t[v > 0], v[v > 0], "^", color="tab:olive", ms=4, label="xi lower bound > 0 (image alone)")
     ax_x.axhline(0.0, color="black", lw=0.6)
     for sgn in (1, -1):
         ax_x.axhline(sgn * threshold_dn, color="tab:red", ls=":", lw=1.0,
