@@ -49,13 +49,25 @@ def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
     return by_group[data["group_of"]]
 
 
-def tensors_for(variant: str, data: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-    """Network inputs and targets of a dataset for a variant."""
+def tensors_for(variant: str, data: dict[str, np.ndarray], chunk: int = 8192) -> dict[str, torch.Tensor]:
+    """Network inputs and targets of a dataset for a variant (full_meta's features in chunks of ``chunk``
+    patches: their per-pixel intermediates for a whole large dataset would take twice its maps' memory)."""
     if variant == "full_meta":
-        maps, scalars, phys = compact_inputs(data["noisy"], data["tables"], data["group_of"], evidence=True)
-        return {"maps": torch.from_numpy(maps), "scalars": torch.from_numpy(scalars),
-                "evidence": torch.from_numpy(phys["evidence"]),
-                "reference": torch.from_numpy(phys["reference"]).float(),
+        n = len(data["noisy"])
+        maps: np.ndarray | None = None
+        rows: dict[str, list[np.ndarray]] = {"scalars": [], "evidence": [], "reference": []}
+        for i in range(0, n, chunk):
+            m, scalars, phys = compact_inputs(data["noisy"][i:i + chunk], data["tables"], data["group_of"][i:i + chunk],
+                                              evidence=True)
+            if maps is None:
+                maps = np.empty((n,) + m.shape[1:], dtype=m.dtype)
+            maps[i:i + len(m)] = m
+            rows["scalars"].append(scalars)
+            rows["evidence"].append(phys["evidence"])
+            rows["reference"].append(phys["reference"])
+        cat = {k: np.concatenate(v) for k, v in rows.items()}
+        return {"maps": torch.from_numpy(maps), "scalars": torch.from_numpy(cat["scalars"]),
+                "evidence": torch.from_numpy(cat["evidence"]), "reference": torch.from_numpy(cat["reference"]).float(),
                 "target": torch.from_numpy(data["truth_sigma_image"]).float()}
     meta_norm = meta_norm_of(data)
     t = {"patch": torch.from_numpy(data["noisy"][:, None] / np.float32(255.0)), "meta": torch.from_numpy(meta_norm)}
