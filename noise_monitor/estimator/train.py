@@ -236,7 +236,7 @@ def head_tensors(net: ImageNoiseNet, tensors: dict[str, torch.Tensor], dev: Any,
 
 
 @torch.no_grad()
-def anchor_tensors(init_net: ImageNoiseNet, tensors: dict[str, torch.Tensor], dev: Any, chunk: int = 512) -> dict[str, torch.Tensor]:
+def anchor_tensors(init_net: torch.nn.Module, tensors: dict[str, torch.Tensor], dev: Any, chunk: int = 512) -> dict[str, torch.Tensor]:
     """The init network's log-space reading ``anchor_mu`` of every patch and ``anchor_w`` = 1 where its
     confidence head declines the patch (the inference rule), else 0."""
     init_net.eval()
