@@ -37,14 +37,20 @@ SETS = {"tune": ((3001, 3002, 3003), lambda rng: skimage_photos()),
 N = 600
 
 
-def tuning_set(name: str, part: str, size: int, cache: Path) -> dict[str, np.ndarray]:
+def tuning_set(name: str, part: str, size: int, cache: Path, effects: dict | None = None,
+               sensor: dict | None = None) -> dict[str, np.ndarray]:
+    """A tuning set's part, from ``cache`` when it has it; ``effects`` / ``sensor``: simulated with that camera
+    (a profile's effects and sensor fields, as ``train --profile``) instead of the paper's, not cached."""
+    camera = bool(effects or sensor)
     path = cache / f"{name}_{part}_p{size}_n{N}.npz"
-    if path.is_file():
+    if path.is_file() and not camera:
         return D.load(path)
     seeds, images = SETS[name]
     with mock.patch.object(D, "source_images", lambda split, rng, **_: images(rng)):
-        d = D.generate(N, size, seeds["abc".index(part)], "train", D.PARTS[part], progress=False)
-    D.save(d, path)
+        d = D.generate(N, size, seeds["abc".index(part)], "train", D.PARTS[part], progress=False, effects=effects,
+                       sensor=sensor)
+    if not camera:
+        D.save(d, path)
     return d
 
 
