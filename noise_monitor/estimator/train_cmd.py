@@ -91,6 +91,9 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError("--lr must be > 0")
     if args.confidence and (args.variant != "full_meta" or args.init is None):
         raise ValueError("--confidence needs --variant full_meta and --init (the measurement to qualify)")
+    if args.anchor < 0 or (args.anchor and (args.variant != "full_meta" or args.init is None or args.confidence)):
+        raise ValueError("--anchor must be >= 0 and needs --variant full_meta and --init (weights with a confidence "
+                         "head), without --confidence")
 
 
 def _command(args: argparse.Namespace) -> str:

@@ -360,6 +360,10 @@ def test_peers_measure_white_noise():
 def test_train_cli_bad_input(tmp_path, capsys):
     rc = cli_main(["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "0"])
     assert rc == 2 and "--steps" in capsys.readouterr().err
+    for extra in (["--anchor", "-1"], ["--anchor", "10"], ["--anchor", "10", "--init", "w.pt", "--confidence"]):
+        rc = cli_main(["train", "--variant", "full_meta", "--out", str(tmp_path), *extra])
+        assert rc == 2 and "--anchor" in capsys.readouterr().err  # refused before any data is generated
+    assert not any(tmp_path.iterdir())
 
 
 def test_train_cli_end_to_end(tmp_path):
