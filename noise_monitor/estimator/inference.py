@@ -50,6 +50,12 @@ CLEAR_DECISION_K = 2.0
 CHUNK_PIXELS = 2**17
 
 
+def is_measurable(error_dn: Any, relative: Any) -> Any:
+    """The decline rule: a patch is measurable when its predicted error is at most ``MEASURABLE_ERROR_DN`` and
+    at most ``MEASURABLE_RELATIVE_ERROR`` of its sigma_image (numpy arrays or torch tensors)."""
+    return (error_dn <= MEASURABLE_ERROR_DN) & (relative <= MEASURABLE_RELATIVE_ERROR)
+
+
 def clear_decisions(pred: dict[str, np.ndarray], threshold_dn: float) -> np.ndarray:
     """Patches whose alarm decision (|xi| > ``threshold_dn``) is clear given their predicted error, measurable
     or not: | |xi| - threshold | > ``CLEAR_DECISION_K`` errors and the relative error within
@@ -243,7 +249,7 @@ class FullMetaEstimator(_Base):
         if raw.ndim == 2:  # confidence head: log-space error std -> DN (first order)
             relative = np.exp(np.clip(raw[:, 1], -8.0, 4.0))
             out["sigma_image_error"] = sigma_image * relative
-            out["measurable"] = (out["sigma_image_error"] <= MEASURABLE_ERROR_DN) & (relative <= MEASURABLE_RELATIVE_ERROR)
+            out["measurable"] = is_measurable(out["sigma_image_error"], relative)
         return out
 
 

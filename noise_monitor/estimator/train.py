@@ -13,7 +13,7 @@ from tqdm import tqdm
 from .device import resolve_device
 from .evidence import N_EVIDENCE
 from .features import compact_inputs
-from .inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR
+from .inference import is_measurable
 from .networks import SIGMA_SCALE, ImageNoiseNet, build_network, network_from_checkpoint
 
 HUBER_DELTA_DN = 1.0
@@ -245,9 +245,8 @@ def anchor_tensors(init_net: torch.nn.Module, tensors: dict[str, torch.Tensor], 
                      for i in range(0, len(tensors["maps"]), chunk)])
     r = out[:, 0].clamp(-6.0, 6.0)
     relative = out[:, 1].clamp(-8.0, 4.0).exp()
-    error_dn = tensors["reference"] * r.exp() * relative
-    declined = (error_dn > MEASURABLE_ERROR_DN) | (relative > MEASURABLE_RELATIVE_ERROR)
-    return {"anchor_mu": r, "anchor_w": declined.float()}
+    measurable = is_measurable(tensors["reference"] * r.exp() * relative, relative)
+    return {"anchor_mu": r, "anchor_w": (~measurable).float()}
 
 
 @torch.no_grad()
