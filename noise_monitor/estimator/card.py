@@ -78,6 +78,8 @@ def _procedural(train: dict) -> str:
     text = f" + {n} procedural images of pixel-scale structure (hillshades, gratings, fabric, halftone, text)" if n else ""
     if im.get("manmade"):
         text += f" + {im['manmade']} man-made procedural scenes (dead leaves of polygons, periodic bars)"
+    if im.get("grain"):
+        text += f" + {im['grain']} grainy procedural pictures (near-white grain as scene content)"
     if im.get("jpeg"):
         text += f"; {im['jpeg']:.0%} of the source images JPEG-compressed (quality {JPEG_QUALITY[0]}-{JPEG_QUALITY[1]})"
     return text
@@ -89,16 +91,25 @@ def _stages(train: dict) -> list[dict]:
 
 
 def rms_cell(s: dict | None) -> str:
-    return "-" if s is None else f"{s['rms']:.3f}"
+    """An RMS (DN), with its 95 % interval when the scores carry one."""
+    if s is None:
+        return "-"
+    ci = s.get("rms_ci95")
+    return f"{s['rms']:.3f}" + (f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else "")
+
+
+def rate_cell(rate: float, ci: list[float] | None) -> str:
+    """A rate in percent, with its 95 % interval when the scores carry one."""
+    return f"{100 * rate:.1f} %" + (f" [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]" if ci else "")
 
 
 def declined_alarms(d: dict) -> str:
     if "false_alarm_rate" in d:
-        return f"false {100 * d['false_alarm_rate']:.1f} %"
+        return f"false {rate_cell(d['false_alarm_rate'], d.get('false_alarm_ci95'))}"
     if d.get("hit_rate") is None:
         return "-"
     acc = d.get("hit_rate_accepted")
-    return f"hits {100 * d['hit_rate']:.1f} % / {'-' if acc is None else f'{100 * acc:.1f} %'}"
+    return f"hits {rate_cell(d['hit_rate'], d.get('hit_ci95'))} / {'-' if acc is None else f'{100 * acc:.1f} %'}"
 
 
 def _benchmark(name: str, label: str, results: dict) -> list[str]:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .card import declined_alarms, rms_cell, write_card
+from .card import declined_alarms, rate_cell, rms_cell, write_card
 from .data import PARTS
 from .evaluate import HELDOUT_SETS, heldout, peer_predictions, score, sensitivity_sweep, timed_predict
 from .inference import NAMES, WEIGHTS_DIR, load
@@ -119,7 +119,10 @@ def _table(results: dict) -> str:
         for name, r in rows.items():
             cells = " ".join(f"{r[k]['rms']:6.3f}" if k in r else "     -" for k in ("pn", "dcsn", "rn", "sigma_image", "xi"))
             rate = r.get("false_alarm_rate", r.get("hit_rate"))
-            lines.append(f"  {name:<28} {cells}  {'' if rate is None else f'{100 * rate:.1f} %'}")
+            ci = r.get("false_alarm_ci95", r.get("hit_ci95"))
+            xi_ci = r.get("xi", {}).get("rms_ci95")
+            lines.append(f"  {name:<28} {cells}  {'' if rate is None else rate_cell(rate, ci)}"
+                         + (f"  (xi RMS {xi_ci[0]:.3f}-{xi_ci[1]:.3f})" if xi_ci else ""))
             d = r.get("declined")
             if d is not None:
                 lines.append(f"  {'  declined unmeasurable':<28} coverage {100 * d['coverage']:.1f} %, xi RMS on accepted "

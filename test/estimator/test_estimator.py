@@ -415,3 +415,25 @@ def test_score_alarm_rates():
     assert a["false_alarm_rate"] == pytest.approx(0.2)
     b = score({"xi": np.array([0.0, 0.0, 2.5, 1.5, 0.0])}, data, "b")
     assert b["hit_rate"] == pytest.approx(0.5) and b["n_hit_candidates"] == 2  # wrong sign is no hit
+
+
+def test_scores_carry_intervals_that_cover_the_truth_at_their_level():
+    from noise_monitor.estimator.evaluate import rate_ci, rms_ci, score
+
+    # Wilson interval of 18 events in 600 (the photos' false alarms): 1.9-4.7 %
+    assert rate_ci(np.arange(600) < 18) == pytest.approx([0.0191, 0.0469], abs=2e-4)
+    assert rate_ci(np.zeros(85, bool))[0] == 0.0
+    # coverage on repeated draws: a 3 % rate on 600 patches, N(0, 0.7 DN) errors
+    rng = np.random.default_rng(11)
+    rate_in = rms_in = 0
+    for _ in range(200):
+        lo, hi = rate_ci(rng.random(600) < 0.03)
+        rate_in += lo <= 0.03 <= hi
+        lo, hi = rms_ci(rng.normal(0.0, 0.7, 600), seed=int(rng.integers(1 << 30)))
+        rms_in += lo <= 0.7 <= hi
+    assert 180 <= rate_in and 176 <= rms_in <= 198  # 95 % intervals: ~190 of 200 (binomial spread +-6)
+    err = np.random.default_rng(0).normal(0.0, 1.0, 300)
+    assert rms_ci(err) == rms_ci(err)  # seeded: the same data, the same interval
+    r = score({"xi": err}, {"truth_xi": np.zeros(300)}, "a")
+    lo, hi = r["xi"]["rms_ci95"]
+    assert lo < r["xi"]["rms"] < hi and r["false_alarm_ci95"][0] < r["false_alarm_rate"] < r["false_alarm_ci95"][1]
