@@ -1,17 +1,19 @@
 """The estimator's tuning sets and their scores: what the confidence head and its limits were chosen on.
 
-Four sets, 600 patches per part (a) / (b) / (c) (``data.PARTS``), never the held-out ones:
+Five sets, 600 patches per part (a) / (b) / (c) (``data.PARTS``), never the held-out ones:
 - ``tune``: new crops of the training photographs (scikit-image, at their fixed 2x), seeds 3001-3003;
 - ``proc``: procedural images of pixel-scale structure only (``procedural.procedural_images``, 30 images),
   seeds 3101-3103;
 - ``manmade``: man-made procedural scenes only (``procedural.manmade_images``, 30 images: dead leaves of
   polygons, periodic bars), seeds 3201-3203;
 - ``tune_native``: new crops of the training photographs at their native resolution (no downsample),
-  seeds 3301-3303.
+  seeds 3301-3303;
+- ``grain``: grainy procedural pictures only (``procedural.grain_images``, 30 images: near-white grain as
+  scene content), seeds 3401-3403.
 Generated once into ``--cache`` (``<set>_<part>_p<size>_n600.npz``), then scored with a weights file: xi RMS
 and alarm rates over every patch, over the measurable ones, and with clear decisions (``evaluate.score``).
 
-Usage: .venv/bin/python bench/estimator_tuning.py [--weights W.pt] [--sets tune proc manmade tune_native]
+Usage: .venv/bin/python bench/estimator_tuning.py [--weights W.pt] [--sets tune proc manmade tune_native grain]
        [--patch-size 64] [--cache out/estimator_eval] [--json out/tuning.json]
 Prints figures; asserts nothing.
 """
@@ -28,12 +30,13 @@ from noise_monitor.estimator import data as D
 from noise_monitor.estimator.evaluate import score
 from noise_monitor.estimator.images import skimage_originals, skimage_photos
 from noise_monitor.estimator.inference import load
-from noise_monitor.estimator.procedural import manmade_images, procedural_images
+from noise_monitor.estimator.procedural import grain_images, manmade_images, procedural_images
 
 SETS = {"tune": ((3001, 3002, 3003), lambda rng: skimage_photos()),
         "proc": ((3101, 3102, 3103), lambda rng: procedural_images(rng, 30)),
         "manmade": ((3201, 3202, 3203), lambda rng: manmade_images(rng, 30)),
-        "tune_native": ((3301, 3302, 3303), lambda rng: skimage_originals())}
+        "tune_native": ((3301, 3302, 3303), lambda rng: skimage_originals()),
+        "grain": ((3401, 3402, 3403), lambda rng: grain_images(rng, 30))}
 N = 600
 
 

@@ -96,6 +96,31 @@ def text(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     return np.asarray(canvas.buffer_rgba(), dtype=np.float32)[..., :3].mean(axis=2)
 
 
+#: Grain of ``grainy``: correlation length (px, Gaussian sigma) and amplitude (DN, std), both log-uniform.
+GRAIN_SCALE = (0.4, 1.5)
+GRAIN_DN = (0.5, 8.0)
+
+
+def grainy(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
+    """A smooth picture under grain (film grain, a scanned print, the source's own sensor noise): Gaussian
+    white noise blurred to a 0.4-1.5 px correlation length, 0.5-8 DN, uniform or strongest in the mid-tones
+    (half each). Scene content, not camera noise: nearly white at the pixel scale, so one image can hardly
+    tell it from the noise, and the confidence head is to learn so."""
+    base = 128.0 + rng.uniform(20.0, 70.0) * _fractal(rng, size, rng.uniform(2.5, 4.0))
+    scale = float(np.exp(rng.uniform(*np.log(GRAIN_SCALE))))
+    grain = cv2.GaussianBlur(rng.standard_normal((size, size)), (0, 0), scale)
+    grain *= float(np.exp(rng.uniform(*np.log(GRAIN_DN)))) / grain.std()
+    if rng.random() < 0.5:
+        t = np.clip(base / 255.0, 0.0, 1.0)
+        grain *= 0.25 + 3.0 * t * (1.0 - t)
+    return base + grain
+
+
+def grain_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
+    """``n`` grainy pictures (:func:`grainy`; float32 DN, clipped to 0..255)."""
+    return [np.clip(grainy(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
+
+
 KINDS: dict[str, Callable[[np.random.Generator, int], np.ndarray]] = {
     "hillshade": hillshade, "grating": grating, "fabric": fabric, "halftone": halftone, "text": text}
 

@@ -47,6 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--manmade", type=int, default=0, metavar="N",
                    help="add N man-made procedural scenes (dead leaves of polygons, periodic bars: straight edges at "
                         "arbitrary angles)")
+    p.add_argument("--grain", type=int, default=0, metavar="N",
+                   help="add N grainy procedural pictures (near-white grain of 0.4-1.5 px as scene content)")
     p.add_argument("--width", type=int, default=None, help="conv features (default: 16)")
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -78,8 +80,8 @@ def _check(args: argparse.Namespace) -> None:
     for name in ("steps", "batch", "patches", "threads"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1")
-    if args.photo_variants < 0 or args.procedural < 0 or args.manmade < 0:
-        raise ValueError("--photo-variants, --procedural and --manmade must be >= 0")
+    if args.photo_variants < 0 or args.procedural < 0 or args.manmade < 0 or args.grain < 0:
+        raise ValueError("--photo-variants, --procedural, --manmade and --grain must be >= 0")
     if args.checkpoint_every < 1:
         raise ValueError("--checkpoint-every must be >= 1")
     imagery(args)  # validates the imagery options
@@ -114,7 +116,8 @@ def _command(args: argparse.Namespace) -> str:
 def imagery(args: argparse.Namespace) -> Imagery:
     """The training imagery options of the command line."""
     return Imagery(photo_scales=(float(args.photo_scales[0]), float(args.photo_scales[1])),
-                   photo_native=args.photo_native, photo_rotate=args.photo_rotate, jpeg=args.jpeg, manmade=args.manmade)
+                   photo_native=args.photo_native, photo_rotate=args.photo_rotate, jpeg=args.jpeg, manmade=args.manmade,
+                   grain=args.grain)
 
 
 def camera(profile: str | None) -> tuple[dict, dict]:
