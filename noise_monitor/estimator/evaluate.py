@@ -115,16 +115,9 @@ def score(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -
     if "xi" in pred:
         xi, xi_true = pred["xi"], data["truth_xi"]
         out["xi"] = xi_stats(xi, xi_true)
-        if part == "a":
-            out["false_alarm_rate"] = round(float(np.mean(np.abs(xi) > ALARM_DN)), 4)
-            out["false_alarm_ci95"] = rate_ci(np.abs(xi) > ALARM_DN)
-        else:
-            big = np.abs(xi_true) > HIT_TRUTH_DN
-            hit = (np.abs(xi) > ALARM_DN) & (np.sign(xi) == np.sign(xi_true))
-            out["hit_rate"] = round(float(hit[big].mean()), 4) if big.any() else None
-            if big.any():
-                out["hit_ci95"] = rate_ci(hit[big])
-            out["n_hit_candidates"] = int(big.sum())
+        out.update(_alarm_rates(xi, xi_true, np.ones(len(xi), dtype=bool), part))
+        if part != "a":
+            out["n_hit_candidates"] = int(np.count_nonzero(np.abs(xi_true) > HIT_TRUTH_DN))
         if "measurable" in pred:
             ok = np.asarray(pred["measurable"], dtype=bool)
             out["declined"] = _declined(xi, xi_true, ok, part)
@@ -140,16 +133,21 @@ def _declined(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray, part: str) ->
     """Scores with the unmeasurable patches declined (see the module docstring)."""
     out: dict = {"coverage": round(float(ok.mean()), 4),
                  "xi": xi_stats(xi[ok], xi_true[ok]) if ok.any() else None}
+    return {**out, **_alarm_rates(xi, xi_true, ok, part, among_accepted=True)}
+
+
+def _alarm_rates(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray, part: str, among_accepted: bool = False) -> dict:
+    """False alarms on (a), hits on (b) / (c) (``among_accepted``: also among the ``ok`` candidates), with
+    their intervals; a patch not ``ok`` never alarms."""
     alarm = ok & (np.abs(xi) > ALARM_DN)
     if part == "a":
-        out["false_alarm_rate"] = round(float(alarm.mean()), 4)
-        out["false_alarm_ci95"] = rate_ci(alarm)
-    else:
-        big = np.abs(xi_true) > HIT_TRUTH_DN
-        hit = alarm & (np.sign(xi) == np.sign(xi_true))
-        out["hit_rate"] = round(float(hit[big].mean()), 4) if big.any() else None
-        if big.any():
-            out["hit_ci95"] = rate_ci(hit[big])
+        return {"false_alarm_rate": round(float(alarm.mean()), 4), "false_alarm_ci95": rate_ci(alarm)}
+    big = np.abs(xi_true) > HIT_TRUTH_DN
+    hit = alarm & (np.sign(xi) == np.sign(xi_true))
+    out: dict = {"hit_rate": None}
+    if big.any():
+        out = {"hit_rate": round(float(hit[big].mean()), 4), "hit_ci95": rate_ci(hit[big])}
+    if among_accepted:
         out["hit_rate_accepted"] = round(float(hit[big & ok].mean()), 4) if (big & ok).any() else None
     return out
 
