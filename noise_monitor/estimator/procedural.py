@@ -108,11 +108,11 @@ def grainy(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     tell it from the noise, and the confidence head is to learn so."""
     base = 128.0 + rng.uniform(20.0, 70.0) * _fractal(rng, size, rng.uniform(2.5, 4.0))
     scale = float(np.exp(rng.uniform(*np.log(GRAIN_SCALE))))
-    grain = cv2.GaussianBlur(rng.standard_normal((size, size)), (0, 0), scale)
-    grain *= float(np.exp(rng.uniform(*np.log(GRAIN_DN)))) / grain.std()
+    grain = np.asarray(cv2.GaussianBlur(rng.standard_normal((size, size)), (0, 0), scale), dtype=np.float64)
+    grain = grain * float(np.exp(rng.uniform(*np.log(GRAIN_DN)))) / grain.std()
     if rng.random() < 0.5:
         t = np.clip(base / 255.0, 0.0, 1.0)
-        grain *= 0.25 + 3.0 * t * (1.0 - t)
+        grain = grain * (0.25 + 3.0 * t * (1.0 - t))
     return base + grain
 
 
