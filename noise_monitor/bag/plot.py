@@ -61,7 +61,7 @@ def plot_replay(table: FrameTable, episodes: list[dict[str, Any]], path: Path, t
     _plot_conditions(ax_c, table)
     ax_s.set_ylabel("noise sigma [DN]")
     ax_s.set_ylim(bottom=0)
-    ax_x.set_ylabel("xi = sigma_model - sigma_image [DN]")
+    ax_x.set_ylabel("xi [DN]\n(model - image)")
     ax_c.set_xlabel("time since first frame [s]")
     ax_s.set_title(title)
     for ax in (ax_s, ax_x, ax_c):
