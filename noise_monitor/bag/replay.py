@@ -116,7 +116,8 @@ def _record(table: FrameTable, bf: Frame, res: FrameResult) -> None:
     table.append(index=bf.index, stamp_ns=res.stamp_ns, processed=res.processed, level=res.level,
                  alarm_active=res.alarm_active, alarm_state=res.alarm_state, cause=res.cause,
                  skip_reason=res.skip_reason, numbers=res.numeric(),
-                 conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {})
+                 conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {},
+                 xi_measurement=res.xi_measurement if res.processed else None)
 
 
 def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:

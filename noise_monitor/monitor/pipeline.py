@@ -72,6 +72,7 @@ class FrameResult:
     xi_model: float | None = None  # analytic sigma_model (this model, these patches) - estimated image noise
     xi_image: float | None = None  # the single-image measurement's xi (per Monitor.xi_source)
     xi_bound: float | None = None  # median over the patches of sigma_model - the image-only noise bound: xi >= it
+    xi_bounded: bool = False  # no patch measurable: the single image's xi is what the bound proves, max(xi_bound, 0)
     xi_temporal: float | None = None  # the model's temporal noise - the frame differences' (static holds)
     temporal_weight: float = 0.0  # share of xi_temporal in xi (inverse-variance weights)
     temporal_frames: int = 0  # frames of the current static hold measured
@@ -134,8 +135,12 @@ class FrameResult:
 
     @property
     def xi_measurement(self) -> str:
-        """Which measurement drove xi: the frame differences of a static hold, or the single image."""
-        return "temporal" if self.temporal_weight >= 0.5 else "image"
+        """Which measurement drove xi: the frame differences of a static hold (``temporal``), the single
+        image's reading (``image``) or, where texture hides the noise in every patch, what the image proves
+        (``bound``)."""
+        if self.temporal_weight >= 0.5:
+            return "temporal"
+        return "bound" if self.xi_bounded else "image"
 
     def report(self) -> StatusReport:
         return StatusReport(self.level, self.name, self.message, self.hardware_id, self.values())
@@ -262,7 +267,8 @@ class Monitor:
         xi_model = float(np.median((model_pp["total"] - image_pp)[use]))
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
         xi_bound = self._xi_bound(est, per_patch["total"] if self.xi_source == "estimator" else model_pp["total"])
-        if xi_bound is not None and bounded_only:
+        bounded = xi_bound is not None and bounded_only
+        if bounded and xi_bound is not None:
             # texture hides the noise in every patch: the image proves only xi >= xi_bound (content adds
             # pixel-scale energy, never removes noise), so "image noisier" is left to the static holds
             xi_image = max(xi_bound, 0.0)
@@ -287,11 +293,11 @@ class Monitor:
         state = self.alarm.update(xi_f, xi, xi_err)
         self.counters["frames_processed"] += 1
         level, message = self._status(xi, xi_f, meta)
-        if xi_bound is not None and bounded_only and weight < 0.5:
+        if bounded and weight < 0.5:
             message += f"; no patch measurable (texture hides the noise): the image proves only xi >= {xi_bound:+.2f} DN"
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
-            xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
+            xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_bounded=bounded, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
             xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],

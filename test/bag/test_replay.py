@@ -240,7 +240,8 @@ def test_frame_table_columns_episodes_and_csv(tmp_path):
         table.append(index=i, stamp_ns=10**9 + i * 10**8, processed=not skipped, level=2 if alarm else 0,
                      alarm_active=alarm, alarm_state="active" if alarm else "ok", cause="xi < 0" if alarm else None,
                      skip_reason="metadata missing" if skipped else None, numbers=numbers,
-                     conditions={"gain_db": 6.0, "exposure_time_s": 0.01, "sensor_temperature_c": 30.0})
+                     conditions={"gain_db": 6.0, "exposure_time_s": 0.01, "sensor_temperature_c": 30.0},
+                     xi_measurement=None if skipped else ("temporal" if i % 2 else "image"))
     assert len(table) == n and table.column("time_s")[-1] == pytest.approx((n - 1) * 0.1)
     assert skip_reasons(table) == {"metadata missing": 5}
     prnu = table.numbers("sigma_model_prnu")
@@ -255,4 +256,5 @@ def test_frame_table_columns_episodes_and_csv(tmp_path):
         rows = list(csv.DictReader(fh))
     assert [int(r["index"]) for r in rows] == list(range(n))
     assert rows[3]["skip_reason"] == "metadata missing" and rows[3]["xi"] == "" and rows[3]["gain_db"] == "6"
+    assert rows[3]["xi_measurement"] == "" and (rows[4]["xi_measurement"], rows[5]["xi_measurement"]) == ("image", "temporal")
     assert rows[-1]["alarm"] == "1" and float(rows[-1]["xi"]) == -2.0 and rows[4100]["sigma_model_prnu"] == "0.5"

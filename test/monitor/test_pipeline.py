@@ -370,6 +370,7 @@ def test_texture_everywhere_proves_only_a_lower_bound_of_xi(stated_gain_db):
         assert res.processed and res.patches_measurable == 0 and res.temporal_weight == 0.0
         assert res.xi_bound is not None and res.xi == pytest.approx(max(res.xi_bound, 0.0))
         assert "the image proves only xi >=" in res.message and "xi_bound" in res.numeric()
+        assert res.xi_measurement == "bound" and res.values()["xi_measurement"] == "bound"
     raw = np.median([r.sigma["xi"] for r in results])
     true_xi = float(MODEL.predict(100.0, stated)["total"] - MODEL.predict(100.0, true_meta)["total"])
     if stated_gain_db == 18.0:
