@@ -9,7 +9,15 @@ import numpy as np
 
 from .card import declined_alarms, rate_cell, rms_cell, write_card
 from .data import PARTS
-from .evaluate import HELDOUT_SETS, heldout, peer_predictions, score, sensitivity_sweep, timed_predict
+from .evaluate import (
+    HELDOUT_SETS,
+    heldout,
+    paired_difference,
+    peer_predictions,
+    score,
+    sensitivity_sweep,
+    timed_predict,
+)
 from .inference import NAMES, WEIGHTS_DIR, load
 from .physics_prior import PhysicsPrior
 
@@ -20,7 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--weights-dir", type=Path, default=WEIGHTS_DIR)
     p.add_argument("--compare", nargs="+", default=[], metavar="LABEL=WEIGHTS",
                    help="also evaluate these full_meta weights in the same run, reported as LABEL (e.g. "
-                        "full_meta_old=old/full_meta.pt: old and new weights side by side on the same data)")
+                        "full_meta_old=old/full_meta.pt: old and new weights side by side on the same data), each "
+                        "also minus full_meta paired on the same patches, with 95 %% intervals")
     p.add_argument("--patches", type=int, default=600, help="held-out patches per part")
     p.add_argument("--patch-size", type=int, nargs="+", default=None,
                    help="evaluate every variant on patches of this size, one benchmark per size given (default: each "
@@ -47,9 +56,10 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
     estimators = {n: load(n, args.device, weights=args.weights_dir / f"{n}.pt") for n in names}
-    for label, path in compared(args.compare, names).items():
+    labels = compared(args.compare, names)
+    for label, path in labels.items():
         estimators[label] = load("full_meta", args.device, weights=path)
-    runs = {_label(size, hs): evaluate(estimators, args, size, hs)
+    runs = {_label(size, hs): evaluate(estimators, args, size, hs, list(labels))
             for hs in args.heldout for size in args.patch_size or [None]}
     for label, results in runs.items():
         print(f"== patches {label}\n{_table(results)}")
@@ -63,6 +73,10 @@ def run(args: argparse.Namespace) -> int:
         for name in names:
             print(f"model card: {write_card(name, args.weights_dir, runs, command)}")
     return 0
+
+
+#: What ``--compare`` weights are compared with, patch by patch.
+BASELINE = "full_meta"
 
 
 def compared(specs: list[str], names: list[str]) -> dict[str, Path]:
@@ -84,9 +98,11 @@ def _label(size: int | None, heldout_set: str) -> str:
     return ("native" if size is None else f"{size}x{size}") + ("" if heldout_set == "benchmark" else f", {heldout_set}")
 
 
-def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None, heldout_set: str = "benchmark") -> dict:
+def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None, heldout_set: str = "benchmark",
+             compared_labels: list[str] | None = None) -> dict:
     """Scores of every estimator (and the peers) on each part of a held-out set, the throughput and (on
-    the benchmark) full_meta's metadata sweep."""
+    the benchmark) full_meta's metadata sweep; each of ``compared_labels`` (``--compare``) also minus the
+    evaluated full_meta, paired on the same patches (``minus_full_meta``)."""
     size_of = {n: patch_size or e.patch_size for n, e in estimators.items()}
     results: dict = {"heldout": heldout_set, "patches_per_part": args.patches, "patch_size": size_of, "parts": {},
                      "ms_per_patch": {}}
@@ -95,12 +111,17 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
         results["parts"][part] = {}
         for size in sorted(set(size_of.values())):
             data = heldout(part, args.patches, size, args.cache, heldout_set=heldout_set)
+            preds = {}
             for name, est in estimators.items():
                 if size_of[name] != size:
                     continue
-                pred, dt = timed_predict(est, data)
-                results["parts"][part][name] = score(pred, data, part)
+                preds[name], dt = timed_predict(est, data)
+                results["parts"][part][name] = score(preds[name], data, part)
                 results["ms_per_patch"].setdefault(name, []).append(1000.0 * dt / len(data["noisy"]))
+            for label in compared_labels or []:
+                if label in preds and BASELINE in preds:
+                    results["parts"][part][label][f"minus_{BASELINE}"] = paired_difference(
+                        preds[label], preds[BASELINE], data, part)
             if not args.no_peers:
                 for peer, pred in peer_predictions(data, prior).items():
                     results["parts"][part][f"{peer}@{size}"] = score(pred, data, part)
@@ -110,6 +131,19 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
         results["sensitivity_full_meta"] = sensitivity_sweep(
             lambda x, m: fm.predict(x, m)["total"][0], size_of["full_meta"], model=fm.prior.model)
     return results
+
+
+def _differences(diff: dict[str, list[float]]) -> str:
+    """Paired differences with their intervals (DN; rates in points)."""
+    names = {"xi_rms": ("xi RMS", 1.0, "DN"), "xi_rms_accepted": ("on accepted", 1.0, "DN"),
+             "false_alarm_rate": ("false alarms", 100.0, "pt"), "hit_rate": ("hits", 100.0, "pt")}
+    cells = []
+    for key, (label, scale, unit) in names.items():
+        if key in diff:
+            d, lo, hi = (scale * v for v in diff[key])
+            cells.append(f"{label} {d:+.3f} [{lo:+.3f}, {hi:+.3f}] {unit}" if unit == "DN"
+                         else f"{label} {d:+.1f} [{lo:+.1f}, {hi:+.1f}] {unit}")
+    return ", ".join(cells)
 
 
 def _table(results: dict) -> str:
@@ -130,6 +164,9 @@ def _table(results: dict) -> str:
             c = r.get("decided")
             if c is not None:
                 lines.append(f"  {'  + clear decisions':<28} coverage {100 * c['coverage']:.1f} %, {declined_alarms(c)}")
+            diff = r.get(f"minus_{BASELINE}")
+            if diff:
+                lines.append(f"  {f'  minus {BASELINE}, paired':<28} {_differences(diff)}")
     sens = results.get("sensitivity_full_meta")
     if sens:
         lines.append(f"sensitivity sweep (full_meta): max |estimator - model| = {sens['max_abs_diff_dn']} DN, "

@@ -417,6 +417,28 @@ def test_score_alarm_rates():
     assert b["hit_rate"] == pytest.approx(0.5) and b["n_hit_candidates"] == 2  # wrong sign is no hit
 
 
+def test_paired_difference_cancels_the_patches_own_variation():
+    from noise_monitor.estimator.evaluate import paired_difference, rms_ci
+
+    rng = np.random.default_rng(5)
+    truth = rng.normal(0.0, 2.0, 600)
+    err = rng.normal(0.0, 1.0, 600) * rng.uniform(0.2, 3.0, 600)  # patches of very different difficulty
+    base = {"xi": truth + err, "measurable": np.ones(600, bool)}
+    better = {"xi": truth + 0.9 * err, "measurable": np.ones(600, bool)}  # 10 % smaller error on every patch
+    d = paired_difference(better, base, {"truth_xi": truth}, "b")
+    rms = float(np.sqrt(np.mean(err**2)))
+    assert d["xi_rms"][0] == pytest.approx(-0.1 * rms, abs=1e-3)
+    lo, hi = d["xi_rms"][1:]
+    assert lo <= d["xi_rms"][0] <= hi < 0.0  # the paired interval excludes 0 ...
+    one = rms_ci(err)  # ... where each RMS's own interval is far wider than the difference
+    assert one[1] - one[0] > 3 * (hi - lo) and "hit_rate" in d
+    same = paired_difference(base, base, {"truth_xi": truth}, "a")
+    assert same["xi_rms"] == [0.0, 0.0, 0.0] and same["false_alarm_rate"] == [0.0, 0.0, 0.0]
+    declined = {**base, "measurable": np.arange(600) < 300}  # accepted scores over each one's own accepted patches
+    d = paired_difference(declined, base, {"truth_xi": truth}, "a")
+    assert d["xi_rms_accepted"][0] == pytest.approx(np.sqrt(np.mean(err[:300] ** 2)) - rms, abs=1e-3)
+
+
 def test_scores_carry_intervals_that_cover_the_truth_at_their_level():
     from noise_monitor.estimator.evaluate import rate_ci, rms_ci, score
 

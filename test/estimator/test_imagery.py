@@ -152,6 +152,7 @@ def test_evaluate_compare_weights_side_by_side(tmp_path, capsys):
     assert r["heldout"] == "photos_native"
     rows = r["parts"]["a"]
     assert rows["full_meta"]["xi"] == rows["full_meta_old"]["xi"]  # the same weights on the same data
+    assert rows["full_meta_old"]["minus_full_meta"]["xi_rms"] == [0.0, 0.0, 0.0]  # paired: nothing differs
     bad = cli_main(["evaluate", "--weights-dir", str(weights), "--variants", "full_meta", "--compare", "full_meta=x.pt"])
     assert bad == 2 and "already used" in capsys.readouterr().err
 
