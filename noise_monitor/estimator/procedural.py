@@ -3,7 +3,8 @@
 Fine texture is where one image cannot tell scene from noise; these images teach the confidence head to
 decline it and let it be measured on content no photo provides often enough: shaded fractal relief
 (like a DEM hillshade), sine gratings of 1.5-6 px periods at random orientations, woven fabric, halftone
-dots and small text rendered by matplotlib. Every image is drawn from ``rng`` (seeded, reproducible).
+dots and small text rendered by matplotlib; grainy pictures (near-white grain as scene content); man-made
+scenes (straight edges, bars). Every image is drawn from ``rng`` (seeded, reproducible).
 """
 from __future__ import annotations
 
@@ -104,8 +105,8 @@ GRAIN_DN = (0.5, 8.0)
 def grainy(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     """A smooth picture under grain (film grain, a scanned print, the source's own sensor noise): Gaussian
     white noise blurred to a 0.4-1.5 px correlation length, 0.5-8 DN, uniform or strongest in the mid-tones
-    (half each). Scene content, not camera noise: nearly white at the pixel scale, so one image can hardly
-    tell it from the noise, and the confidence head is to learn so."""
+    (half each). Scene content, not camera noise, close to white at the pixel scale: the tuning set ``grain``
+    checks that the confidence head declines it (``train --grain`` adds it to a head's training imagery)."""
     base = 128.0 + rng.uniform(20.0, 70.0) * _fractal(rng, size, rng.uniform(2.5, 4.0))
     scale = float(np.exp(rng.uniform(*np.log(GRAIN_SCALE))))
     grain = np.asarray(cv2.GaussianBlur(rng.standard_normal((size, size)), (0, 0), scale), dtype=np.float64)
