@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 #: Leading columns of every per-frame table; the conditions and the monitor's numbers (float32) follow.
 BASE_COLUMNS = ("hardware_id", "bag", "sha256", "index", "stamp_ns", "time", "processed", "level", "alarm",
-                "alarm_state", "cause", "skip_reason")
+                "alarm_state", "cause", "skip_reason", "xi_measurement")
 
 
 def require_pyarrow() -> None:
@@ -46,7 +46,8 @@ def to_arrow(table: FrameTable, hardware_id: str, sha256: str) -> pa.Table:
         "processed": pa.array(table.column("processed"), pa.bool_()),
         "level": pa.array(table.column("level"), pa.int8()),
         "alarm": pa.array(table.column("alarm"), pa.bool_()),
-        **{name: pa.array(table.texts(name), pa.string()) for name in ("alarm_state", "cause", "skip_reason")},
+        **{name: pa.array(table.texts(name), pa.string())
+           for name in ("alarm_state", "cause", "skip_reason", "xi_measurement")},
     }
     for key in (*CONDITION_KEYS, *table.number_keys):
         cols[key] = pa.array(table.numbers(key).astype(np.float32), pa.float32())  # float32 -> 64 -> 32 is exact
@@ -63,15 +64,16 @@ def write_parquet(tab: pa.Table, path: Path) -> None:
 def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
     """Concatenate per-bag Parquet files (file, bag path) into one: a row group per bag, one bag in memory.
 
-    Columns missing from a bag (e.g. an extra source only some profiles have) are NaN there. Returns rows.
+    Columns missing from a bag (e.g. an extra source only some profiles have, or a text column a part written
+    by an older version lacks) are NaN there (texts: null). Returns rows.
     """
     parts = list(parts)
     schemas = [pq.read_schema(p) for p, _ in parts]
-    names = list(BASE_COLUMNS)
-    for s in schemas:
-        names += [n for n in s.names if n not in names]
     fields = {f.name: f for s in schemas for f in s}
     fields["bag"] = pa.field("bag", pa.string())
+    names = [n for n in BASE_COLUMNS if n in fields]  # parts of an older version may lack a base column
+    for s in schemas:
+        names += [n for n in s.names if n not in names]
     schema = pa.schema([fields[n] for n in names])
     tmp = path.with_name(path.name + ".tmp")
     rows = 0
@@ -82,7 +84,10 @@ def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
                 if name == "bag":
                     tab = tab.add_column(i, schema.field(name), pa.array([bag] * tab.num_rows, pa.string()))
                 elif name not in tab.column_names:
-                    tab = tab.add_column(i, schema.field(name), pa.array(np.full(tab.num_rows, np.nan, np.float32)))
+                    field = schema.field(name)
+                    missing = (pa.nulls(tab.num_rows, field.type) if pa.types.is_string(field.type)
+                               else pa.array(np.full(tab.num_rows, np.nan, np.float32)))
+                    tab = tab.add_column(i, field, missing)
             writer.write_table(tab.select(schema.names).cast(schema))
             rows += tab.num_rows
     tmp.replace(path)

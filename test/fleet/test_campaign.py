@@ -124,6 +124,8 @@ def test_per_frame_results_bit_exact_with_replay(pool_run: tuple[dict, Path]) ->
         assert got["index"].to_pylist() == table.column("index").tolist()
         assert got["processed"].to_pylist() == table.column("processed").tolist()
         assert got["skip_reason"].to_pylist() == table.texts("skip_reason")
+        assert got["xi_measurement"].to_pylist() == table.texts("xi_measurement")
+        assert set(got["xi_measurement"].to_pylist()) <= {"image", "temporal", "bound", None}
         keys = [k for k in (*CONDITION_KEYS, *table.number_keys) if k not in TIMING]
         assert "xi" in keys and "sigma_dcsn" in keys
         for k in keys:
@@ -288,3 +290,23 @@ def test_simulate_bag_cli_sets_camera_id_and_start(tmp_path: Path) -> None:
     with open_bag(bag) as reader:
         assert reader.start_ns == 1_777_622_400 * 10**9
     assert main(["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "static", "--start", "May"]) == 2
+
+
+def test_merge_fills_what_an_older_part_lacks(tmp_path: Path) -> None:
+    """A part written before a column existed (a resumed campaign): texts null, numbers NaN, rows kept."""
+    import pyarrow as pa
+
+    from noise_monitor.fleet.frames import merge
+
+    new = pa.table({"index": pa.array([0, 1], pa.int64()), "xi_measurement": pa.array(["image", "bound"]),
+                    "xi": pa.array([0.1, 0.2], pa.float32())})
+    old = pa.table({"index": pa.array([0], pa.int64()), "sigma_extra": pa.array([1.5], pa.float32())})
+    pq.write_table(new, tmp_path / "new.parquet")
+    pq.write_table(old, tmp_path / "old.parquet")
+    assert merge([(tmp_path / "new.parquet", "a.mcap"), (tmp_path / "old.parquet", "b.mcap")], tmp_path / "m.parquet") == 3
+    m = pq.read_table(tmp_path / "m.parquet")
+    assert m["bag"].to_pylist() == ["a.mcap", "a.mcap", "b.mcap"]
+    assert m["xi_measurement"].to_pylist() == ["image", "bound", None]
+    assert np.isnan(m["xi"].to_numpy()[2]) and np.isnan(m["sigma_extra"].to_numpy()[:2]).all()
+    only_old = merge([(tmp_path / "old.parquet", "b.mcap")], tmp_path / "o.parquet")  # no part has the column
+    assert only_old == 1 and "xi_measurement" not in pq.read_table(tmp_path / "o.parquet").column_names
