@@ -139,17 +139,22 @@ def _declined(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray, part: str) ->
 def _alarm_rates(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray, part: str, among_accepted: bool = False) -> dict:
     """False alarms on (a), hits on (b) / (c) (``among_accepted``: also among the ``ok`` candidates), with
     their intervals; a patch not ``ok`` never alarms."""
-    alarm = ok & (np.abs(xi) > ALARM_DN)
+    alarm, hit, big = _alarms(xi, xi_true, ok)
     if part == "a":
         return {"false_alarm_rate": round(float(alarm.mean()), 4), "false_alarm_ci95": rate_ci(alarm)}
-    big = np.abs(xi_true) > HIT_TRUTH_DN
-    hit = alarm & (np.sign(xi) == np.sign(xi_true))
     out: dict = {"hit_rate": None}
     if big.any():
         out = {"hit_rate": round(float(hit[big].mean()), 4), "hit_ci95": rate_ci(hit[big])}
     if among_accepted:
         out["hit_rate_accepted"] = round(float(hit[big & ok].mean()), 4) if (big & ok).any() else None
     return out
+
+
+def _alarms(xi: np.ndarray, xi_true: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per patch: an alarm (accepted and |xi| > ``ALARM_DN``), a hit (an alarm of the true sign) and a hit
+    candidate (|xi_true| > ``HIT_TRUTH_DN``)."""
+    alarm = ok & (np.abs(xi) > ALARM_DN)
+    return alarm, alarm & (np.sign(xi) == np.sign(xi_true)), np.abs(xi_true) > HIT_TRUTH_DN
 
 
 def paired_difference(pred: dict[str, np.ndarray], base: dict[str, np.ndarray], data: dict[str, np.ndarray],
@@ -180,9 +185,8 @@ def _resampled_scores(pred: dict[str, np.ndarray], xi_true: np.ndarray, part: st
     xi = np.asarray(pred["xi"], dtype=float)
     sq = np.square(xi - xi_true)
     ok = np.asarray(pred.get("measurable", np.ones(len(xi), bool)), dtype=bool)
-    alarm = ok & (np.abs(xi) > ALARM_DN)
-    big = np.abs(xi_true) > HIT_TRUTH_DN
-    hit = alarm & (np.sign(xi) == np.sign(xi_true)) & big
+    alarm, hit, big = _alarms(xi, xi_true, ok)
+    hit = hit & big
     out = {}
     with np.errstate(invalid="ignore", divide="ignore"):  # no accepted patch / candidate in a resample: NaN
         for name, idx in rows.items():

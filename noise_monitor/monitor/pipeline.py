@@ -267,11 +267,11 @@ class Monitor:
         xi_model = float(np.median((model_pp["total"] - image_pp)[use]))
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
         xi_bound = self._xi_bound(est, per_patch["total"] if self.xi_source == "estimator" else model_pp["total"])
-        bounded = xi_bound is not None and bounded_only
-        if bounded and xi_bound is not None:
+        bounded = False
+        if xi_bound is not None and bounded_only:
             # texture hides the noise in every patch: the image proves only xi >= xi_bound (content adds
             # pixel-scale energy, never removes noise), so "image noisier" is left to the static holds
-            xi_image = max(xi_bound, 0.0)
+            bounded, xi_image = True, max(xi_bound, 0.0)
         xi, xi_t, weight, held, xi_err = xi_image, None, 0.0, 0, cfg.image_xi_error_dn
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         if tm is not None:
