@@ -31,15 +31,17 @@ HELDOUT = ("photos", "photos_native")
 N = 600
 
 
-def dataset(name: str, part: str, size: int, cache: Path) -> dict[str, np.ndarray]:
-    """The set's data of a part, regenerated when the cached copy predates ``source_index``."""
+def dataset(name: str, part: str, size: int, cache: Path, n: int | None = None) -> dict[str, np.ndarray]:
+    """The set's data of a part (``n`` patches of a held-out set, default ``N``; a tuning set has ``N``),
+    regenerated when the cached copy predates ``source_index``."""
+    n = n or N
     def make() -> dict[str, np.ndarray]:
         if name in HELDOUT:
-            return heldout(part, N, size, cache, progress=False, heldout_set=name)
+            return heldout(part, n, size, cache, progress=False, heldout_set=name)
         return tuning_set(name, part, size, cache)
     data = make()
     if "source_index" not in data:
-        for path in cache.glob(f"{name}_{part}_p{size}_n{N}.npz"):
+        for path in cache.glob(f"{name}_{part}_p{size}_n{n}.npz"):
             path.unlink()
         data = make()
     return data
