@@ -30,15 +30,14 @@ Usage: .venv/bin/python bench/estimator_ceiling.py [--sets photos tune] [--patch
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
-from estimator_per_image import HELDOUT, NAMES, dataset
+from estimator_per_image import HELDOUT, NAMES, add_common_arguments, dataset, estimator
 from scipy.stats import mannwhitneyu
 
 from noise_monitor.estimator.data import metas_of
 from noise_monitor.estimator.evaluate import HIT_TRUTH_DN, score
-from noise_monitor.estimator.inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR, load
+from noise_monitor.estimator.inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR
 
 
 def rules(pred: dict[str, np.ndarray], truth_sigma: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
@@ -61,18 +60,13 @@ def summary(sc: dict, part: str) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sets", nargs="+", default=["photos", "tune"], choices=list(NAMES))
+    add_common_arguments(ap)
     ap.add_argument("--patches", type=int, default=3000, help="patches per part of the held-out sets")
-    ap.add_argument("--parts", nargs="+", default=["a", "b", "c"], choices=["a", "b", "c"])
-    ap.add_argument("--patch-size", type=int, default=64)
     ap.add_argument("--per-image", action="store_true", help="also break the hits down by source image")
     ap.add_argument("--thresholds", action="store_true", help="also the per-image threshold oracle's ceiling")
     ap.add_argument("--false-alarms", type=float, default=0.02, help="the threshold oracle's false-alarm budget")
-    ap.add_argument("--cache", type=Path, default=Path("out/estimator_eval"))
-    ap.add_argument("--weights", default=None, help="full_meta weights (default: the shipped ones)")
     args = ap.parse_args()
-    args.cache.mkdir(parents=True, exist_ok=True)
-    est = load("full_meta", device="cpu", weights=args.weights, threads=1)
+    est = estimator(args)
     for name in args.sets:
         readings: dict[str, tuple[dict[str, np.ndarray], np.ndarray]] = {}
         for part in args.parts:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from estimator_tuning import tuning_set
@@ -51,16 +52,26 @@ def rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_common_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options of the per-image benches: sets, parts, patch size, data cache and weights."""
     ap.add_argument("--sets", nargs="+", default=["photos", "tune"], choices=list(NAMES))
     ap.add_argument("--parts", nargs="+", default=["a", "b", "c"], choices=["a", "b", "c"])
     ap.add_argument("--patch-size", type=int, default=64)
     ap.add_argument("--cache", type=Path, default=Path("out/estimator_eval"))
     ap.add_argument("--weights", default=None, help="full_meta weights (default: the shipped ones)")
-    args = ap.parse_args()
+
+
+def estimator(args: argparse.Namespace) -> Any:
+    """The full_meta estimator of ``args.weights`` on one CPU thread (and the data cache made)."""
     args.cache.mkdir(parents=True, exist_ok=True)
-    est = load("full_meta", device="cpu", weights=args.weights, threads=1)
+    return load("full_meta", device="cpu", weights=args.weights, threads=1)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_common_arguments(ap)
+    args = ap.parse_args()
+    est = estimator(args)
     for name in args.sets:
         for part in args.parts:
             d = dataset(name, part, args.patch_size, args.cache)
