@@ -17,9 +17,9 @@ whether the noise is there at all.
 Then the reading's own ceiling (``--thresholds``, needs parts a, b and c): an oracle that knows each patch's
 source image and, per image, picks the alarm thresholds on the read xi (one for "image noisier", xi < -t-,
 one for "image less noisy", xi > t+, each on a 0.25 DN grid from 1 DN) that give the most hits on (b) and (c)
-(the mean of the two rates) with the false alarms on (a) within ``--false-alarms`` (issue 15: 2 %). No
-decision on these readings that does not know the image (a confidence head, a margin, a decline) can beat it
-by much; where it misses the hits target, the reading itself has to change. Per image it also prints how
+(the mean of the two rates) with the false alarms on (a) within ``--false-alarms`` (issue 15: 2 %). No rule
+that alarms on the read xi does better; one that also declines could only by telling, within an image, a misread
+patch of (a) from a candidate read alike. Where it misses the hits target, the reading itself has to change. Per image it also prints how
 well the read xi separates (a)'s patches from (c)'s hit candidates (AUC, 1 = fully).
 
 Usage: .venv/bin/python bench/estimator_ceiling.py [--sets photos tune] [--patches 3000] [--parts a b c]
