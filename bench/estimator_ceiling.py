@@ -1,12 +1,13 @@
 """What a better confidence head could buy: issue 15's per-patch targets under an oracle head.
 
 The confidence head decides which patches are measured (``measurable``) and which declined ones still give a
-clear alarm decision (``inference.clear_decisions``); it cannot make a reading more accurate. This bench
-scores three decline rules on the same patches with ``evaluate.score``: the shipped head; an **oracle** head
-that knows each patch's actual sigma_image error (it accepts exactly the patches whose actual error is within
-the limits, ``inference.MEASURABLE_ERROR_DN`` and ``MEASURABLE_RELATIVE_ERROR``, and decides declined ones
-with that error); and no decline. Where the oracle misses a target, no confidence head on this measurement
-meets it: the reading itself has to change.
+clear alarm decision (``inference.clear_decisions``); it cannot make a reading more accurate. This bench scores
+three decline rules on the same patches with ``evaluate.score``: the weights' own head (the shipped one by
+default); an **oracle** head that knows each patch's actual sigma_image error (it accepts exactly the patches
+whose actual error is within the limits, ``inference.MEASURABLE_ERROR_DN`` and ``MEASURABLE_RELATIVE_ERROR``,
+and decides declined ones with that error); and no decline. The oracle head shows what a perfect error
+prediction buys in false alarms and accepted xi error; its hits are no bound (a real head may decide a patch
+whose actual error is larger than predicted, rightly): the threshold oracle below bounds those.
 
 Per source image (``--per-image``): its share of the hit candidates, the hits with clear decisions under
 each rule, and what the *noise-free* patch reads: its image-only bound ``sigma_image_upper`` (the content's
@@ -18,9 +19,10 @@ Then the reading's own ceiling (``--thresholds``, needs parts a, b and c): an or
 source image and, per image, picks the alarm thresholds on the read xi (one for "image noisier", xi < -t-,
 one for "image less noisy", xi > t+, each on a 0.25 DN grid from 1 DN) that give the most hits on (b) and (c)
 (the mean of the two rates) with the false alarms on (a) within ``--false-alarms`` (issue 15: 2 %). No rule
-that alarms on the read xi does better; one that also declines could only by telling, within an image, a misread
-patch of (a) from a candidate read alike. Where it misses the hits target, the reading itself has to change. Per image it also prints how
-well the read xi separates (a)'s patches from (c)'s hit candidates (AUC, 1 = fully).
+that alarms when the read xi crosses a threshold does better (to the grid's step); one that also declines could
+only by telling, within an image, a misread patch of (a) from a candidate read alike. Where it misses the hits
+target, the reading itself has to change. Per image it also prints how well the read xi separates (a)'s patches
+from (c)'s hit candidates (AUC, 1 = fully).
 
 Usage: .venv/bin/python bench/estimator_ceiling.py [--sets photos tune] [--patches 3000] [--parts a b c]
        [--patch-size 64] [--per-image] [--thresholds] [--false-alarms 0.02] [--cache out/estimator_eval]
@@ -41,12 +43,12 @@ from noise_monitor.estimator.inference import MEASURABLE_ERROR_DN, MEASURABLE_RE
 
 
 def rules(pred: dict[str, np.ndarray], truth_sigma: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
-    """The shipped head's predictions and the same readings under the oracle head and under no decline."""
+    """The weights' own head (``pred``) and the same readings under the oracle head and under no decline."""
     s = np.asarray(pred["sigma_image"], dtype=float)
     actual = np.abs(s - truth_sigma)
     oracle = {**pred, "sigma_image_error": actual,
               "measurable": (actual <= MEASURABLE_ERROR_DN) & (actual <= MEASURABLE_RELATIVE_ERROR * s)}
-    return {"shipped head": pred, "oracle head": oracle, "no decline": {**pred, "measurable": np.ones(len(s), bool)}}
+    return {"head": pred, "oracle head": oracle, "no decline": {**pred, "measurable": np.ones(len(s), bool)}}
 
 
 def summary(sc: dict, part: str) -> str:

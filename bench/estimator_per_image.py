@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from estimator_tuning import tuning_set
@@ -23,7 +22,7 @@ from estimator_tuning import tuning_set
 from noise_monitor.estimator import images
 from noise_monitor.estimator.data import metas_of
 from noise_monitor.estimator.evaluate import heldout
-from noise_monitor.estimator.inference import load
+from noise_monitor.estimator.inference import FullMetaEstimator, PaperEstimator, load
 
 NAMES = {"photos": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS,
          "photos_native": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS,
@@ -61,7 +60,7 @@ def add_common_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--weights", default=None, help="full_meta weights (default: the shipped ones)")
 
 
-def estimator(args: argparse.Namespace) -> Any:
+def estimator(args: argparse.Namespace) -> FullMetaEstimator | PaperEstimator:
     """The full_meta estimator of ``args.weights`` on one CPU thread (and the data cache made)."""
     args.cache.mkdir(parents=True, exist_ok=True)
     return load("full_meta", device="cpu", weights=args.weights, threads=1)
