@@ -16,25 +16,35 @@ Definitions (per bag, over the images; frames the monitor skipped in either repl
 - clean xi error: the per-frame ``xi`` (and ``xi_filtered``) of the clean replay against 0;
 - false alarm episode: an alarm episode in the clean replay.
 
+``--single-photo``: besides, for every held-out seed and held-out photograph, a ``campaign_heldout`` bag whose
+photo panels all come from that one photograph (its procedural panels and flat chart patches unchanged), the
+same figures per photograph: a frame's median over patches of one image's content, where the per-patch
+errors sit per image.
+
 Usage: .venv/bin/python bench/bench_stream_detection.py [--seeds 1 2 3] [--heldout-seeds 21 22 23]
-       [--frames 100] [--width 320 --height 256] [--params config/node.yaml] [--threads 1] [--json out/stream_detection.json]
+       [--frames 100] [--width 320 --height 256] [--params config/node.yaml] [--threads 1] [--single-photo]
+       [--json out/stream_detection.json]
 Prints figures; asserts nothing.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import tempfile
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import numpy as np
 
+from noise_monitor.bag import campaign
 from noise_monitor.bag.reader import BagReader
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import FrameTable, alarm_episodes
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter
+from noise_monitor.estimator.images import MATPLOTLIB_PHOTOS, PYWAVELETS_PHOTOS, matplotlib_photos, pywavelets_photos
 
 PROFILE = "ev76c661"
 GAIN_OFFSET_DB = -6.0
@@ -141,25 +151,35 @@ def main() -> None:
     ap.add_argument("--height", type=int, default=256)
     ap.add_argument("--params", help="node params YAML (default config/node.yaml)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads")
+    ap.add_argument("--single-photo", action="store_true",
+                    help="also held-out campaigns whose photo panels come from one photograph each")
     ap.add_argument("--json")
     args = ap.parse_args()
     per_bag: dict[str, list[dict[str, Any]]] = {"tuned": [], "held-out": []}
+    photos = dict(zip(MATPLOTLIB_PHOTOS + PYWAVELETS_PHOTOS, matplotlib_photos() + pywavelets_photos()))
     with tempfile.TemporaryDirectory() as tmp:
-        for label, scenario, seeds in (("tuned", "campaign", args.seeds),
-                                       ("held-out", "campaign_heldout", args.heldout_seeds)):
-            for seed in seeds:
-                bag = simulate_bag(Path(tmp) / f"{scenario}_{seed}.mcap", PROFILE, scenario, frames=args.frames,
+        runs: list[tuple[str, str, int, str | None]] = [
+            *(("tuned", "campaign", seed, None) for seed in args.seeds),
+            *(("held-out", "campaign_heldout", seed, None) for seed in args.heldout_seeds),
+            *((f"photo {name}", "campaign_heldout", seed, name) for name in (photos if args.single_photo else ())
+              for seed in args.heldout_seeds)]
+        for label, scenario, seed, photo in runs:
+            stem = f"{scenario}_{seed}_{photo or 'all'}"
+            one_photo = (mock.patch.object(campaign, "_photos", lambda variant, image=photos[photo]: [image])
+                         if photo else contextlib.nullcontext())
+            with one_photo:
+                bag = simulate_bag(Path(tmp) / f"{stem}.mcap", PROFILE, scenario, frames=args.frames,
                                    width=args.width, height=args.height, fps=10.0, seed=seed)
-                low = stated_gain_copy(bag, Path(tmp) / f"{scenario}_{seed}_low.mcap", GAIN_OFFSET_DB)
-                row = measure_bag(bag, low, args.params, args.threads)
-                row["seed"] = seed
-                per_bag[label].append(row)
-                print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
-                      f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "
-                      f"(missed frames {row['missed_frames']}), alarm on at the frame {row['alarmed_at_frame']} (not at "
-                      f"{row['not_alarmed_at_frame']}); true |xi| of these frames "
-                      f"{min(map(abs, row['need_true_xi']), default=float('nan')):.2f}.."
-                      f"{max(map(abs, row['need_true_xi']), default=float('nan')):.2f} DN", flush=True)
+            low = stated_gain_copy(bag, Path(tmp) / f"{stem}_low.mcap", GAIN_OFFSET_DB)
+            row = measure_bag(bag, low, args.params, args.threads)
+            row["seed"] = seed
+            per_bag.setdefault(label, []).append(row)
+            print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
+                  f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "
+                  f"(missed frames {row['missed_frames']}), alarm on at the frame {row['alarmed_at_frame']} (not at "
+                  f"{row['not_alarmed_at_frame']}); true |xi| of these frames "
+                  f"{min(map(abs, row['need_true_xi']), default=float('nan')):.2f}.."
+                  f"{max(map(abs, row['need_true_xi']), default=float('nan')):.2f} DN", flush=True)
     summary = {k: summarize(v) for k, v in per_bag.items()}
     t, h = summary["tuned"], summary["held-out"]
     print(f"\n{'':44s} {'tuned':>16s} {'held-out':>16s}")
@@ -176,6 +196,11 @@ def main() -> None:
     print(f"{'  ... alarm on at the frame itself':44s} {t['at_text']:>16s} {h['at_text']:>16s}")
     print(f"{'gain 6 dB low: views with such frames':44s} {t['views_with_need']:>16d} {h['views_with_need']:>16d}")
     print(f"{'gain 6 dB low: xi error RMS (DN)':44s} {t['low_xi_error_rms']:>16.3f} {h['low_xi_error_rms']:>16.3f}")
+    for label, s in summary.items():
+        if label.startswith("photo "):
+            print(f"{label[6:]:32s} clean xi error RMS / mean {s['clean_xi_rms']:.3f} / {s['clean_xi_mean']:+.3f} DN, "
+                  f"false alarm episodes {s['false_alarm_episodes']}, gain 6 dB low detected {100 * s['detection']:.1f} % "
+                  f"({s['hits']}/{s['need']})")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps({"summary": summary, "bags": per_bag}, indent=1))
