@@ -57,12 +57,13 @@ class FrameTable:
 
     _FIXED = (("index", np.int64, -1), ("stamp_ns", np.int64, 0), ("processed", np.bool_, False),
               ("level", np.int8, 0), ("alarm", np.bool_, False))
-    _TEXTS = ("alarm_state", "cause", "skip_reason", "xi_measurement")
+    #: The text columns (alarm state, cause, skip reason, which measurement drove xi).
+    TEXTS = ("alarm_state", "cause", "skip_reason", "xi_measurement")
 
     def __init__(self) -> None:
         self._n = 0
         self._fixed = {name: _Column(dtype, fill) for name, dtype, fill in self._FIXED}
-        self._texts = {name: _Column(np.int32, -1) for name in self._TEXTS}
+        self._texts = {name: _Column(np.int32, -1) for name in self.TEXTS}
         self._vocab: list[str] = []
         self._codes: dict[str, int] = {}
         self._numbers: dict[str, _Column] = {}

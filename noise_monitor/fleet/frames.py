@@ -46,8 +46,7 @@ def to_arrow(table: FrameTable, hardware_id: str, sha256: str) -> pa.Table:
         "processed": pa.array(table.column("processed"), pa.bool_()),
         "level": pa.array(table.column("level"), pa.int8()),
         "alarm": pa.array(table.column("alarm"), pa.bool_()),
-        **{name: pa.array(table.texts(name), pa.string())
-           for name in ("alarm_state", "cause", "skip_reason", "xi_measurement")},
+        **{name: pa.array(table.texts(name), pa.string()) for name in FrameTable.TEXTS},
     }
     for key in (*CONDITION_KEYS, *table.number_keys):
         cols[key] = pa.array(table.numbers(key).astype(np.float32), pa.float32())  # float32 -> 64 -> 32 is exact
