@@ -9,6 +9,8 @@ so training never needs the noise model again. Per patch:
     with another random gain than stated (``overrides``), in an independent simulation;
   - unexpected noise: with probability ``p_unexpected`` an additive N(0, s) (s log-uniform in
     ``unexpected_range``, or ``unexpected_sigma`` if set), clipped, measured as the std of its increment;
+    with several ``unexpected_shapes`` its per-pixel sigma grows as (clean intensity)^g, g drawn from them
+    (0: flat; 0.5: shot-like; 1: PRNU-like), s its RMS over the patch: noise whose shape the stated model lacks;
   - sigma_image = sqrt(sum of the image's per-source sigma^2 + unexpected^2), xi = sigma_model - sigma_image.
 
 A camera's own effect set (``effects``, e.g. a profile extended by the lab) is simulated on top of the
@@ -46,6 +48,7 @@ class Scheme:
     p_unexpected: float = 0.5
     unexpected_range: tuple[float, float] = (0.3, 12.0)
     unexpected_sigma: float | None = None
+    unexpected_shapes: tuple[float, ...] = (0.0,)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -134,7 +137,8 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
             var_image = sig["total"] ** 2
             if rng.random() < scheme.p_unexpected:
                 s_u = scheme.unexpected_sigma or float(np.exp(rng.uniform(*np.log(scheme.unexpected_range))))
-                nxt = np.clip(img + rng.normal(0.0, s_u, img.shape).astype(np.float32), 0.0, 255.0)
+                scale = _shape(clean[i], scheme.unexpected_shapes, rng) * s_u
+                nxt = np.clip(img + (rng.normal(0.0, 1.0, img.shape) * scale).astype(np.float32), 0.0, 255.0)
                 unexpected[i] = float(np.std(nxt - img, dtype=np.float64))
                 var_image += unexpected[i] ** 2
                 img = nxt
@@ -147,8 +151,28 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
         "effects_json": np.array(json.dumps(_plain(effects), sort_keys=True)),
         "sensor_json": np.array(json.dumps(_plain(sensor), sort_keys=True)), "photo_variants": np.array(photo_variants),
         "procedural": np.array(procedural), "imagery_json": np.array(imagery.to_json()),
+        "scheme_json": np.array(json.dumps(scheme.as_dict(), sort_keys=True)),
         **{f"truth_{k}": v for k, v in truth.items()},
     }
+
+
+def _shape(clean: np.ndarray, shapes: tuple[float, ...], rng: np.random.Generator) -> np.ndarray | float:
+    """Per-pixel sigma of unit RMS, proportional to (clean intensity)^g with g drawn from ``shapes`` (1.0 for
+    one flat shape: no draw, so the default keeps every earlier dataset bit-identical)."""
+    if len(shapes) == 1 and shapes[0] == 0.0:
+        return 1.0
+    g = float(shapes[int(rng.integers(len(shapes)))]) if len(shapes) > 1 else float(shapes[0])
+    w = np.maximum(clean.astype(np.float64), 1.0) ** g
+    return w / np.sqrt(np.mean(w**2))
+
+
+def scheme_of(data: dict[str, np.ndarray]) -> Scheme:
+    """The corruption scheme a dataset was generated with (the default for datasets older than its record)."""
+    if "scheme_json" not in data:
+        return Scheme()
+    d = json.loads(str(data["scheme_json"]))
+    return Scheme(**{**d, "unexpected_range": tuple(d["unexpected_range"]),
+                     "unexpected_shapes": tuple(d["unexpected_shapes"])})
 
 
 def _plain(specs: Mapping | None) -> dict:

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..physics import load_profile
 from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
-from .data import Scheme, camera_of, generate, imagery_of, load, photo_variants_of, procedural_of, save
+from .data import Scheme, camera_of, generate, imagery_of, load, photo_variants_of, procedural_of, save, scheme_of
 from .images import JPEG_QUALITY, PHOTO_DOWNSCALE, Imagery
 from .networks import VARIANTS
 from .train import TrainSettings, train
@@ -49,6 +49,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "arbitrary angles)")
     p.add_argument("--grain", type=int, default=0, metavar="N",
                    help="add N grainy procedural pictures (near-white grain of 0.4-1.5 px as scene content)")
+    p.add_argument("--unexpected-shapes", type=float, nargs="+", default=[0.0], metavar="G",
+                   help="exponents g of the unexpected noise's per-pixel sigma ~ (clean intensity)^g, one drawn per "
+                        "patch (0 = the flat N(0, s); 0.5 shot-like; 1 PRNU-like: noise whose shape the stated model "
+                        "lacks; default 0)")
     p.add_argument("--width", type=int, default=None, help="conv features (default: 16)")
     p.add_argument("--depth", type=int, default=None, help="conv layers (full_meta) / residual blocks (paper family)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -82,6 +86,8 @@ def _check(args: argparse.Namespace) -> None:
             raise ValueError(f"--{name} must be >= 1")
     if args.photo_variants < 0 or args.procedural < 0 or args.manmade < 0 or args.grain < 0:
         raise ValueError("--photo-variants, --procedural, --manmade and --grain must be >= 0")
+    if any(not 0.0 <= g <= 2.0 for g in args.unexpected_shapes):
+        raise ValueError("--unexpected-shapes exponents must be in [0, 2]")
     if args.checkpoint_every < 1:
         raise ValueError("--checkpoint-every must be >= 1")
     imagery(args)  # validates the imagery options
@@ -105,7 +111,7 @@ def _command(args: argparse.Namespace) -> str:
         if key.startswith("_") or key in ("command", "json") or value is None or value is False:
             continue
         flag = "--" + key.replace("_", "-")
-        if key == "photo_scales":  # one option of two values
+        if key in ("photo_scales", "unexpected_shapes"):  # one option of several values
             parts.append(f"{flag} {' '.join(f'{float(v):g}' for v in value)}")
             continue
         for v in value if isinstance(value, list) else [value]:
@@ -118,6 +124,11 @@ def imagery(args: argparse.Namespace) -> Imagery:
     return Imagery(photo_scales=(float(args.photo_scales[0]), float(args.photo_scales[1])),
                    photo_native=args.photo_native, photo_rotate=args.photo_rotate, jpeg=args.jpeg, manmade=args.manmade,
                    grain=args.grain)
+
+
+def scheme(args: argparse.Namespace) -> Scheme:
+    """The training corruption scheme of the command line."""
+    return Scheme(unexpected_shapes=tuple(float(g) for g in args.unexpected_shapes))
 
 
 def camera(profile: str | None) -> tuple[dict, dict]:
@@ -147,11 +158,14 @@ def run(args: argparse.Namespace) -> int:
         if procedural_of(data) != args.procedural:
             raise ValueError(f"dataset {data_path} was generated with --procedural {procedural_of(data)}, not "
                              f"{args.procedural}; give a new --data path")
+        if scheme_of(data) != scheme(args):
+            raise ValueError(f"dataset {data_path} was generated with another corruption scheme "
+                             f"({scheme_of(data).as_dict()}) than {scheme(args).as_dict()}; give a new --data path")
         if imagery_of(data) != imagery(args):
             raise ValueError(f"dataset {data_path} was generated with other imagery options "
                              f"({imagery_of(data).to_json()}) than {imagery(args).to_json()}; give a new --data path")
     else:
-        data = generate(args.patches, args.patch_size, args.data_seed, "train", Scheme(), effects=effects, sensor=sensor,
+        data = generate(args.patches, args.patch_size, args.data_seed, "train", scheme(args), effects=effects, sensor=sensor,
                         photo_variants=args.photo_variants, procedural=args.procedural, imagery=imagery(args))
         save(data, data_path)
     gen_s = time.time() - t0
@@ -161,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
                              anchor=args.anchor)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
-               "effects": effects, "sensor": sensor, "scheme": Scheme().as_dict(),
+               "effects": effects, "sensor": sensor, "scheme": scheme(args).as_dict(),
                "photo_variants": args.photo_variants, "procedural": args.procedural,
                **({"imagery": imagery(args).as_dict()} if not imagery(args).is_default() else {}),
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
