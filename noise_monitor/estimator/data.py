@@ -157,8 +157,8 @@ def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: S
 
 
 def _shape(clean: np.ndarray, shapes: tuple[float, ...], rng: np.random.Generator) -> np.ndarray | float:
-    """Per-pixel sigma of unit RMS, proportional to (clean intensity)^g with g drawn from ``shapes`` (1.0 for
-    one flat shape: no draw, so the default keeps every earlier dataset bit-identical)."""
+    """Per-pixel sigma of unit RMS, proportional to (clean intensity)^g with g drawn from ``shapes``; the default
+    flat shape returns 1.0 without a draw, so datasets of the default scheme stay bit-identical."""
     if len(shapes) == 1 and shapes[0] == 0.0:
         return 1.0
     g = float(shapes[int(rng.integers(len(shapes)))]) if len(shapes) > 1 else float(shapes[0])
