@@ -326,7 +326,10 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
                  "weights": v["weights"]} for name, v in summary["estimator"].items()]
         parts.append("<h2>Estimator on the same frames</h2><p>The monitor's xi = sigma_model - sigma_image per "
                      "frame (sigma_image: Full-Meta's measurement of the noise in the image); near 0 when the "
-                     "model is complete.</p>" + _table(rows, list(rows[0])))
+                     "model is complete. With an effect missing from the model, read |xi| as a lower bound of the "
+                     "missing noise: the measurement leans on the model's per-pixel shape and under-reads noise "
+                     "whose shape the model lacks, most on patches spanning a wide intensity range.</p>"
+                     + _table(rows, list(rows[0])))
     parts.append("<h2>Measurement</h2><pre>" + html.escape(json.dumps(summary["measurement"], indent=1)) + "</pre>")
     parts.append("</body></html>")
     path = out / "report.html"
