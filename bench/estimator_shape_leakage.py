@@ -27,13 +27,13 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import FrameTable
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main as cli_main
 from noise_monitor.estimator import load
+from noise_monitor.monitor import MonitorConfig
 from noise_monitor.physics import NoiseModel, load_profile
 
 LEVELS = (40.0, 120.0, 200.0)
@@ -87,22 +87,15 @@ def campaign(weights: str | None, pct: float, seeds: list[int]) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         stated = Path(tmp) / "with_prnu.yaml"
         stated.write_text(dataclasses.replace(load_profile("ev76c661"), effects={"prnu": {"sigma_pct": pct}}).to_yaml())
-        params = {}
-        for label, temporal in (("node", None), ("single-image", 0)):
-            doc = yaml.safe_load(Path("config/node.yaml").read_text())
-            node = doc["/**"]["ros__parameters"]
-            node["weights"] = weights or ""
-            if temporal is not None:
-                node["temporal_frames"] = temporal
-            params[label] = Path(tmp) / f"{label}.yaml"
-            params[label].write_text(yaml.safe_dump(doc))
+        # the node's parameters (config/node.yaml), and the same monitor with the temporal measurement off
+        configs: dict[str, MonitorConfig | None] = {"node": None, "single-image": MonitorConfig(temporal_frames=0)}
         for seed in seeds:
             bag = simulate_bag(Path(tmp) / f"c{seed}.mcap", "ev76c661", "campaign_heldout", effects=[f"prnu={pct:g}"],
                                frames=100, width=320, height=256, fps=10.0, seed=seed)
-            for label, path in params.items():
+            for label, config in configs.items():
                 paper, full = FrameTable(), FrameTable()
-                replay(bag, "ev76c661", None, config=str(path), threads=1, progress=False, table=paper)
-                replay(bag, str(stated), None, config=str(path), threads=1, progress=False, table=full)
+                for profile, table in (("ev76c661", paper), (str(stated), full)):
+                    replay(bag, profile, None, weights=weights, config=config, threads=1, progress=False, table=table)
                 ok = paper.column("processed").astype(bool) & full.column("processed").astype(bool)
                 xi = paper.numbers("xi").astype(np.float64)[ok]
                 truth = (paper.numbers("sigma_model").astype(np.float64) - full.numbers("sigma_model").astype(np.float64))[ok]
