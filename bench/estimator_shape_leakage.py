@@ -8,12 +8,12 @@ one intensity (the shape is flat either way) and 64 px horizontal ramps (from 0.
 6 dB, 10 ms, 30 degC; 3 % PRNU; 16 noise draws per patch kind (seeded). Then the lab's estimator view of the bag
 of ``test/lab/test_cli.py`` (a hidden 3 % PRNU): xi, sigma_image and sigma_model means before / after the effect is
 added (``noise-monitor analyze --add-effect prnu=fit``). ``--campaign PCT``: besides, the node on held-out photo
-campaigns (``campaign_heldout``, ev76c661, 320x256, 100 frames at 10 Hz, ``--seeds``) with a hidden PCT % PRNU, replayed
+campaigns (``campaign_heldout``, or the tuned-on ``campaign`` with ``--scenario``; ev76c661, 320x256, 100 frames at 10 Hz, ``--seeds``) with a hidden PCT % PRNU, replayed
 with the paper's model and with the PRNU stated: per-frame xi against the truth (sigma_model without - with the
 PRNU, same patches), with the node's parameters (``config/node.yaml``: static holds fuse the temporal measurement,
 which a fixed pattern does not enter) and single-image (``temporal_frames: 0``).
 
-Usage: .venv/bin/python bench/estimator_shape_leakage.py [--weights W.pt ...] [--no-lab] [--campaign 4 --seeds 21 22]
+Usage: .venv/bin/python bench/estimator_shape_leakage.py [--weights W.pt ...] [--no-lab] [--campaign 4 --seeds 21 22 --scenario campaign_heldout]
 Prints figures; asserts nothing.
 """
 from __future__ import annotations
@@ -83,14 +83,14 @@ def lab_view(weights: str | None) -> None:
           f"{a['sigma_image_dn']['mean']:.3f}, sigma_model {b['sigma_model_dn']['mean']:.3f} -> {a['sigma_model_dn']['mean']:.3f}")
 
 
-def campaign(weights: str | None, pct: float, seeds: list[int]) -> None:
+def campaign(weights: str | None, pct: float, seeds: list[int], scenario: str) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         stated = Path(tmp) / "with_prnu.yaml"
         stated.write_text(dataclasses.replace(load_profile("ev76c661"), effects={"prnu": {"sigma_pct": pct}}).to_yaml())
         # the node's parameters (config/node.yaml), and the same monitor with the temporal measurement off
         configs: dict[str, MonitorConfig | None] = {"node": None, "single-image": MonitorConfig(temporal_frames=0)}
         for seed in seeds:
-            bag = simulate_bag(Path(tmp) / f"c{seed}.mcap", "ev76c661", "campaign_heldout", effects=[f"prnu={pct:g}"],
+            bag = simulate_bag(Path(tmp) / f"c{seed}.mcap", "ev76c661", scenario, effects=[f"prnu={pct:g}"],
                                frames=100, width=320, height=256, fps=10.0, seed=seed)
             for label, config in configs.items():
                 paper, full = FrameTable(), FrameTable()
@@ -101,7 +101,7 @@ def campaign(weights: str | None, pct: float, seeds: list[int]) -> None:
                 truth = (paper.numbers("sigma_model").astype(np.float64) - full.numbers("sigma_model").astype(np.float64))[ok]
                 big = np.abs(truth) >= 1.0
                 ratio = f"{np.median(xi[big] / truth[big]):.2f}" if big.any() else "-"
-                print(f"campaign seed {seed}, {pct:g} % PRNU hidden, {label:12s}: true xi mean {truth.mean():+.2f} DN (|xi| >= 1 "
+                print(f"{scenario} seed {seed}, {pct:g} % PRNU hidden, {label:12s}: true xi mean {truth.mean():+.2f} DN (|xi| >= 1 "
                       f"on {big.mean():.0%} of {ok.sum()} frames), read {xi.mean():+.2f} DN, read / true there {ratio}, "
                       f"alarm on {paper.column('alarm').astype(bool)[ok].mean():.0%}; PRNU stated: xi mean "
                       f"{full.numbers('xi').astype(np.float64)[ok].mean():+.2f} DN")
@@ -112,7 +112,9 @@ def main() -> None:
     ap.add_argument("--weights", nargs="+", default=[None], help="full_meta weights (default: the shipped ones)")
     ap.add_argument("--no-lab", action="store_true", help="skip the lab view (about a minute)")
     ap.add_argument("--campaign", type=float, default=None, metavar="PCT", help="also campaigns with a hidden PCT %% PRNU")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[21, 22], help="campaign seeds (held-out photographs)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[21, 22], help="campaign seeds")
+    ap.add_argument("--scenario", default="campaign_heldout", choices=["campaign_heldout", "campaign"],
+                    help="held-out photographs (matplotlib, PyWavelets) or the tuned-on ones (scikit-image)")
     args = ap.parse_args()
     for w in args.weights:
         print(f"== {w or 'shipped weights'}")
@@ -120,7 +122,7 @@ def main() -> None:
         if not args.no_lab:
             lab_view(w)
         if args.campaign is not None:
-            campaign(w, args.campaign, args.seeds)
+            campaign(w, args.campaign, args.seeds, args.scenario)
 
 
 if __name__ == "__main__":
