@@ -8,7 +8,8 @@ one intensity (the shape is flat either way) and 64 px horizontal ramps (from 0.
 6 dB, 10 ms, 30 degC; 3 % PRNU; 16 noise draws per patch kind (seeded). Then the lab's estimator view of the bag
 of ``test/lab/test_cli.py`` (a hidden 3 % PRNU): xi, sigma_image and sigma_model means before / after the effect is
 added (``noise-monitor analyze --add-effect prnu=fit``). ``--campaign PCT``: besides, the node on held-out photo
-campaigns (``campaign_heldout``, or the tuned-on ``campaign`` with ``--scenario``; ev76c661, 320x256, 100 frames at 10 Hz, ``--seeds``) with a hidden PCT % PRNU, replayed
+campaigns (``campaign_heldout``, or the tuned-on ``campaign`` with ``--scenario``; ev76c661, 320x256, 100 frames
+at 10 Hz, ``--seeds``) with a hidden PCT % PRNU, replayed
 with the paper's model and with the PRNU stated: per-frame xi against the truth (sigma_model without - with the
 PRNU, same patches), with the node's parameters (``config/node.yaml``: static holds fuse the temporal measurement,
 which a fixed pattern does not enter) and single-image (``temporal_frames: 0``).
