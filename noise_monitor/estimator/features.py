@@ -15,7 +15,7 @@ import numpy as np
 from .bound import noise_upper_bound
 from .evidence import texture_evidence
 from .physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
-from .residuals import BLOCK, block_energies, immerkaer, laplacian, quantiles
+from .residuals import BLOCK, block_energies, block_means, immerkaer, laplacian, quantiles
 
 #: Floor of the reference scale and of sigma_model (DN).
 SIGMA_MODEL_FLOOR = 0.05
@@ -26,6 +26,13 @@ BLOCK_QUANTILES = (0.1, 0.25, 0.5)
 REFERENCE_QUANTILE = 0.05
 #: Variance of the 4-neighbour Laplacian of unit white noise (16 + 4 x 1).
 LAPLACIAN_GAIN = 20.0
+#: Scalar inputs of the compact net: log reference scale, source fractions (3), log residual energy
+#: ratios (2), log block-energy quantiles of both residuals (6) (see :func:`compact_inputs`).
+N_SCALARS = 12
+#: Scalars of the optional shape-trend input (:func:`shape_trend`).
+N_SHAPE_TREND = 2
+#: Quantile of the shaped block energies within each intensity half (:func:`shape_trend`).
+TREND_QUANTILE = 0.25
 
 
 def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
@@ -56,8 +63,24 @@ def reference_sigma(noisy: np.ndarray, shape: np.ndarray, shaped_energies: np.nd
     return np.maximum(np.sqrt(q / unit_noise_quantile(h, w)), SIGMA_MODEL_FLOOR)
 
 
+def shape_trend(shaped_energies: np.ndarray, smooth: np.ndarray) -> np.ndarray:
+    """How the noise's intensity dependence departs from the stated shape's (N, N_SHAPE_TREND): the log ratio of
+    a low quantile of the shaped block energies in the brighter half of the blocks to that in the darker
+    half, and the log ratio of the halves' median intensities. About 0 where the stated shape is the
+    noise's; positive where the noise grows faster with intensity than stated (an unstated PRNU); texture
+    in one half moves it too, so it is an input to learn from, not a correction.
+    """
+    inten = block_means(smooth)
+    order = np.argsort(inten, axis=1, kind="stable")
+    energies, inten = np.take_along_axis(shaped_energies, order, 1), np.take_along_axis(inten, order, 1)
+    half = energies.shape[1] // 2
+    dark, bright = (quantiles(e, (TREND_QUANTILE,))[:, 0] for e in (energies[:, :half], energies[:, half:]))
+    span = np.log((np.median(inten[:, half:], axis=1) + 1.0) / (np.median(inten[:, :half], axis=1) + 1.0))
+    return np.stack([np.log((bright + 1e-6) / (dark + 1e-6)), span], axis=1)
+
+
 def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
-                   evidence: bool = False, upper: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+                   evidence: bool = False, upper: bool = False, trend: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(maps (N, 3, H, W), scalars (N, 12), physics prediction + ``reference``) for noisy patches in DN.
 
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
@@ -67,6 +90,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     square and its block quantiles (2 x 4). No metadata scale: see the module docstring.
     ``evidence``: also the texture evidence of the confidence head (``evidence.texture_evidence``).
     ``upper``: also ``phys["upper"]``, the image-only upper bound of the noise (``bound.noise_upper_bound``).
+    ``trend``: append the :func:`shape_trend` scalars (networks with ``CompactConfig.shape_trend``).
     """
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
@@ -84,7 +108,8 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     shares = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1) / total[:, None] ** 2
     energy = [np.log(np.mean(np.square(r), axis=(1, 2)).astype(np.float64) + 1e-6)[:, None] for r in (resid, lap)]
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
-                              energy[1], block_energy_quantiles(lap)], axis=1).astype(np.float32)
+                              energy[1], block_energy_quantiles(lap)]
+                             + ([shape_trend(shaped, smooth)] if trend else []), axis=1).astype(np.float32)
     phys["reference"] = ref
     if upper:
         phys["upper"] = noise_upper_bound(noisy, shaped)

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..physics import CameraMetadata, NoiseModel
 from . import onnx_weights
-from .features import compact_inputs
+from .features import N_SCALARS, N_SHAPE_TREND, compact_inputs
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -152,12 +152,12 @@ def onnx_session(net: Any, example: tuple[Any, ...], threads: int | None = None)
     return onnx_weights.session(data, threads or default_threads()), names
 
 
-def _compact_example(patch_size: int, evidence: int = 0) -> tuple[Any, ...]:
+def _compact_example(patch_size: int, n_scalars: int, evidence: int = 0) -> tuple[Any, ...]:
     import torch
 
-    from .networks import N_MAPS, N_SCALARS
+    from .networks import N_MAPS
 
-    example = (torch.zeros(2, N_MAPS, patch_size, patch_size), torch.zeros(2, N_SCALARS))
+    example = (torch.zeros(2, N_MAPS, patch_size, patch_size), torch.zeros(2, n_scalars))
     return example + ((torch.zeros(2, evidence),) if evidence else ())
 
 
@@ -200,7 +200,7 @@ class FullMetaEstimator(_Base):
                           "fine-tuned for)", stacklevel=4)
 
     def _example(self) -> tuple[Any, ...]:
-        return _compact_example(self.patch_size, self.net.cfg.evidence)
+        return _compact_example(self.patch_size, self.net.cfg.n_scalars, self.net.cfg.evidence)
 
     def companion(self, source_sha256: str) -> bytes:
         """This network as an ONNX companion of the checkpoint with that SHA-256 (torch backend objects)."""
@@ -212,6 +212,13 @@ class FullMetaEstimator(_Base):
     @property
     def _wants_evidence(self) -> bool:
         return len(self._inputs) > 2 if self._session is not None else bool(self.net.cfg.evidence)
+
+    @property
+    def _wants_trend(self) -> bool:
+        """Whether the network takes the shape-trend scalars (``features.shape_trend``)."""
+        if self._session is not None:
+            return self._session.get_inputs()[1].shape[1] == N_SCALARS + N_SHAPE_TREND
+        return bool(self.net.cfg.shape_trend)
 
     def _run_net(self, *inputs: np.ndarray) -> np.ndarray:
         if self._session is not None:
@@ -238,7 +245,8 @@ class FullMetaEstimator(_Base):
         group_of = np.empty(len(x), dtype=np.int64)
         for g, idx in enumerate(groups.values()):
             group_of[idx] = g
-        maps, scalars, phys = compact_inputs(x, tables, group_of, evidence=self._wants_evidence, upper=True)
+        maps, scalars, phys = compact_inputs(x, tables, group_of, evidence=self._wants_evidence, upper=True,
+                                             trend=self._wants_trend)
         inputs = (maps, scalars) + ((phys.pop("evidence"),) if self._wants_evidence else ())
         raw = self._run_net(*inputs).astype(np.float64)
         r = np.clip(raw[:, 0] if raw.ndim == 2 else raw, -6.0, 6.0)

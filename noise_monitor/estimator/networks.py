@@ -14,6 +14,7 @@ import torch
 from torch import nn
 
 from ..physics import NORMALIZED_ORDER
+from .features import N_SCALARS, N_SHAPE_TREND
 
 #: Metadata per branch (names of ``CameraMetadata.normalized()`` entries), as listed in issue 3.
 FULL_META_BRANCHES: dict[str, tuple[str, ...]] = {
@@ -133,6 +134,13 @@ class CompactConfig:
     confidence: tuple[int, ...] = field(default=())
     #: texture-evidence inputs of the confidence head (0: none; ``evidence.N_EVIDENCE``)
     evidence: int = 0
+    #: the shape-trend scalars as inputs too (``features.shape_trend``)
+    shape_trend: bool = False
+
+    @property
+    def n_scalars(self) -> int:
+        """Scalar inputs: ``N_SCALARS``, plus ``features.N_SHAPE_TREND`` with ``shape_trend``."""
+        return N_SCALARS + (N_SHAPE_TREND if self.shape_trend else 0)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -145,15 +153,12 @@ def default_strides(depth: int) -> tuple[int, ...]:
 
 #: Maps of the compact net: box residual and Laplacian residual (both / model sigma), intensity.
 N_MAPS = 3
-#: Scalar inputs of the compact net: log reference scale, source fractions (3), log residual energy
-#: ratios (2), log block-energy quantiles of both residuals (6) (see ``features.compact_inputs``).
-N_SCALARS = 12
 
 
 class ImageNoiseNet(nn.Module):
     """Measures the noise actually in a patch as ``log(sigma_image / reference)``.
 
-    Inputs: ``maps`` (N, N_MAPS, H, W) and ``scalars`` (N, N_SCALARS) (``features.compact_inputs``).
+    Inputs: ``maps`` (N, N_MAPS, H, W) and ``scalars`` (N, ``cfg.n_scalars``) (``features.compact_inputs``).
     A strided 3x3 trunk feeds attention pooling (``heads`` softmax-weighted averages over positions:
     the net learns to read the noise where the patch is flat) and mean / RMS pooling, fused with the
     scalars by an MLP. A zero output means "the noise is the image's reference scale"
@@ -180,7 +185,7 @@ class ImageNoiseNet(nn.Module):
             c_in = cfg.width
         self.convs = nn.Sequential(*layers)
         self.attend = nn.Conv2d(cfg.width, 2 * cfg.heads, 1)
-        n_in = 2 * cfg.width + cfg.heads + N_SCALARS
+        n_in = 2 * cfg.width + cfg.heads + cfg.n_scalars
         mlp: list[nn.Module] = []
         for n in cfg.hidden:
             mlp += [nn.Linear(n_in, n), nn.ReLU()]
@@ -188,7 +193,7 @@ class ImageNoiseNet(nn.Module):
         mlp.append(nn.Linear(n_in, 1))
         self.mlp = nn.Sequential(*mlp)
         if cfg.confidence:
-            n_conf = 2 * cfg.width + cfg.heads + N_SCALARS + n_in + 1 + cfg.evidence
+            n_conf = 2 * cfg.width + cfg.heads + cfg.n_scalars + n_in + 1 + cfg.evidence
             self.confidence = dense_block(n_conf, cfg.confidence)
             # standardisation of the head's inputs, set from the training data (train.fit_confidence_inputs)
             self.register_buffer("conf_mean", torch.zeros(n_conf))

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from .device import resolve_device
 from .evidence import N_EVIDENCE
-from .features import compact_inputs
+from .features import N_SCALARS, N_SHAPE_TREND, compact_inputs
 from .inference import is_measurable
 from .networks import SIGMA_SCALE, ImageNoiseNet, build_network, network_from_checkpoint
 
@@ -39,6 +39,9 @@ class TrainSettings:
     #: measurement toward the init's reading on the patches the init declines, so that fine-tuning on new
     #: imagery does not move the reading of content no single image can measure (0 = off)
     anchor: float = 0.0
+    #: full_meta: the network also takes the shape-trend scalars (``features.shape_trend``); from an ``init``
+    #: without them, their input weights start at zero (the init's reading unchanged)
+    shape_trend: bool = False
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -49,16 +52,17 @@ def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
     return by_group[data["group_of"]]
 
 
-def tensors_for(variant: str, data: dict[str, np.ndarray], chunk: int = 8192) -> dict[str, torch.Tensor]:
+def tensors_for(variant: str, data: dict[str, np.ndarray], chunk: int = 8192, trend: bool = False) -> dict[str, torch.Tensor]:
     """Network inputs and targets of a dataset for a variant (full_meta's features in chunks of ``chunk``
-    patches: their per-pixel intermediates for a whole large dataset would take twice its maps' memory)."""
+    patches: their per-pixel intermediates for a whole large dataset would take twice its maps' memory;
+    ``trend``: with the shape-trend scalars)."""
     if variant == "full_meta":
         n = len(data["noisy"])
         maps: np.ndarray | None = None
         rows: dict[str, list[np.ndarray]] = {"scalars": [], "evidence": [], "reference": []}
         for i in range(0, n, chunk):
             m, scalars, phys = compact_inputs(data["noisy"][i:i + chunk], data["tables"], data["group_of"][i:i + chunk],
-                                              evidence=True)
+                                              evidence=True, trend=trend)
             if maps is None:
                 maps = np.empty((n,) + m.shape[1:], dtype=m.dtype)
             maps[i:i + len(m)] = m
@@ -143,8 +147,12 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         head, evidence = CONFIDENCE_HIDDEN, N_EVIDENCE
         ck_init = {**ck_init, "state_dict": {k: v for k, v in ck_init["state_dict"].items()
                                               if not k.startswith(("confidence.", "conf_"))}}
-    if head and settings.variant == "full_meta":
-        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence))
+    trend = settings.shape_trend or bool(init_cfg.get("shape_trend"))
+    if (head or trend) and settings.variant == "full_meta":
+        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence, shape_trend=trend))
+    if trend and ck_init is not None and not init_cfg.get("shape_trend"):
+        ck_init = {**ck_init, "config": {**init_cfg, "shape_trend": True},
+                   "state_dict": with_trend_inputs(ck_init["state_dict"], net.cfg)}
     net = net.to(dev)
     trainable = [p for name, p in net.named_parameters() if not settings.confidence or name.startswith("confidence.")]
     for p in net.parameters():
@@ -179,7 +187,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     from .data import camera_of
 
     effects, sensor = camera_of(data)
-    tensors = tensors_for(settings.variant, data)
+    tensors = tensors_for(settings.variant, data, trend=trend)
     if settings.confidence:
         tensors = head_tensors(net, tensors, dev)
     if settings.anchor and ck_init is not None:
@@ -217,6 +225,22 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     return path
 
 
+def with_trend_inputs(state_dict: dict[str, torch.Tensor], cfg: Any) -> dict[str, torch.Tensor]:
+    """A full_meta state dict without the shape-trend inputs widened to take them: zero weights (and, in the
+    confidence head's standardisation, mean 0 / std 1) for the new scalars, so the readings are unchanged."""
+    at, extra = 2 * cfg.width + cfg.heads + N_SCALARS, N_SHAPE_TREND
+    out = dict(state_dict)
+    for key in ("mlp.0.weight", "confidence.0.weight"):
+        if key in out:
+            w = out[key]
+            out[key] = torch.cat([w[:, :at], w.new_zeros(w.shape[0], extra), w[:, at:]], dim=1)
+    for key, fill in (("conf_mean", 0.0), ("conf_std", 1.0)):
+        if key in out:
+            v = out[key]
+            out[key] = torch.cat([v[:at], v.new_full((extra,), fill), v[at:]])
+    return out
+
+
 def _layers(config: dict) -> dict:
     """A network configuration without its operating patch size and confidence head (the measurement's
     weight shapes depend on the rest)."""
@@ -252,7 +276,8 @@ def anchor_tensors(init_net: torch.nn.Module, tensors: dict[str, torch.Tensor], 
 @torch.no_grad()
 def fit_confidence_inputs(net: ImageNoiseNet, data: dict[str, np.ndarray], dev: Any, n: int = 4096) -> None:
     """Set the confidence head's input standardisation from the first ``n`` patches of the data."""
-    maps, scalars, phys = compact_inputs(data["noisy"][:n], data["tables"], data["group_of"][:n], evidence=True)
+    maps, scalars, phys = compact_inputs(data["noisy"][:n], data["tables"], data["group_of"][:n], evidence=True,
+                                         trend=net.cfg.shape_trend)
     z = torch.cat([net.confidence_inputs(torch.from_numpy(maps[i:i + 256]).to(dev),
                                          torch.from_numpy(scalars[i:i + 256]).to(dev))[1]
                    for i in range(0, len(maps), 256)])

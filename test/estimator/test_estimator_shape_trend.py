@@ -1,0 +1,58 @@
+"""The optional shape-trend input (``features.shape_trend``, ``train --shape-trend``): what it reads on ramps,
+and that weights without it are widened to take it without changing a reading (ONNX and torch alike)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from noise_monitor.estimator.features import N_SCALARS, N_SHAPE_TREND, compact_inputs
+from noise_monitor.estimator.inference import FullMetaEstimator, load, weights_path
+from noise_monitor.estimator.networks import ImageNoiseNet, network_from_checkpoint
+from noise_monitor.estimator.physics_prior import PhysicsPrior
+from noise_monitor.estimator.train import with_trend_inputs
+from noise_monitor.physics import NoiseModel, load_profile
+
+META = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
+
+
+def _ramps(model: NoiseModel, n: int = 12) -> np.ndarray:
+    """64 px horizontal ramps from 20 to 220 DN (noise-free edges: none) with ``model``'s noise, seeded."""
+    rng = np.random.default_rng(11)
+    clean = np.tile(np.linspace(20.0, 220.0, 64, dtype=np.float32), (64, 1))
+    return np.stack([np.clip(model.simulate(clean, META, rng)[0], 0, 255) for _ in range(n)]).astype(np.float32)
+
+
+def test_shape_trend_reads_a_noise_steeper_than_stated():
+    """On ramps the trend is ~0 when the stated model is the noise's and clearly positive with a 3 % PRNU the
+    stated model lacks; the second scalar is the ramp's intensity span (the halves' median ratio ~3.2)."""
+    tables = PhysicsPrior(NoiseModel()).tables(META)[None]
+    trend = {}
+    for name, truth in (("stated", NoiseModel()), ("prnu", NoiseModel(extra={"prnu": {"sigma_pct": 3.0}}))):
+        noisy = _ramps(truth)
+        _, scalars, _ = compact_inputs(noisy, tables, np.zeros(len(noisy), np.int64), trend=True)
+        assert scalars.shape == (len(noisy), N_SCALARS + N_SHAPE_TREND)
+        trend[name] = scalars[:, -2:]
+    assert abs(np.median(trend["stated"][:, 0])) < 0.15 and np.median(trend["prnu"][:, 0]) > 0.4, trend
+    assert np.allclose(trend["stated"][:, 1], trend["prnu"][:, 1], atol=0.05)
+    assert np.all(np.abs(trend["stated"][:, 1] - np.log(170.0 / 70.0)) < 0.15)
+
+
+def test_weights_widened_for_the_trend_read_as_before():
+    """``with_trend_inputs``: the shipped weights widened to take the trend scalars read every patch as before,
+    under torch and ONNX Runtime (which tells the input from the session's scalar width)."""
+    ck = torch.load(weights_path("full_meta"), weights_only=True)
+    cfg = replace(network_from_checkpoint(ck).cfg, shape_trend=True)
+    wide = ImageNoiseNet(cfg)
+    wide.load_state_dict(with_trend_inputs(ck["state_dict"], cfg))
+    widened = {**ck, "config": cfg.as_dict(), "state_dict": wide.state_dict()}
+    noisy = _ramps(NoiseModel(extra={"prnu": {"sigma_pct": 3.0}}), n=6)
+    ref = load("full_meta", device="cpu", backend="torch").predict(noisy, META)
+    for backend in ("torch", "onnx"):
+        est = FullMetaEstimator(widened, torch.device("cpu"), backend=backend)
+        assert est._wants_trend
+        out = est.predict(noisy, META)
+        for key in ("sigma_image", "sigma_image_error"):
+            assert out[key] == pytest.approx(ref[key], rel=1e-4), (backend, key)
