@@ -81,7 +81,7 @@ def shape_trend(shaped_energies: np.ndarray, smooth: np.ndarray) -> np.ndarray:
 
 def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
                    evidence: bool = False, upper: bool = False, trend: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """(maps (N, 3, H, W), scalars (N, 12), physics prediction + ``reference``) for noisy patches in DN.
+    """(maps (N, 3, H, W), scalars (N, N_SCALARS), physics prediction + ``reference``) for noisy patches in DN.
 
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
     noise; a linear ramp leaves none), both divided by the model's sigma shape (unit RMS per patch)

@@ -243,8 +243,8 @@ def with_trend_inputs(state_dict: dict[str, torch.Tensor], cfg: Any) -> dict[str
 
 def _layers(config: dict) -> dict:
     """A network configuration without its operating patch size and confidence head (the measurement's
-    weight shapes depend on the rest)."""
-    return {k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence")}
+    weight shapes depend on the rest; weights from before ``shape_trend`` have none)."""
+    return {"shape_trend": False, **{k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence")}}
 
 
 @torch.no_grad()
