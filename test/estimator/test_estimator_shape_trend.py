@@ -56,3 +56,28 @@ def test_weights_widened_for_the_trend_read_as_before():
         out = est.predict(noisy, META)
         for key in ("sigma_image", "sigma_image_error"):
             assert out[key] == pytest.approx(ref[key], rel=1e-4), (backend, key)
+
+
+def test_training_with_the_trend_widens_the_init_and_a_new_head_keeps_it(tmp_path):
+    """``TrainSettings.shape_trend`` from weights without it: the first MLP layer gains the trend's columns (zero
+    at the start, trained after), every other weight of the measurement keeps its shape; a head trained alone on
+    the result keeps the trend input and the widened weights load for inference."""
+    from noise_monitor.estimator.data import generate
+    from noise_monitor.estimator.train import TrainSettings, train
+
+    data = generate(16, 32, seed=9, group=8, progress=False)
+    before = torch.load(weights_path("full_meta"), weights_only=True)
+    path = train(TrainSettings("full_meta", steps=2, batch=4, shape_trend=True), data, tmp_path / "m", threads=1,
+                 progress=False, init=weights_path("full_meta"))
+    after = torch.load(path, weights_only=True)
+    assert after["config"]["shape_trend"] is True
+    w0, w1 = before["state_dict"]["mlp.0.weight"], after["state_dict"]["mlp.0.weight"]
+    assert w1.shape == (w0.shape[0], w0.shape[1] + N_SHAPE_TREND)
+    at = 2 * after["config"]["width"] + after["config"]["heads"] + N_SCALARS  # pooled features, then the scalars
+    assert torch.count_nonzero(w1[:, at:at + N_SHAPE_TREND]) > 0  # the trend's columns started at 0 and trained
+    head = train(TrainSettings("full_meta", steps=2, batch=4, confidence=True), data, tmp_path / "h", threads=1,
+                 progress=False, init=path)
+    ck = torch.load(head, weights_only=True)
+    assert ck["config"]["shape_trend"] is True
+    est = FullMetaEstimator(ck, torch.device("cpu"), backend="onnx")
+    assert est._wants_trend and np.all(np.isfinite(est.predict(_ramps(NoiseModel(), n=2), META)["sigma_image"]))
