@@ -8,14 +8,30 @@ import numpy as np
 import pytest
 import torch
 
+from noise_monitor.estimator.data import generate
 from noise_monitor.estimator.features import N_SCALARS, N_SHAPE_TREND, compact_inputs
-from noise_monitor.estimator.inference import FullMetaEstimator, load, weights_path
+from noise_monitor.estimator.inference import FullMetaEstimator
 from noise_monitor.estimator.networks import ImageNoiseNet, network_from_checkpoint
 from noise_monitor.estimator.physics_prior import PhysicsPrior
-from noise_monitor.estimator.train import with_trend_inputs
+from noise_monitor.estimator.train import TrainSettings, train, with_trend_inputs
 from noise_monitor.physics import NoiseModel, load_profile
 
 META = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
+CPU = torch.device("cpu")
+
+
+@pytest.fixture(scope="module")
+def data() -> dict[str, np.ndarray]:
+    return generate(16, 32, seed=9, group=8, progress=False)
+
+
+@pytest.fixture(scope="module")
+def no_trend(tmp_path_factory: pytest.TempPathFactory, data: dict[str, np.ndarray]):
+    """Weights without the trend input but with a confidence head (a measurement, then its head; 2 steps each)."""
+    out = tmp_path_factory.mktemp("no_trend")
+    base = train(TrainSettings("full_meta", steps=2, batch=4), data, out / "m", threads=1, progress=False)
+    return train(TrainSettings("full_meta", steps=2, batch=4, confidence=True), data, out / "h", threads=1,
+                 progress=False, init=base)
 
 
 def _ramps(model: NoiseModel, n: int = 12) -> np.ndarray:
@@ -40,35 +56,32 @@ def test_shape_trend_reads_a_noise_steeper_than_stated():
     assert np.all(np.abs(trend["stated"][:, 1] - np.log(170.0 / 70.0)) < 0.15)
 
 
-def test_weights_widened_for_the_trend_read_as_before():
-    """``with_trend_inputs``: the shipped weights widened to take the trend scalars read every patch as before,
+def test_weights_widened_for_the_trend_read_as_before(no_trend):
+    """``with_trend_inputs``: weights with a head widened to take the trend scalars read every patch as before,
     under torch and ONNX Runtime (which tells the input from the session's scalar width)."""
-    ck = torch.load(weights_path("full_meta"), weights_only=True)
+    ck = torch.load(no_trend, weights_only=True)
+    assert not ck["config"].get("shape_trend") and ck["config"]["confidence"]
     cfg = replace(network_from_checkpoint(ck).cfg, shape_trend=True)
     wide = ImageNoiseNet(cfg)
     wide.load_state_dict(with_trend_inputs(ck["state_dict"], cfg))
     widened = {**ck, "config": cfg.as_dict(), "state_dict": wide.state_dict()}
     noisy = _ramps(NoiseModel(extra={"prnu": {"sigma_pct": 3.0}}), n=6)
-    ref = load("full_meta", device="cpu", backend="torch").predict(noisy, META)
+    ref = FullMetaEstimator(ck, CPU, backend="torch").predict(noisy, META)
     for backend in ("torch", "onnx"):
-        est = FullMetaEstimator(widened, torch.device("cpu"), backend=backend)
+        est = FullMetaEstimator(widened, CPU, backend=backend)
         assert est._wants_trend
         out = est.predict(noisy, META)
         for key in ("sigma_image", "sigma_image_error"):
             assert out[key] == pytest.approx(ref[key], rel=1e-4), (backend, key)
 
 
-def test_training_with_the_trend_widens_the_init_and_a_new_head_keeps_it(tmp_path):
+def test_training_with_the_trend_widens_the_init_and_a_new_head_keeps_it(tmp_path, no_trend, data):
     """``TrainSettings.shape_trend`` from weights without it: the first MLP layer gains the trend's columns (zero
     at the start, trained after), every other weight of the measurement keeps its shape; a head trained alone on
     the result keeps the trend input and the widened weights load for inference."""
-    from noise_monitor.estimator.data import generate
-    from noise_monitor.estimator.train import TrainSettings, train
-
-    data = generate(16, 32, seed=9, group=8, progress=False)
-    before = torch.load(weights_path("full_meta"), weights_only=True)
+    before = torch.load(no_trend, weights_only=True)
     path = train(TrainSettings("full_meta", steps=2, batch=4, shape_trend=True), data, tmp_path / "m", threads=1,
-                 progress=False, init=weights_path("full_meta"))
+                 progress=False, init=no_trend)
     after = torch.load(path, weights_only=True)
     assert after["config"]["shape_trend"] is True
     w0, w1 = before["state_dict"]["mlp.0.weight"], after["state_dict"]["mlp.0.weight"]
@@ -79,5 +92,5 @@ def test_training_with_the_trend_widens_the_init_and_a_new_head_keeps_it(tmp_pat
                  progress=False, init=path)
     ck = torch.load(head, weights_only=True)
     assert ck["config"]["shape_trend"] is True
-    est = FullMetaEstimator(ck, torch.device("cpu"), backend="onnx")
+    est = FullMetaEstimator(ck, CPU, backend="onnx")
     assert est._wants_trend and np.all(np.isfinite(est.predict(_ramps(NoiseModel(), n=2), META)["sigma_image"]))
