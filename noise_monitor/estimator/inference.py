@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Sequence
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -213,9 +214,9 @@ class FullMetaEstimator(_Base):
     def _wants_evidence(self) -> bool:
         return len(self._inputs) > 2 if self._session is not None else bool(self.net.cfg.evidence)
 
-    @property
+    @cached_property
     def _wants_trend(self) -> bool:
-        """Whether the network takes the shape-trend scalars (``features.shape_trend``)."""
+        """Whether the network takes the shape-trend scalars (``features.shape_trend``; asked once, not per call)."""
         if self._session is not None:
             return self._session.get_inputs()[1].shape[1] == N_SCALARS + N_SHAPE_TREND
         return bool(self.net.cfg.shape_trend)

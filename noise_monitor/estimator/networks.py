@@ -138,6 +138,11 @@ class CompactConfig:
     shape_trend: bool = False
 
     @property
+    def n_pooled(self) -> int:
+        """Pooled features of the trunk (mean and RMS per channel, one per attention head); the scalars follow."""
+        return 2 * self.width + self.heads
+
+    @property
     def n_scalars(self) -> int:
         """Scalar inputs: ``N_SCALARS``, plus ``features.N_SHAPE_TREND`` with ``shape_trend``."""
         return N_SCALARS + (N_SHAPE_TREND if self.shape_trend else 0)
@@ -185,7 +190,7 @@ class ImageNoiseNet(nn.Module):
             c_in = cfg.width
         self.convs = nn.Sequential(*layers)
         self.attend = nn.Conv2d(cfg.width, 2 * cfg.heads, 1)
-        n_in = 2 * cfg.width + cfg.heads + cfg.n_scalars
+        n_in = cfg.n_pooled + cfg.n_scalars
         mlp: list[nn.Module] = []
         for n in cfg.hidden:
             mlp += [nn.Linear(n_in, n), nn.ReLU()]
@@ -193,7 +198,7 @@ class ImageNoiseNet(nn.Module):
         mlp.append(nn.Linear(n_in, 1))
         self.mlp = nn.Sequential(*mlp)
         if cfg.confidence:
-            n_conf = 2 * cfg.width + cfg.heads + cfg.n_scalars + n_in + 1 + cfg.evidence
+            n_conf = cfg.n_pooled + cfg.n_scalars + n_in + 1 + cfg.evidence
             self.confidence = dense_block(n_conf, cfg.confidence)
             # standardisation of the head's inputs, set from the training data (train.fit_confidence_inputs)
             self.register_buffer("conf_mean", torch.zeros(n_conf))

@@ -14,7 +14,7 @@ from .device import resolve_device
 from .evidence import N_EVIDENCE
 from .features import N_SCALARS, N_SHAPE_TREND, compact_inputs
 from .inference import is_measurable
-from .networks import SIGMA_SCALE, ImageNoiseNet, build_network, network_from_checkpoint
+from .networks import SIGMA_SCALE, CompactConfig, ImageNoiseNet, build_network, network_from_checkpoint
 
 HUBER_DELTA_DN = 1.0
 #: Hidden sizes of the confidence head added by ``TrainSettings.confidence``.
@@ -225,10 +225,10 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     return path
 
 
-def with_trend_inputs(state_dict: dict[str, torch.Tensor], cfg: Any) -> dict[str, torch.Tensor]:
+def with_trend_inputs(state_dict: dict[str, torch.Tensor], cfg: CompactConfig) -> dict[str, torch.Tensor]:
     """A full_meta state dict without the shape-trend inputs widened to take them: zero weights (and, in the
     confidence head's standardisation, mean 0 / std 1) for the new scalars, so the readings are unchanged."""
-    at, extra = 2 * cfg.width + cfg.heads + N_SCALARS, N_SHAPE_TREND
+    at, extra = cfg.n_pooled + N_SCALARS, N_SHAPE_TREND
     out = dict(state_dict)
     for key in ("mlp.0.weight", "confidence.0.weight"):
         if key in out:

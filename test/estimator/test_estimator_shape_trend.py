@@ -86,7 +86,7 @@ def test_training_with_the_trend_widens_the_init_and_a_new_head_keeps_it(tmp_pat
     assert after["config"]["shape_trend"] is True
     w0, w1 = before["state_dict"]["mlp.0.weight"], after["state_dict"]["mlp.0.weight"]
     assert w1.shape == (w0.shape[0], w0.shape[1] + N_SHAPE_TREND)
-    at = 2 * after["config"]["width"] + after["config"]["heads"] + N_SCALARS  # pooled features, then the scalars
+    at = network_from_checkpoint(after).cfg.n_pooled + N_SCALARS  # pooled features, then the scalars
     assert torch.count_nonzero(w1[:, at:at + N_SHAPE_TREND]) > 0  # the trend's columns started at 0 and trained
     head = train(TrainSettings("full_meta", steps=2, batch=4, confidence=True), data, tmp_path / "h", threads=1,
                  progress=False, init=path)
