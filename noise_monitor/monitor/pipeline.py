@@ -41,6 +41,24 @@ XI_ERROR_FLOOR_DN = 0.05
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
 
 
+def patch_weights(est: dict[str, np.ndarray], use: np.ndarray) -> np.ndarray | None:
+    """Weights of the used patches in the frame's medians: 1 / predicted error^2 (``sigma_image_error``, floored
+    at ``XI_ERROR_FLOOR_DN`` so that no one patch takes the frame; a non-finite error weighs nothing), None
+    (equal weights) without a predicted error or when no used patch has a finite one."""
+    if "sigma_image_error" not in est:
+        return None
+    err = np.asarray(est["sigma_image_error"], dtype=np.float64).reshape(-1)[use]
+    weights = np.where(np.isfinite(err), 1.0 / np.maximum(err, XI_ERROR_FLOOR_DN) ** 2, 0.0)
+    return weights if weights.any() else None
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray | None) -> float:
+    """The median of ``values``, weighted by ``weights`` (the lower weighted median), plain without weights."""
+    if weights is None:
+        return float(np.median(values))
+    return float(np.quantile(values, 0.5, weights=weights, method="inverted_cdf"))
+
+
 class Estimator(Protocol):
     """The estimator contract (``noise_monitor.estimator.load``)."""
 
@@ -259,12 +277,17 @@ class Monitor:
             return self._skip(frame, f"evaluation failed: {exc}")
         ok = np.asarray(est["measurable"], dtype=bool).reshape(-1) if "measurable" in est else np.ones(len(patches), bool)
         use, bounded_only = self._patches_to_use(est, ok)
-        sigma = {k: float(np.median(v[use])) for k, v in per_patch.items()}
-        model = {k: float(np.median(v[use])) for k, v in model_pp.items()}
+        weights = patch_weights(est, use)
+
+        def frame_median(v: np.ndarray) -> float:
+            return weighted_median(v[use], weights)
+
+        sigma = {k: frame_median(v) for k, v in per_patch.items()}
+        model = {k: frame_median(v) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
         image_pp = np.asarray(est.get("sigma_image", est["total"]), dtype=np.float64).reshape(-1)
-        sigma["image"] = float(np.median(image_pp[use]))
-        xi_model = float(np.median((model_pp["total"] - image_pp)[use]))
+        sigma["image"] = frame_median(image_pp)
+        xi_model = frame_median(model_pp["total"] - image_pp)
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
         xi_bound = self._xi_bound(est, per_patch["total"] if self.xi_source == "estimator" else model_pp["total"])
         bounded = False

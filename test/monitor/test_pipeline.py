@@ -322,10 +322,41 @@ def test_auto_xi_source_uses_the_model_when_the_profile_adds_effects(rng):
     assert res.level == OK and abs(res.xi_filtered) < 0.5 and res.model["prnu"] > 2.0
 
 
+def weighted(values: np.ndarray, w: np.ndarray) -> float:
+    """The lower weighted median, written out: the first sorted value where the cumulative weight reaches half."""
+    order = np.argsort(values)
+    cum = np.cumsum(w[order])
+    return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
+
+
+def test_frame_medians_rest_on_the_precise_patches():
+    """The frame's median weighs each patch by 1 / predicted error^2: three textured patches read 2 DN high at
+    0.3 DN do not outvote two flat ones read right at 0.05 DN; the error floor (0.05 DN) keeps one patch from
+    taking the frame; a non-finite error weighs nothing; without predicted errors the plain median."""
+    from noise_monitor.monitor.pipeline import patch_weights, weighted_median
+
+    xi = np.array([0.0, 0.1, 2.0, 2.1, 2.2])
+    err = np.array([0.05, 0.05, 0.3, 0.3, 0.3])
+    use = np.ones(5, bool)
+    assert np.median(xi) == 2.0 and weighted_median(xi, patch_weights({"sigma_image_error": err}, use)) == 0.1
+    w = patch_weights({"sigma_image_error": np.array([1e-6, 0.05, 0.05])}, np.ones(3, bool))
+    assert w is not None and np.allclose(w, 400.0)  # floored: the first patch no longer outweighs both others
+    assert weighted_median(np.array([0.0, 1.0, 1.0]), w) == 1.0
+    w = patch_weights({"sigma_image_error": np.array([np.nan, 0.1, 0.1])}, np.ones(3, bool))
+    assert w is not None and w[0] == 0.0 and weighted_median(np.array([-9.0, 1.0, 2.0]), w) == 1.0
+    assert patch_weights({"sigma_image_error": np.array([np.nan, np.inf])}, np.ones(2, bool)) is None
+    assert patch_weights({}, use) is None and weighted_median(xi, None) == 2.0
+    assert patch_weights({"sigma_image_error": err}, np.array([1, 1, 0, 0, 0], bool)).shape == (2,)
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        v, ww = rng.normal(size=7), rng.uniform(0.1, 5.0, 7)
+        assert weighted_median(v, ww) == weighted(v, ww)
+
+
 def test_medians_over_the_patches_the_estimator_can_measure(rng):
     """With the shipped estimator's confidence output the frame's sigmas and xi are medians over its
-    measurable patches only; a frame of fine texture everywhere falls back to every patch for the sigmas and
-    to the image-only bound for xi."""
+    measurable patches only, weighted by 1 / predicted error^2; a frame of fine texture everywhere falls back
+    to every patch for the sigmas and to the image-only bound for xi."""
     from noise_monitor.estimator import load
 
     est = load("full_meta", device="cpu", model=MODEL)
@@ -341,9 +372,10 @@ def test_medians_over_the_patches_the_estimator_can_measure(rng):
         ok = out["measurable"]
         assert res.numeric()["patches_measurable"] == ok.sum() == res.patches_measurable
         use = ok if ok.any() else np.ones_like(ok)
-        assert res.sigma["image"] == pytest.approx(float(np.median(out["sigma_image"][use])), rel=1e-5)
+        w = 1.0 / np.maximum(out["sigma_image_error"][use], 0.05) ** 2
+        assert res.sigma["image"] == pytest.approx(weighted(out["sigma_image"][use], w), rel=1e-5)
         if ok.any():
-            assert res.xi_image == pytest.approx(float(np.median(out["xi"][use])), abs=1e-5)
+            assert res.xi_image == pytest.approx(weighted(out["xi"][use], w), abs=1e-5)
         else:  # texture everywhere: the image proves only a lower bound of xi
             assert res.xi_image == pytest.approx(max(float(np.median(out["xi_lower"])), 0.0), abs=1e-5)
         assert (0 < ok.sum() < len(ok)) if some_declined else not ok.any()
