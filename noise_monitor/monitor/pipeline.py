@@ -42,9 +42,10 @@ ESTIMATOR_KEYS = SOURCES + ("total", "xi")
 
 
 def patch_weights(est: dict[str, np.ndarray], use: np.ndarray) -> np.ndarray | None:
-    """Weights of the used patches in the frame's medians: 1 / predicted error^2 (``sigma_image_error``, floored
-    at ``XI_ERROR_FLOOR_DN`` so that no one patch takes the frame; a non-finite error weighs nothing), None
-    (equal weights) without a predicted error or when no used patch has a finite one."""
+    """Weights of the used patches in the frame's medians of the measurement (sigma_image, xi): 1 / predicted
+    error^2 (``sigma_image_error``, floored at ``XI_ERROR_FLOOR_DN`` so that no one patch takes the frame; a
+    non-finite error weighs nothing), None (equal weights) without a predicted error or when no used patch has
+    a finite one."""
     if "sigma_image_error" not in est:
         return None
     err = np.asarray(est["sigma_image_error"], dtype=np.float64).reshape(-1)[use]
@@ -277,17 +278,17 @@ class Monitor:
             return self._skip(frame, f"evaluation failed: {exc}")
         ok = np.asarray(est["measurable"], dtype=bool).reshape(-1) if "measurable" in est else np.ones(len(patches), bool)
         use, bounded_only = self._patches_to_use(est, ok)
+        # the model's per-source sigmas are plain medians (the physics gives them at every patch's intensity:
+        # weights would move them with the patch selection, not with the camera); the measurement and xi
+        # rest on the patches it reads most precisely
         weights = patch_weights(est, use)
-
-        def frame_median(v: np.ndarray) -> float:
-            return weighted_median(v[use], weights)
-
-        sigma = {k: frame_median(v) for k, v in per_patch.items()}
-        model = {k: frame_median(v) for k, v in model_pp.items()}
+        sigma = {k: float(np.median(v[use])) for k, v in per_patch.items()}
+        sigma["xi"] = weighted_median(per_patch["xi"][use], weights)
+        model = {k: float(np.median(v[use])) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
         image_pp = np.asarray(est.get("sigma_image", est["total"]), dtype=np.float64).reshape(-1)
-        sigma["image"] = frame_median(image_pp)
-        xi_model = frame_median(model_pp["total"] - image_pp)
+        sigma["image"] = weighted_median(image_pp[use], weights)
+        xi_model = weighted_median((model_pp["total"] - image_pp)[use], weights)
         xi_image = sigma["xi"] if self.xi_source == "estimator" else xi_model
         xi_bound = self._xi_bound(est, per_patch["total"] if self.xi_source == "estimator" else model_pp["total"])
         bounded = False
