@@ -354,9 +354,10 @@ def test_frame_medians_rest_on_the_precise_patches():
 
 
 def test_medians_over_the_patches_the_estimator_can_measure(rng):
-    """With the shipped estimator's confidence output the frame's sigmas and xi are medians over its
-    measurable patches only, weighted by 1 / predicted error^2; a frame of fine texture everywhere falls back
-    to every patch for the sigmas and to the image-only bound for xi."""
+    """With the shipped estimator's confidence output the frame's sigma_image and xi are medians over its
+    measurable patches only, weighted by 1 / predicted error^2, its per-source sigmas plain medians over them;
+    a frame of fine texture everywhere falls back to every patch for the sigmas and to the image-only bound
+    for xi."""
     from noise_monitor.estimator import load
 
     est = load("full_meta", device="cpu", model=MODEL)
@@ -374,6 +375,7 @@ def test_medians_over_the_patches_the_estimator_can_measure(rng):
         use = ok if ok.any() else np.ones_like(ok)
         w = 1.0 / np.maximum(out["sigma_image_error"][use], 0.05) ** 2
         assert res.sigma["image"] == pytest.approx(weighted(out["sigma_image"][use], w), rel=1e-5)
+        assert res.sigma["pn"] == pytest.approx(float(np.median(out["pn"][use])), rel=1e-5)
         if ok.any():
             assert res.xi_image == pytest.approx(weighted(out["xi"][use], w), abs=1e-5)
         else:  # texture everywhere: the image proves only a lower bound of xi
