@@ -80,6 +80,8 @@ def _procedural(train: dict) -> str:
         text += f" + {im['manmade']} man-made procedural scenes (dead leaves of polygons, periodic bars)"
     if im.get("grain"):
         text += f" + {im['grain']} grainy procedural pictures (near-white grain as scene content)"
+    if im.get("charts"):
+        text += f" + {im['charts']} test charts (tiles over the whole intensity range)"
     if im.get("jpeg"):
         text += f"; {im['jpeg']:.0%} of the source images JPEG-compressed (quality {JPEG_QUALITY[0]}-{JPEG_QUALITY[1]})"
     return text

@@ -4,7 +4,7 @@ Fine texture is where one image cannot tell scene from noise; these images teach
 decline it and let it be measured on content no photo provides often enough: shaded fractal relief
 (like a DEM hillshade), sine gratings of 1.5-6 px periods at random orientations, woven fabric, halftone
 dots and small text rendered by matplotlib; grainy pictures (near-white grain as scene content); man-made
-scenes (straight edges, bars). Every image is drawn from ``rng`` (seeded, reproducible).
+scenes (straight edges, bars); test charts (tiles over the whole intensity range). Every image is drawn from ``rng`` (seeded, reproducible).
 """
 from __future__ import annotations
 
@@ -241,3 +241,53 @@ def manmade_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[n
     in turn: straight anti-aliased edges at arbitrary angles, flat shaded faces, periodic bars."""
     kinds = list(MANMADE_KINDS.values())
     return [np.clip(kinds[i % len(kinds)](rng, size), 0.0, 255.0).astype(np.float32) for i in range(n)]
+
+
+# --- test charts: tiles over the whole intensity range -------------------------------------------
+#: Tile sides (px) of the test charts (log-uniform).
+CHART_TILES = (10.0, 48.0)
+#: Tile contents of the test charts and their probabilities.
+CHART_KINDS = {"flat": 0.4, "ramp": 0.25, "texture": 0.2, "steps": 0.15}
+
+
+def _chart_tile(rng: np.random.Generator, kind: str, side: int, level: float) -> np.ndarray:
+    """One tile at ``level`` (DN): flat, a linear ramp, a smooth texture or a step wedge of 2-4 steps."""
+    if kind == "ramp":
+        return _ramp(rng, side, side, level, float(rng.uniform(10.0, 120.0)))
+    if kind == "texture":
+        tex = cv2.GaussianBlur(rng.standard_normal((side, side)).astype(np.float32), (0, 0), float(rng.uniform(1.0, 6.0)))
+        return level + float(rng.uniform(5.0, 40.0)) * tex / max(float(np.abs(tex).max()), 1e-6)
+    tile = np.full((side, side), level, np.float32)
+    if kind == "steps":
+        k = int(rng.integers(2, 5))
+        steps = level + np.linspace(-1.0, 1.0, k) * float(rng.uniform(10.0, 60.0))
+        idx = np.minimum(np.arange(side) * k // side, k - 1)
+        tile = np.broadcast_to(steps[idx][None, :] if rng.random() < 0.5 else steps[idx][:, None], (side, side))
+    return tile.astype(np.float32)
+
+
+def chart_scene(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
+    """A test chart: a grid of square tiles (10-48 px, 0-3 px borders of a background level) whose levels
+    are a step wedge over the whole 0..255 range in random order, the clipped ends included; each tile flat,
+    a ramp, a smooth texture or a step wedge (``CHART_KINDS``); slightly blurred half the time. Every level
+    sits next to every other within a patch, which photographs rarely show (camera characterisation
+    charts, lab scenes)."""
+    side = int(np.exp(rng.uniform(*np.log(CHART_TILES))))
+    pitch = side + int(rng.integers(0, 4))
+    n = -(-size // pitch) + 1
+    img = np.full((n * pitch, n * pitch), float(rng.uniform(0.0, 255.0)), np.float32)
+    levels = rng.permutation(np.linspace(rng.uniform(0.0, 10.0), rng.uniform(245.0, 255.0), n * n))
+    kinds = rng.choice(list(CHART_KINDS), n * n, p=list(CHART_KINDS.values()))
+    for k in range(n * n):
+        r, c = divmod(k, n)
+        img[r * pitch:r * pitch + side, c * pitch:c * pitch + side] = _chart_tile(rng, kinds[k], side, float(levels[k]))
+    y0, x0 = rng.integers(0, pitch, 2)
+    img = img[y0:y0 + size, x0:x0 + size]
+    if rng.random() < 0.5:
+        img = cv2.GaussianBlur(img, (0, 0), float(rng.uniform(0.3, 0.8)))
+    return img
+
+
+def chart_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
+    """``n`` test charts (:func:`chart_scene`; float32 DN, clipped to 0..255)."""
+    return [np.clip(chart_scene(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
