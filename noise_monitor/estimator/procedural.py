@@ -282,10 +282,8 @@ def chart_scene(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
         r, c = divmod(k, n)
         img[r * pitch:r * pitch + side, c * pitch:c * pitch + side] = _chart_tile(rng, kinds[k], side, float(levels[k]))
     y0, x0 = rng.integers(0, pitch, 2)
-    img = img[y0:y0 + size, x0:x0 + size]
-    if rng.random() < 0.5:
-        img = cv2.GaussianBlur(img, (0, 0), float(rng.uniform(0.3, 0.8)))
-    return img
+    chart = img[y0:y0 + size, x0:x0 + size]
+    return cv2.GaussianBlur(chart, (0, 0), float(rng.uniform(0.3, 0.8))) if rng.random() < 0.5 else chart
 
 
 def chart_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:

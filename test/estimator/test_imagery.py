@@ -25,10 +25,17 @@ from noise_monitor.estimator.images import (
     source_images,
 )
 from noise_monitor.estimator.inference import WEIGHTS_DIR
-from noise_monitor.estimator.procedural import MANMADE_KINDS, bars, grain_images, manmade_images, polygon_leaves
+from noise_monitor.estimator.procedural import (
+    MANMADE_KINDS,
+    bars,
+    chart_images,
+    grain_images,
+    manmade_images,
+    polygon_leaves,
+)
 from noise_monitor.estimator.residuals import immerkaer
 
-VARIED = Imagery(photo_scales=(1.0, 4.0), photo_native=0.5, photo_rotate=0.5, jpeg=0.5, manmade=2, grain=1)
+VARIED = Imagery(photo_scales=(1.0, 4.0), photo_native=0.5, photo_rotate=0.5, jpeg=0.5, manmade=2, grain=1, charts=1)
 
 
 def test_manmade_images_are_seeded_on_the_dn_scale_with_flat_faces_and_straight_edges(seeded_images) -> None:
@@ -50,6 +57,14 @@ def test_grain_is_pixel_scale_content_correlated_unlike_white_noise(seeded_image
             assert lag1 < -0.64  # the Laplacian of white noise
         else:  # grain of 0.5-8 DN at 0.4-1.5 px: pixel-scale content, correlated beyond one pixel
             assert r.std() > 0.3 and -0.62 < lag1 < -0.3
+
+
+def test_charts_span_the_intensity_range_in_flat_tiles_with_edges(seeded_images) -> None:
+    for im in seeded_images(chart_images, 4, 11):
+        # the levels of a step wedge over the whole range, the clipped ends included ...
+        assert np.percentile(im, 2) < 25.0 and np.percentile(im, 98) > 230.0
+        # ... in tiles: most pixels have little pixel-scale residual, the tile edges a large step
+        assert np.median(np.abs(immerkaer(im[None])[0])) < 1.0 and np.abs(np.diff(im, axis=1)).max() > 10.0
 
 
 def test_manmade_kinds_alternate():
@@ -102,7 +117,7 @@ def test_imagery_defaults_leave_datasets_bit_identical_and_options_are_recorded(
     varied = generate(8, 32, seed=3, progress=False, photo_variants=1, imagery=VARIED)
     assert imagery_of(varied) == VARIED and not np.array_equal(varied["noisy"], plain["noisy"])
     imgs = source_images("train", np.random.default_rng(2), n_dead_leaves=1, variants=1, imagery=VARIED)
-    assert len(imgs) == len(SKIMAGE_PHOTOS) + 1 + VARIED.manmade + VARIED.grain
+    assert len(imgs) == len(SKIMAGE_PHOTOS) + 1 + VARIED.manmade + VARIED.grain + VARIED.charts
     with pytest.raises(ValueError, match="train split"):
         source_images("photos", np.random.default_rng(0), imagery=Imagery(manmade=1))
     with pytest.raises(ValueError, match="photo variants"):
@@ -117,11 +132,11 @@ def test_train_cli_imagery_options(tmp_path, capsys):
     args = ["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "1", "--batch", "2",
             "--patches", "8", "--patch-size", "32", "--threads", "1", "--photo-variants", "1"]
     extra = ["--photo-scales", "1", "4", "--photo-native", "0.3", "--photo-rotate", "0.5", "--jpeg", "0.25",
-             "--manmade", "2", "--grain", "1", "--keep-checkpoints", "--checkpoint-every", "1"]
+             "--manmade", "2", "--grain", "1", "--charts", "1", "--keep-checkpoints", "--checkpoint-every", "1"]
     assert cli_main(args + extra) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["imagery"] == {"photo_scales": [1.0, 4.0], "photo_native": 0.3, "photo_rotate": 0.5, "jpeg": 0.25,
-                                  "manmade": 2, "grain": 1}
+                                  "manmade": 2, "grain": 1, "charts": 1}
     assert "--photo-scales 1 4 " in summary["command"] and (tmp_path / "step_1.pt").is_file()
     assert cli_main(args) == 2 and "imagery options" in capsys.readouterr().err  # the dataset is another one
     rc = cli_main(["train", "--variant", "full_meta", "--out", str(tmp_path / "x"), "--photo-rotate", "0.5"])
