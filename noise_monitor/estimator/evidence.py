@@ -92,6 +92,20 @@ def _spectral(x: np.ndarray) -> np.ndarray:
     return out
 
 
+def high_band_median_power(x: np.ndarray) -> np.ndarray:
+    """(N,) median periodogram power over the high band of each plane-detrended, Hann-windowed patch (N, H, W).
+    A grating or a few edges occupy few frequency bins and leave the median alone; for white noise it is
+    proportional to the variance."""
+    n, h, w = x.shape
+    window, high = _bands(h, w)[:2]
+    idx = np.flatnonzero(high)
+    out = np.empty(n)
+    for i in range(0, n, _CHUNK):
+        f = scipy.fft.rfft2(_detrend(x[i:i + _CHUNK]) * window)
+        out[i:i + _CHUNK] = np.median((f.real**2 + f.imag**2).reshape(f.shape[0], -1)[:, idx], axis=1)
+    return out
+
+
 def _spatial(x: np.ndarray, shape: np.ndarray | None, fine: np.ndarray | None = None,
              shaped: np.ndarray | None = None) -> np.ndarray:
     """Statistics 4-5 of the module docstring, uncalibrated, (N, 2); block energies divided by the model's

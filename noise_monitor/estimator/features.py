@@ -13,7 +13,7 @@ from functools import cache
 import numpy as np
 
 from .bound import noise_upper_bound
-from .evidence import texture_evidence
+from .evidence import high_band_median_power, texture_evidence
 from .physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
 from .residuals import BLOCK, block_energies, block_means, immerkaer, laplacian, quantiles
 
@@ -33,6 +33,8 @@ N_SCALARS = 12
 N_SHAPE_TREND = 2
 #: Quantile of the shaped block energies within each intensity half (:func:`shape_trend`).
 TREND_QUANTILE = 0.25
+#: Scalars of the optional spectral input (:func:`spectral_scale`).
+N_SPECTRAL = 1
 
 
 def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
@@ -79,8 +81,28 @@ def shape_trend(shaped_energies: np.ndarray, smooth: np.ndarray) -> np.ndarray:
     return np.stack([np.log((bright + 1e-6) / (dark + 1e-6)), span], axis=1)
 
 
+@cache
+def unit_noise_spectral_median(h: int, w: int) -> float:
+    """The high-band median periodogram power of unit white noise on an h x w patch (seeded Monte-Carlo, 256
+    patches): the calibration of :func:`spectral_scale`."""
+    noise = np.random.default_rng(20242).standard_normal((256, h, w)).astype(np.float32)
+    return float(high_band_median_power(noise).mean())
+
+
+def spectral_scale(noisy: np.ndarray, shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(N, N_SPECTRAL): log of a line-robust noise scale over the reference scale: the median of the high-band
+    periodogram (|f| >= 0.25 cycles/px, ``evidence.high_band_median_power``) of the patch divided by the model's
+    sigma shape, calibrated on white noise. A pixel-scale grating, which the reference and the residual maps read
+    as noise, fills a few frequency bins and leaves it alone; texture spread over the band raises it like the
+    reference. About 0 on white noise of the reference's level."""
+    n, h, w = noisy.shape
+    sigma = np.sqrt(high_band_median_power(noisy / shape) / unit_noise_spectral_median(h, w))
+    return np.log(np.maximum(sigma, SIGMA_MODEL_FLOOR) / ref)[:, None]
+
+
 def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
-                   evidence: bool = False, upper: bool = False, trend: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+                   evidence: bool = False, upper: bool = False, trend: bool = False,
+                   spectral: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(maps (N, 3, H, W), scalars (N, N_SCALARS), physics prediction + ``reference``) for noisy patches in DN.
 
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
@@ -91,6 +113,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     ``evidence``: also the texture evidence of the confidence head (``evidence.texture_evidence``).
     ``upper``: also ``phys["upper"]``, the image-only upper bound of the noise (``bound.noise_upper_bound``).
     ``trend``: append the :func:`shape_trend` scalars (networks with ``CompactConfig.shape_trend``).
+    ``spectral``: then the :func:`spectral_scale` scalar (networks with ``CompactConfig.spectral``).
     """
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
@@ -109,7 +132,8 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     energy = [np.log(np.mean(np.square(r), axis=(1, 2)).astype(np.float64) + 1e-6)[:, None] for r in (resid, lap)]
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
                               energy[1], block_energy_quantiles(lap)]
-                             + ([shape_trend(shaped, smooth)] if trend else []), axis=1).astype(np.float32)
+                             + ([shape_trend(shaped, smooth)] if trend else [])
+                             + ([spectral_scale(noisy, shape, ref)] if spectral else []), axis=1).astype(np.float32)
     phys["reference"] = ref
     if upper:
         phys["upper"] = noise_upper_bound(noisy, shaped)

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..physics import CameraMetadata, NoiseModel
 from . import onnx_weights
-from .features import N_SCALARS, N_SHAPE_TREND, compact_inputs
+from .features import N_SCALARS, N_SHAPE_TREND, N_SPECTRAL, compact_inputs
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -215,11 +215,14 @@ class FullMetaEstimator(_Base):
         return len(self._inputs) > 2 if self._session is not None else bool(self.net.cfg.evidence)
 
     @cached_property
-    def _wants_trend(self) -> bool:
-        """Whether the network takes the shape-trend scalars (``features.shape_trend``; asked once, not per call)."""
+    def _extra_scalars(self) -> tuple[bool, bool]:
+        """Whether the network takes the shape-trend scalars and the spectral scale (``features.shape_trend``,
+        ``features.spectral_scale``; asked once, not per call). An ONNX session tells them from its scalar width
+        (each combination has its own)."""
         if self._session is not None:
-            return self._session.get_inputs()[1].shape[1] == N_SCALARS + N_SHAPE_TREND
-        return bool(self.net.cfg.shape_trend)
+            extra = self._session.get_inputs()[1].shape[1] - N_SCALARS
+            return extra in (N_SHAPE_TREND, N_SHAPE_TREND + N_SPECTRAL), extra in (N_SPECTRAL, N_SHAPE_TREND + N_SPECTRAL)
+        return bool(self.net.cfg.shape_trend), bool(self.net.cfg.spectral)
 
     def _run_net(self, *inputs: np.ndarray) -> np.ndarray:
         if self._session is not None:
@@ -247,7 +250,7 @@ class FullMetaEstimator(_Base):
         for g, idx in enumerate(groups.values()):
             group_of[idx] = g
         maps, scalars, phys = compact_inputs(x, tables, group_of, evidence=self._wants_evidence, upper=True,
-                                             trend=self._wants_trend)
+                                             trend=self._extra_scalars[0], spectral=self._extra_scalars[1])
         inputs = (maps, scalars) + ((phys.pop("evidence"),) if self._wants_evidence else ())
         raw = self._run_net(*inputs).astype(np.float64)
         r = np.clip(raw[:, 0] if raw.ndim == 2 else raw, -6.0, 6.0)

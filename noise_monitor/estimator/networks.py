@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from ..physics import NORMALIZED_ORDER
-from .features import N_SCALARS, N_SHAPE_TREND
+from .features import N_SCALARS, N_SHAPE_TREND, N_SPECTRAL
 
 #: Metadata per branch (names of ``CameraMetadata.normalized()`` entries), as listed in issue 3.
 FULL_META_BRANCHES: dict[str, tuple[str, ...]] = {
@@ -136,6 +136,8 @@ class CompactConfig:
     evidence: int = 0
     #: the shape-trend scalars as inputs too (``features.shape_trend``)
     shape_trend: bool = False
+    #: the line-robust spectral scale as an input too (``features.spectral_scale``; after the trend's)
+    spectral: bool = False
 
     @property
     def n_pooled(self) -> int:
@@ -144,8 +146,9 @@ class CompactConfig:
 
     @property
     def n_scalars(self) -> int:
-        """Scalar inputs: ``N_SCALARS``, plus ``features.N_SHAPE_TREND`` with ``shape_trend``."""
-        return N_SCALARS + (N_SHAPE_TREND if self.shape_trend else 0)
+        """Scalar inputs: ``N_SCALARS``, plus ``features.N_SHAPE_TREND`` with ``shape_trend``, plus
+        ``features.N_SPECTRAL`` with ``spectral``."""
+        return N_SCALARS + (N_SHAPE_TREND if self.shape_trend else 0) + (N_SPECTRAL if self.spectral else 0)
 
     def as_dict(self) -> dict:
         return asdict(self)

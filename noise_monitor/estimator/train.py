@@ -12,9 +12,9 @@ from tqdm import tqdm
 
 from .device import resolve_device
 from .evidence import N_EVIDENCE
-from .features import N_SCALARS, N_SHAPE_TREND, compact_inputs
+from .features import N_SCALARS, N_SHAPE_TREND, N_SPECTRAL, compact_inputs
 from .inference import is_measurable
-from .networks import SIGMA_SCALE, CompactConfig, ImageNoiseNet, build_network, network_from_checkpoint
+from .networks import SIGMA_SCALE, ImageNoiseNet, build_network, network_from_checkpoint
 
 HUBER_DELTA_DN = 1.0
 #: Hidden sizes of the confidence head added by ``TrainSettings.confidence``.
@@ -42,6 +42,9 @@ class TrainSettings:
     #: full_meta: the network also takes the shape-trend scalars (``features.shape_trend``); from an ``init``
     #: without them, their input weights start at zero (the init's reading unchanged)
     shape_trend: bool = False
+    #: full_meta: the network also takes the line-robust spectral scale (``features.spectral_scale``); from an
+    #: ``init`` without it, its input weights start at zero (the init's reading unchanged)
+    spectral: bool = False
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -52,17 +55,18 @@ def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
     return by_group[data["group_of"]]
 
 
-def tensors_for(variant: str, data: dict[str, np.ndarray], chunk: int = 8192, trend: bool = False) -> dict[str, torch.Tensor]:
+def tensors_for(variant: str, data: dict[str, np.ndarray], chunk: int = 8192, trend: bool = False,
+                spectral: bool = False) -> dict[str, torch.Tensor]:
     """Network inputs and targets of a dataset for a variant (full_meta's features in chunks of ``chunk``
     patches: their per-pixel intermediates for a whole large dataset would take twice its maps' memory;
-    ``trend``: with the shape-trend scalars)."""
+    ``trend`` / ``spectral``: with the shape-trend scalars / the spectral scale)."""
     if variant == "full_meta":
         n = len(data["noisy"])
         maps: np.ndarray | None = None
         rows: dict[str, list[np.ndarray]] = {"scalars": [], "evidence": [], "reference": []}
         for i in range(0, n, chunk):
             m, scalars, phys = compact_inputs(data["noisy"][i:i + chunk], data["tables"], data["group_of"][i:i + chunk],
-                                              evidence=True, trend=trend)
+                                              evidence=True, trend=trend, spectral=spectral)
             if maps is None:
                 maps = np.empty((n,) + m.shape[1:], dtype=m.dtype)
             maps[i:i + len(m)] = m
@@ -148,11 +152,17 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
         ck_init = {**ck_init, "state_dict": {k: v for k, v in ck_init["state_dict"].items()
                                               if not k.startswith(("confidence.", "conf_"))}}
     trend = settings.shape_trend or bool(init_cfg.get("shape_trend"))
-    if (head or trend) and settings.variant == "full_meta":
-        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence, shape_trend=trend))
+    spectral = settings.spectral or bool(init_cfg.get("spectral"))
+    if (head or trend or spectral) and settings.variant == "full_meta":
+        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence, shape_trend=trend, spectral=spectral))
     if trend and ck_init is not None and not init_cfg.get("shape_trend"):
-        ck_init = {**ck_init, "config": {**init_cfg, "shape_trend": True},
-                   "state_dict": with_trend_inputs(ck_init["state_dict"], net.cfg)}
+        at = net.cfg.n_pooled + N_SCALARS
+        ck_init = {**ck_init, "config": {**ck_init["config"], "shape_trend": True},
+                   "state_dict": with_new_inputs(ck_init["state_dict"], at, N_SHAPE_TREND)}
+    if spectral and ck_init is not None and not init_cfg.get("spectral"):
+        at = net.cfg.n_pooled + N_SCALARS + (N_SHAPE_TREND if trend else 0)
+        ck_init = {**ck_init, "config": {**ck_init["config"], "spectral": True},
+                   "state_dict": with_new_inputs(ck_init["state_dict"], at, N_SPECTRAL)}
     net = net.to(dev)
     trainable = [p for name, p in net.named_parameters() if not settings.confidence or name.startswith("confidence.")]
     for p in net.parameters():
@@ -187,7 +197,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     from .data import camera_of
 
     effects, sensor = camera_of(data)
-    tensors = tensors_for(settings.variant, data, trend=trend)
+    tensors = tensors_for(settings.variant, data, trend=trend, spectral=spectral)
     if settings.confidence:
         tensors = head_tensors(net, tensors, dev)
     if settings.anchor and ck_init is not None:
@@ -225,10 +235,10 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     return path
 
 
-def with_trend_inputs(state_dict: dict[str, torch.Tensor], cfg: CompactConfig) -> dict[str, torch.Tensor]:
-    """A full_meta state dict without the shape-trend inputs widened to take them: zero weights (and, in the
-    confidence head's standardisation, mean 0 / std 1) for the new scalars, so the readings are unchanged."""
-    at, extra = cfg.n_pooled + N_SCALARS, N_SHAPE_TREND
+def with_new_inputs(state_dict: dict[str, torch.Tensor], at: int, extra: int) -> dict[str, torch.Tensor]:
+    """A full_meta state dict widened to take ``extra`` new scalar inputs at input column ``at`` of the MLP and
+    the confidence head: zero weights (and, in the head's standardisation, mean 0 / std 1) for them, so the
+    readings are unchanged."""
     out = dict(state_dict)
     for key in ("mlp.0.weight", "confidence.0.weight"):
         if key in out:
@@ -243,8 +253,9 @@ def with_trend_inputs(state_dict: dict[str, torch.Tensor], cfg: CompactConfig) -
 
 def _layers(config: dict) -> dict:
     """A network configuration without its operating patch size and confidence head (the measurement's
-    weight shapes depend on the rest; weights from before ``shape_trend`` have none)."""
-    return {"shape_trend": False, **{k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence")}}
+    weight shapes depend on the rest; weights from before ``shape_trend`` / ``spectral`` have none)."""
+    return {"shape_trend": False, "spectral": False,
+            **{k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence")}}
 
 
 @torch.no_grad()
@@ -277,7 +288,7 @@ def anchor_tensors(init_net: torch.nn.Module, tensors: dict[str, torch.Tensor], 
 def fit_confidence_inputs(net: ImageNoiseNet, data: dict[str, np.ndarray], dev: Any, n: int = 4096) -> None:
     """Set the confidence head's input standardisation from the first ``n`` patches of the data."""
     maps, scalars, phys = compact_inputs(data["noisy"][:n], data["tables"], data["group_of"][:n], evidence=True,
-                                         trend=net.cfg.shape_trend)
+                                         trend=net.cfg.shape_trend, spectral=net.cfg.spectral)
     z = torch.cat([net.confidence_inputs(torch.from_numpy(maps[i:i + 256]).to(dev),
                                          torch.from_numpy(scalars[i:i + 256]).to(dev))[1]
                    for i in range(0, len(maps), 256)])

@@ -70,6 +70,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="full_meta with --init (weights with a confidence head): pull the measurement toward the "
                         "init's reading on the patches the init declines, with weight W (keeps the reading of content "
                         "one image cannot measure from drifting while fine-tuning on new imagery; 0 = off)")
+    p.add_argument("--spectral", action="store_true",
+                   help="full_meta: also give the network a line-robust noise scale (the median of the patch's "
+                        "high-band periodogram, which a pixel-scale grating does not move); from --init weights "
+                        "without it, its input weights start at zero")
     p.add_argument("--shape-trend", action="store_true",
                    help="full_meta: also give the network the shape-trend scalars (how the noise's intensity "
                         "dependence departs from the stated model's); from --init weights without them, their input "
@@ -108,8 +112,8 @@ def _check(args: argparse.Namespace) -> None:
     if args.anchor < 0 or (args.anchor and (args.variant != "full_meta" or args.init is None or args.confidence)):
         raise ValueError("--anchor must be >= 0 and needs --variant full_meta and --init (weights with a confidence "
                          "head), without --confidence")
-    if args.shape_trend and args.variant != "full_meta":
-        raise ValueError("--shape-trend is an input of the full_meta network")
+    if (args.shape_trend or args.spectral) and args.variant != "full_meta":
+        raise ValueError("--shape-trend and --spectral are inputs of the full_meta network")
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -180,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth, confidence=args.confidence,
                              checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints,
-                             anchor=args.anchor, shape_trend=args.shape_trend)
+                             anchor=args.anchor, shape_trend=args.shape_trend, spectral=args.spectral)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": scheme(args).as_dict(),
