@@ -22,3 +22,30 @@ def seeded_images() -> Callable[..., list[np.ndarray]]:
         return a
 
     return check
+
+
+@pytest.fixture
+def widened_reads_as_before() -> Callable[..., None]:
+    """Check ``train.with_new_inputs``: full_meta weights ``ck`` widened to the configuration ``cfg`` (``extra`` new
+    scalar inputs at MLP input column ``at``) read ``noisy`` at ``meta`` as before, under torch and ONNX Runtime,
+    and the estimator tells the new inputs (``flags``: its ``_extra_scalars``)."""
+    import torch
+
+    from noise_monitor.estimator.inference import FullMetaEstimator
+    from noise_monitor.estimator.networks import ImageNoiseNet
+    from noise_monitor.estimator.train import with_new_inputs
+
+    def check(ck: dict, cfg, at: int, extra: int, noisy: np.ndarray, meta, flags: tuple[bool, bool]) -> None:
+        cpu = torch.device("cpu")
+        wide = ImageNoiseNet(cfg)
+        wide.load_state_dict(with_new_inputs(ck["state_dict"], at, extra))
+        widened = {**ck, "config": cfg.as_dict(), "state_dict": wide.state_dict()}
+        ref = FullMetaEstimator(ck, cpu, backend="torch").predict(noisy, meta)
+        for backend in ("torch", "onnx"):
+            est = FullMetaEstimator(widened, cpu, backend=backend)
+            assert est._extra_scalars == flags
+            out = est.predict(noisy, meta)
+            for key in ("sigma_image", "sigma_image_error"):
+                assert out[key] == pytest.approx(ref[key], rel=1e-4), (backend, key)
+
+    return check

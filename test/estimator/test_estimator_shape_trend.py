@@ -11,9 +11,9 @@ import torch
 from noise_monitor.estimator.data import generate
 from noise_monitor.estimator.features import N_SCALARS, N_SHAPE_TREND, compact_inputs
 from noise_monitor.estimator.inference import FullMetaEstimator
-from noise_monitor.estimator.networks import ImageNoiseNet, network_from_checkpoint
+from noise_monitor.estimator.networks import network_from_checkpoint
 from noise_monitor.estimator.physics_prior import PhysicsPrior
-from noise_monitor.estimator.train import TrainSettings, train, with_new_inputs
+from noise_monitor.estimator.train import TrainSettings, train
 from noise_monitor.physics import NoiseModel, load_profile
 
 META = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
@@ -56,23 +56,14 @@ def test_shape_trend_reads_a_noise_steeper_than_stated():
     assert np.all(np.abs(trend["stated"][:, 1] - np.log(170.0 / 70.0)) < 0.15)
 
 
-def test_weights_widened_for_the_trend_read_as_before(no_trend):
+def test_weights_widened_for_the_trend_read_as_before(no_trend, widened_reads_as_before):
     """``with_new_inputs``: weights with a head widened to take the trend scalars read every patch as before,
     under torch and ONNX Runtime (which tells the input from the session's scalar width)."""
     ck = torch.load(no_trend, weights_only=True)
     assert not ck["config"].get("shape_trend") and ck["config"]["confidence"]
     cfg = replace(network_from_checkpoint(ck).cfg, shape_trend=True)
-    wide = ImageNoiseNet(cfg)
-    wide.load_state_dict(with_new_inputs(ck["state_dict"], cfg.n_pooled + N_SCALARS, N_SHAPE_TREND))
-    widened = {**ck, "config": cfg.as_dict(), "state_dict": wide.state_dict()}
-    noisy = _ramps(NoiseModel(extra={"prnu": {"sigma_pct": 3.0}}), n=6)
-    ref = FullMetaEstimator(ck, CPU, backend="torch").predict(noisy, META)
-    for backend in ("torch", "onnx"):
-        est = FullMetaEstimator(widened, CPU, backend=backend)
-        assert est._extra_scalars == (True, False)
-        out = est.predict(noisy, META)
-        for key in ("sigma_image", "sigma_image_error"):
-            assert out[key] == pytest.approx(ref[key], rel=1e-4), (backend, key)
+    widened_reads_as_before(ck, cfg, cfg.n_pooled + N_SCALARS, N_SHAPE_TREND,
+                            _ramps(NoiseModel(extra={"prnu": {"sigma_pct": 3.0}}), n=6), META, (True, False))
 
 
 def test_training_with_the_trend_widens_the_init_and_a_new_head_keeps_it(tmp_path, no_trend, data):

@@ -12,9 +12,9 @@ import torch
 from noise_monitor.estimator.data import generate
 from noise_monitor.estimator.features import N_SCALARS, N_SHAPE_TREND, N_SPECTRAL, compact_inputs
 from noise_monitor.estimator.inference import FullMetaEstimator
-from noise_monitor.estimator.networks import ImageNoiseNet, network_from_checkpoint
+from noise_monitor.estimator.networks import network_from_checkpoint
 from noise_monitor.estimator.physics_prior import PhysicsPrior
-from noise_monitor.estimator.train import TrainSettings, train, with_new_inputs
+from noise_monitor.estimator.train import TrainSettings, train
 from noise_monitor.physics import NoiseModel, load_profile
 
 META = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
@@ -68,23 +68,13 @@ def weights(tmp_path_factory: pytest.TempPathFactory):
     return data, head
 
 
-def test_weights_widened_for_the_spectral_input_read_as_before(weights):
+def test_weights_widened_for_the_spectral_input_read_as_before(weights, widened_reads_as_before):
     """``with_new_inputs`` after the trend's columns: every patch reads as before, torch and ONNX alike (ONNX
     Runtime tells trend and spectral inputs from the scalar width)."""
-    _, path = weights
-    ck = torch.load(path, weights_only=True)
+    ck = torch.load(weights[1], weights_only=True)
     cfg = replace(network_from_checkpoint(ck).cfg, spectral=True)
-    wide = ImageNoiseNet(cfg)
-    wide.load_state_dict(with_new_inputs(ck["state_dict"], cfg.n_pooled + N_SCALARS + N_SHAPE_TREND, N_SPECTRAL))
-    widened = {**ck, "config": cfg.as_dict(), "state_dict": wide.state_dict()}
-    noisy, _ = _gratings(3.0, 15.0, n=4)
-    ref = FullMetaEstimator(ck, CPU, backend="torch").predict(noisy, META)
-    for backend in ("torch", "onnx"):
-        est = FullMetaEstimator(widened, CPU, backend=backend)
-        assert est._extra_scalars == (True, True)
-        out = est.predict(noisy, META)
-        for key in ("sigma_image", "sigma_image_error"):
-            assert out[key] == pytest.approx(ref[key], rel=1e-4), (backend, key)
+    widened_reads_as_before(ck, cfg, cfg.n_pooled + N_SCALARS + N_SHAPE_TREND, N_SPECTRAL, _gratings(3.0, 15.0, n=4)[0],
+                            META, (True, True))
 
 
 def test_training_with_the_spectral_input_widens_the_init(tmp_path, weights):
