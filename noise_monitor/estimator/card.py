@@ -82,6 +82,8 @@ def _procedural(train: dict) -> str:
         text += f" + {im['grain']} grainy procedural pictures (near-white grain as scene content)"
     if im.get("charts"):
         text += f" + {im['charts']} test charts (tiles over the whole intensity range)"
+    if im.get("gratings"):
+        text += f" + {im['gratings']} plain gratings (pixel-scale sine gratings over the whole image)"
     if im.get("jpeg"):
         text += f"; {im['jpeg']:.0%} of the source images JPEG-compressed (quality {JPEG_QUALITY[0]}-{JPEG_QUALITY[1]})"
     return text

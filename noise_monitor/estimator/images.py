@@ -53,7 +53,9 @@ class Imagery:
       polygons, periodic bars);
     - ``grain``: grainy procedural pictures added (``procedural.grain_images``: near-white grain as scene
       content);
-    - ``charts``: test charts added (``procedural.chart_images``: tiles over the whole intensity range).
+    - ``charts``: test charts added (``procedural.chart_images``: tiles over the whole intensity range);
+    - ``gratings``: plain gratings added (``procedural.plain_grating_images``: pixel-scale sine gratings over the
+      whole image).
     """
 
     photo_scales: tuple[float, float] = PHOTO_DOWNSCALE
@@ -63,6 +65,7 @@ class Imagery:
     manmade: int = 0
     grain: int = 0
     charts: int = 0
+    gratings: int = 0
 
     def __post_init__(self) -> None:
         lo, hi = self.photo_scales
@@ -71,9 +74,9 @@ class Imagery:
         for name in ("photo_native", "photo_rotate", "jpeg"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)}")
-        if min(self.manmade, self.grain, self.charts) < 0:
-            raise ValueError(f"manmade, grain and chart images must be >= 0, got {self.manmade}, {self.grain} and "
-                             f"{self.charts}")
+        if min(self.manmade, self.grain, self.charts, self.gratings) < 0:
+            raise ValueError(f"manmade, grain, chart and grating images must be >= 0, got {self.manmade}, {self.grain}, "
+                             f"{self.charts} and {self.gratings}")
 
     @property
     def default_photos(self) -> bool:
@@ -251,7 +254,7 @@ def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
     from ``rng`` (none for ``photos`` and ``photos_native``). ``variants`` > 0 (train only): the training
     photographs as ``photo_variants(rng, variants, imagery)`` instead of once at 2x; ``procedural`` > 0
     (train only): that many images of pixel-scale structure from ``procedural.procedural_images`` besides;
-    ``imagery`` (train only; :class:`Imagery`): ``imagery.manmade`` man-made scenes, ``imagery.grain`` grainy pictures and ``imagery.charts`` test charts besides, then each
+    ``imagery`` (train only; :class:`Imagery`): ``imagery.manmade`` man-made scenes, ``imagery.grain`` grainy pictures, ``imagery.charts`` test charts and ``imagery.gratings`` plain gratings besides, then each
     image JPEG-compressed with probability ``imagery.jpeg``. The draws of ``imagery`` come after all
     others, so its defaults leave every earlier dataset bit-identical."""
     if split not in SPLITS:
@@ -271,7 +274,7 @@ def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
         photos = photo_variants(rng, variants, imagery)
     else:
         photos = skimage_photos() if split == "train" else matplotlib_photos()
-    from .procedural import chart_images, grain_images, manmade_images, procedural_images
+    from .procedural import chart_images, grain_images, manmade_images, plain_grating_images, procedural_images
 
     images = photos + [dead_leaves(rng) for _ in range(n_dead_leaves)] + procedural_images(rng, procedural)
     if imagery.manmade:
@@ -280,6 +283,8 @@ def source_images(split: str, rng: np.random.Generator, n_dead_leaves: int = 24,
         images += grain_images(rng, imagery.grain)
     if imagery.charts:
         images += chart_images(rng, imagery.charts)
+    if imagery.gratings:
+        images += plain_grating_images(rng, imagery.gratings)
     if imagery.jpeg:
         lo, hi = JPEG_QUALITY
         images = [jpeg_compress(im, int(rng.integers(lo, hi + 1))) if rng.random() < imagery.jpeg else im

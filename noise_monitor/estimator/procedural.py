@@ -60,6 +60,22 @@ def grating(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     return img
 
 
+def plain_grating(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
+    """One sine grating (two, a third of the time) of a pixel-scale period over the whole image, on a flat or gently
+    ramped background: the unmasked periodic content a patch of a fence, a screen or a fabric close up holds, and
+    which :func:`grating` shows only faded into a fractal background."""
+    img = _ramp(rng, size, size, float(rng.uniform(20.0, 235.0)), float(rng.uniform(0.0, 40.0))).astype(np.float64)
+    for _ in range(1 if rng.random() < 2 / 3 else 2):
+        amp = float(np.exp(rng.uniform(np.log(2.0), np.log(60.0))))
+        img += amp * _wave(rng, size, _period(rng), rng.uniform(0, np.pi))
+    return img
+
+
+def plain_grating_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
+    """``n`` plain gratings (:func:`plain_grating`; float32 DN, clipped to 0..255)."""
+    return [np.clip(plain_grating(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
+
+
 def fabric(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     """A woven pattern: crossed gratings multiplied, with a weave-scale modulation, under smooth shading."""
     angle, period = rng.uniform(0, np.pi), _period(rng)

@@ -51,6 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="add N grainy procedural pictures (near-white grain of 0.4-1.5 px as scene content)")
     p.add_argument("--charts", type=int, default=0, metavar="N",
                    help="add N test charts (tiles over the whole 0..255 range: flat, ramps, smooth textures, step wedges)")
+    p.add_argument("--gratings", type=int, default=0, metavar="N",
+                   help="add N plain gratings (one or two sine gratings of 1.5-6 px periods over the whole image)")
     p.add_argument("--unexpected-shapes", type=float, nargs="+", default=[0.0], metavar="G",
                    help="exponents g of the unexpected noise's per-pixel sigma ~ (clean intensity)^g, one drawn per "
                         "patch (0 = the flat N(0, s); 0.5 shot-like; 1 PRNU-like: noise whose shape the stated model "
@@ -94,8 +96,8 @@ def _check(args: argparse.Namespace) -> None:
     for name in ("steps", "batch", "patches", "threads"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1")
-    if min(args.photo_variants, args.procedural, args.manmade, args.grain, args.charts) < 0:
-        raise ValueError("--photo-variants, --procedural, --manmade, --grain and --charts must be >= 0")
+    if min(args.photo_variants, args.procedural, args.manmade, args.grain, args.charts, args.gratings) < 0:
+        raise ValueError("--photo-variants, --procedural, --manmade, --grain, --charts and --gratings must be >= 0")
     if any(not 0.0 <= g <= 2.0 for g in args.unexpected_shapes):
         raise ValueError("--unexpected-shapes exponents must be in [0, 2]")
     if args.checkpoint_every < 1:
@@ -135,7 +137,7 @@ def imagery(args: argparse.Namespace) -> Imagery:
     """The training imagery options of the command line."""
     return Imagery(photo_scales=(float(args.photo_scales[0]), float(args.photo_scales[1])),
                    photo_native=args.photo_native, photo_rotate=args.photo_rotate, jpeg=args.jpeg, manmade=args.manmade,
-                   grain=args.grain, charts=args.charts)
+                   grain=args.grain, charts=args.charts, gratings=args.gratings)
 
 
 def scheme(args: argparse.Namespace) -> Scheme:

@@ -31,11 +31,12 @@ from noise_monitor.estimator.procedural import (
     chart_images,
     grain_images,
     manmade_images,
+    plain_grating_images,
     polygon_leaves,
 )
 from noise_monitor.estimator.residuals import immerkaer
 
-VARIED = Imagery(photo_scales=(1.0, 4.0), photo_native=0.5, photo_rotate=0.5, jpeg=0.5, manmade=2, grain=1, charts=1)
+VARIED = Imagery(photo_scales=(1.0, 4.0), photo_native=0.5, photo_rotate=0.5, jpeg=0.5, manmade=2, grain=1, charts=1, gratings=1)
 
 
 def test_manmade_images_are_seeded_on_the_dn_scale_with_flat_faces_and_straight_edges(seeded_images) -> None:
@@ -65,6 +66,15 @@ def test_charts_span_the_intensity_range_in_flat_tiles_with_edges(seeded_images)
         assert np.percentile(im, 2) < 25.0 and np.percentile(im, 98) > 230.0
         # ... in tiles: most pixels have little pixel-scale residual, the tile edges a large step
         assert np.median(np.abs(immerkaer(im[None])[0])) < 1.0 and np.abs(np.diff(im, axis=1)).max() > 10.0
+
+
+def test_plain_gratings_are_line_spectra_over_the_whole_image(seeded_images) -> None:
+    for im in seeded_images(plain_grating_images, 6, 13):
+        f = np.abs(np.fft.rfft2(im - im.mean())) ** 2
+        f[0, 0] = 0.0
+        fine = np.hypot(*np.meshgrid(np.fft.fftfreq(96), np.fft.rfftfreq(96), indexing="ij")) >= 1 / 6.5
+        # a 1.5-6 px grating puts its power in a few fine-frequency bins (Hann-free: some leakage)
+        assert np.sort(f[fine])[-8:].sum() > 0.3 * f.sum()
 
 
 def test_manmade_kinds_alternate():
@@ -117,7 +127,7 @@ def test_imagery_defaults_leave_datasets_bit_identical_and_options_are_recorded(
     varied = generate(8, 32, seed=3, progress=False, photo_variants=1, imagery=VARIED)
     assert imagery_of(varied) == VARIED and not np.array_equal(varied["noisy"], plain["noisy"])
     imgs = source_images("train", np.random.default_rng(2), n_dead_leaves=1, variants=1, imagery=VARIED)
-    assert len(imgs) == len(SKIMAGE_PHOTOS) + 1 + VARIED.manmade + VARIED.grain + VARIED.charts
+    assert len(imgs) == len(SKIMAGE_PHOTOS) + 1 + VARIED.manmade + VARIED.grain + VARIED.charts + VARIED.gratings
     with pytest.raises(ValueError, match="train split"):
         source_images("photos", np.random.default_rng(0), imagery=Imagery(manmade=1))
     with pytest.raises(ValueError, match="photo variants"):
@@ -132,11 +142,11 @@ def test_train_cli_imagery_options(tmp_path, capsys):
     args = ["train", "--variant", "full_meta", "--out", str(tmp_path), "--steps", "1", "--batch", "2",
             "--patches", "8", "--patch-size", "32", "--threads", "1", "--photo-variants", "1"]
     extra = ["--photo-scales", "1", "4", "--photo-native", "0.3", "--photo-rotate", "0.5", "--jpeg", "0.25",
-             "--manmade", "2", "--grain", "1", "--charts", "1", "--keep-checkpoints", "--checkpoint-every", "1"]
+             "--manmade", "2", "--grain", "1", "--charts", "1", "--gratings", "1", "--keep-checkpoints", "--checkpoint-every", "1"]
     assert cli_main(args + extra) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["imagery"] == {"photo_scales": [1.0, 4.0], "photo_native": 0.3, "photo_rotate": 0.5, "jpeg": 0.25,
-                                  "manmade": 2, "grain": 1, "charts": 1}
+                                  "manmade": 2, "grain": 1, "charts": 1, "gratings": 1}
     assert "--photo-scales 1 4 " in summary["command"] and (tmp_path / "step_1.pt").is_file()
     assert cli_main(args) == 2 and "imagery options" in capsys.readouterr().err  # the dataset is another one
     rc = cli_main(["train", "--variant", "full_meta", "--out", str(tmp_path / "x"), "--photo-rotate", "0.5"])
