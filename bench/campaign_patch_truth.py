@@ -50,12 +50,10 @@ class KeepClean:
 
 
 def recorded_images(bag: Path) -> list[np.ndarray]:
-    """The bag's mono8 images (DN, float32) in order."""
+    """The bag's images (DN) in order, prepared as the node prepares them."""
     reader = BagReader(bag, detect_topics=True)
     try:
-        assert reader.image_topic is not None  # required by the reader
-        return [np.frombuffer(bytes(m.data), np.uint8).reshape(m.height, m.width).astype(np.float32)
-                for _, _, m in reader.messages([reader.image_topic])]
+        return [np.asarray(f.image_dn, dtype=np.float32) for f in reader.frames(PROFILE)]
     finally:
         reader.close()
 

@@ -37,6 +37,12 @@ def hillshade(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     return 255.0 * ls.hillshade(dem, vert_exag=rng.uniform(0.05, 1.0))
 
 
+def _drawn(kind: Callable[[np.random.Generator, int], np.ndarray], rng: np.random.Generator, n: int,
+           size: int) -> list[np.ndarray]:
+    """``n`` images of one kind drawn in turn from ``rng`` (float32 DN, clipped to 0..255)."""
+    return [np.clip(kind(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
+
+
 def _period(rng: np.random.Generator) -> float:
     return float(np.exp(rng.uniform(*np.log(PERIODS))))
 
@@ -73,7 +79,7 @@ def plain_grating(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
 
 def plain_grating_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
     """``n`` plain gratings (:func:`plain_grating`; float32 DN, clipped to 0..255)."""
-    return [np.clip(plain_grating(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
+    return _drawn(plain_grating, rng, n, size)
 
 
 def fabric(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
@@ -135,7 +141,7 @@ def grainy(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
 
 def grain_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
     """``n`` grainy pictures (:func:`grainy`; float32 DN, clipped to 0..255)."""
-    return [np.clip(grainy(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
+    return _drawn(grainy, rng, n, size)
 
 
 KINDS: dict[str, Callable[[np.random.Generator, int], np.ndarray]] = {
@@ -304,4 +310,4 @@ def chart_scene(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
 
 def chart_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
     """``n`` test charts (:func:`chart_scene`; float32 DN, clipped to 0..255)."""
-    return [np.clip(chart_scene(rng, size), 0.0, 255.0).astype(np.float32) for _ in range(n)]
+    return _drawn(chart_scene, rng, n, size)

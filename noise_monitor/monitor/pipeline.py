@@ -282,7 +282,7 @@ class Monitor:
         # weights would move them with the patch selection, not with the camera); the measurement and xi
         # rest on the patches it reads most precisely
         weights = patch_weights(est, use)
-        sigma = {k: float(np.median(v[use])) for k, v in per_patch.items()}
+        sigma = {k: float(np.median(v[use])) for k, v in per_patch.items() if k != "xi"}
         sigma["xi"] = weighted_median(per_patch["xi"][use], weights)
         model = {k: float(np.median(v[use])) for k, v in model_pp.items()}
         # the estimator's measurement of the noise in the image (contract: total; Full-Meta: sigma_image)
