@@ -155,12 +155,13 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     spectral = settings.spectral or bool(init_cfg.get("spectral"))
     if (head or trend or spectral) and settings.variant == "full_meta":
         net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence, shape_trend=trend, spectral=spectral))
-    at = net.cfg.n_pooled + N_SCALARS  # the optional scalars follow the base ones, in this order
-    for key, wanted, extra in (("shape_trend", trend, N_SHAPE_TREND), ("spectral", spectral, N_SPECTRAL)):
-        if wanted and ck_init is not None and not init_cfg.get(key):  # widen the init to take them
-            ck_init = {**ck_init, "config": {**ck_init["config"], key: True},
-                       "state_dict": with_new_inputs(ck_init["state_dict"], at, extra)}
-        at += extra if wanted else 0
+    if (trend or spectral) and ck_init is not None:  # the optional scalars follow the base ones, in this order
+        at = net.cfg.n_pooled + N_SCALARS
+        for key, wanted, extra in (("shape_trend", trend, N_SHAPE_TREND), ("spectral", spectral, N_SPECTRAL)):
+            if wanted and not init_cfg.get(key):  # widen the init to take them
+                ck_init = {**ck_init, "config": {**ck_init["config"], key: True},
+                           "state_dict": with_new_inputs(ck_init["state_dict"], at, extra)}
+            at += extra if wanted else 0
     net = net.to(dev)
     trainable = [p for name, p in net.named_parameters() if not settings.confidence or name.startswith("confidence.")]
     for p in net.parameters():
