@@ -8,7 +8,6 @@ from typing import Any, cast
 
 import numpy as np
 import torch
-from scipy.stats import norm
 from tqdm import tqdm
 
 from .device import resolve_device
@@ -46,15 +45,6 @@ class TrainSettings:
     #: full_meta: the network also takes the line-robust spectral scale (``features.spectral_scale``); from an
     #: ``init`` without it, its input weights start at zero (the init's reading unchanged)
     spectral: bool = False
-    #: full_meta confidence head: 0 = Gaussian NLL of the log residual; q in (0, 1) = the pinball loss of |log
-    #: residual| at quantile q against the predicted error times the Gaussian's two-sided q quantile (the same
-    #: error as the NLL's for Gaussian residuals, larger where a minority of the patches is misread)
-    head_quantile: float = 0.0
-
-
-def gaussian_two_sided(q: float) -> float:
-    """z with P(|N(0, 1)| <= z) = q (1.645 for q = 0.9)."""
-    return float(norm.ppf(0.5 + 0.5 * q))
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -95,11 +85,9 @@ def tensors_for(variant: str, data: dict[str, np.ndarray], chunk: int = 8192, tr
     return t
 
 
-def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor], anchor: float = 0.0,
-            head_quantile: float = 0.0) -> torch.Tensor:
+def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor], anchor: float = 0.0) -> torch.Tensor:
     """Training loss. full_meta: Huber on sigma_image plus, with a confidence head, the Gaussian NLL of
-    the measurement's log-space residual under the head's predicted error (``head_quantile``: the pinball
-    loss, see ``TrainSettings.head_quantile``); a batch of the frozen
+    the measurement's log-space residual under the head's predicted error; a batch of the frozen
     measurement's cached outputs (``z``, ``mu``: :func:`head_tensors`) trains the head alone. With
     ``anchor`` and a batch of the init's readings (``anchor_mu``, ``anchor_w``: :func:`anchor_tensors`),
     plus ``anchor`` x the mean weighted squared log difference to them."""
@@ -118,11 +106,7 @@ def loss_of(variant: str, net: torch.nn.Module, batch: dict[str, torch.Tensor], 
         if log_err is not None:
             resid = torch.log(batch["target"] / batch["reference"]) - r.detach()
             log_err = log_err.clamp(-8.0, 4.0)
-            if head_quantile:
-                u = resid.abs() - gaussian_two_sided(head_quantile) * log_err.exp()
-                loss = loss + torch.maximum(head_quantile * u, (head_quantile - 1.0) * u).mean()
-            else:
-                loss = loss + (0.5 * (resid / log_err.exp()) ** 2 + log_err).mean()
+            loss = loss + (0.5 * (resid / log_err.exp()) ** 2 + log_err).mean()
         return loss
     out = net(batch["patch"], batch["meta"])
     return torch.stack([torch.nn.functional.mse_loss(out[k], batch[k]) for k in out]).mean()
@@ -225,7 +209,7 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     while step < settings.steps:
         idx = torch.from_numpy(rng.integers(0, n, settings.batch))
         batch = {k: v[idx].to(dev) for k, v in tensors.items()}
-        loss = loss_of(settings.variant, net, batch, settings.anchor, settings.head_quantile)
+        loss = loss_of(settings.variant, net, batch, settings.anchor)
         opt.zero_grad()
         loss.backward()
         opt.step()

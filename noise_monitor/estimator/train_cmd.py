@@ -72,9 +72,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="full_meta with --init (weights with a confidence head): pull the measurement toward the "
                         "init's reading on the patches the init declines, with weight W (keeps the reading of content "
                         "one image cannot measure from drifting while fine-tuning on new imagery; 0 = off)")
-    p.add_argument("--head-quantile", type=float, default=0.0, metavar="Q",
-                   help="with --confidence: train the head by the pinball loss of |log residual| at quantile Q "
-                        "(0 = Gaussian NLL; see TrainSettings.head_quantile)")
     p.add_argument("--spectral", action="store_true",
                    help="full_meta: also give the network a line-robust noise scale (the median of the patch's "
                         "high-band periodogram, which a pixel-scale grating does not move); from --init weights "
@@ -117,8 +114,6 @@ def _check(args: argparse.Namespace) -> None:
     if args.anchor < 0 or (args.anchor and (args.variant != "full_meta" or args.init is None or args.confidence)):
         raise ValueError("--anchor must be >= 0 and needs --variant full_meta and --init (weights with a confidence "
                          "head), without --confidence")
-    if not 0.0 <= args.head_quantile < 1.0 or (args.head_quantile and not args.confidence):
-        raise ValueError("--head-quantile must be in [0, 1) and needs --confidence (it is the head's loss)")
     if (args.shape_trend or args.spectral) and args.variant != "full_meta":
         raise ValueError("--shape-trend and --spectral are inputs of the full_meta network")
 
@@ -191,8 +186,7 @@ def run(args: argparse.Namespace) -> int:
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth, confidence=args.confidence,
                              checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints,
-                             anchor=args.anchor, shape_trend=args.shape_trend, spectral=args.spectral,
-                             head_quantile=args.head_quantile)
+                             anchor=args.anchor, shape_trend=args.shape_trend, spectral=args.spectral)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": scheme(args).as_dict(),
