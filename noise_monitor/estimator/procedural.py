@@ -77,6 +77,13 @@ def plain_grating(rng: np.random.Generator, size: int = SIZE) -> np.ndarray:
     return img
 
 
+def sine_grating(size: int, period: float, amp: float, angle: float, phase: float, level: float = 100.0) -> np.ndarray:
+    """A square patch of one sine grating over its whole area (float64 DN): ``level`` + ``amp`` x the sine of
+    period ``period`` px across the direction ``angle`` (rad), shifted by ``phase`` (rad)."""
+    yy, xx = np.mgrid[0:size, 0:size]
+    return level + amp * np.sin(2 * np.pi * (np.cos(angle) * xx + np.sin(angle) * yy) / period + phase)
+
+
 def plain_grating_images(rng: np.random.Generator, n: int, size: int = SIZE) -> list[np.ndarray]:
     """``n`` plain gratings (:func:`plain_grating`; float32 DN, clipped to 0..255)."""
     return _drawn(plain_grating, rng, n, size)

@@ -10,6 +10,7 @@ from noise_monitor.estimator.data import generate, metas_of
 from noise_monitor.estimator.evaluate import score
 from noise_monitor.estimator.inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR
 from noise_monitor.estimator.networks import N_MAPS, N_SCALARS, CompactConfig, ImageNoiseNet
+from noise_monitor.estimator.procedural import sine_grating
 from noise_monitor.estimator.train import TrainSettings, train
 from noise_monitor.physics import load_profile
 
@@ -126,8 +127,7 @@ def test_pixel_scale_gratings_are_declined_or_measured_right(meta):
     random orientation is now declined or its xi is within 0.5 DN; flat patches stay measurable."""
     est = load("full_meta", device="cpu")
     rng = np.random.default_rng(11)
-    yy, xx = np.mgrid[0:64, 0:64]
-    clean = [100.0 + amp * np.sin(2 * np.pi * (np.cos(a) * xx + np.sin(a) * yy) / period + rng.uniform(0, 6.3))
+    clean = [sine_grating(64, period, amp, a, rng.uniform(0, 6.3))
              for period in (2.0, 2.5, 3.0, 4.0, 5.0, 6.0) for amp in (5.0, 15.0, 40.0) for a in rng.uniform(0, np.pi, 2)]
     clean += [np.full((64, 64), level) for level in (30.0, 100.0, 200.0)]
     sims = [est.prior.model.simulate(c.astype(np.float32), meta, rng, mode="sequential") for c in clean]
