@@ -72,7 +72,8 @@ def main() -> None:
         x = rng.uniform(0, 255, (b, size, size)).astype(np.float32)
         tables = fm.prior.tables(meta)[None]
         evidence = bool(fm.net.cfg.evidence)  # the confidence head's texture evidence (third input)
-        maps, scalars, phys = compact_inputs(x, tables, np.zeros(b, np.int64), evidence=evidence)
+        extra = {"trend": fm.net.cfg.shape_trend, "spectral": fm.net.cfg.spectral}  # the optional scalars
+        maps, scalars, phys = compact_inputs(x, tables, np.zeros(b, np.int64), evidence=evidence, **extra)
         arrays = (maps, scalars) + ((phys["evidence"],) if evidence else ())
         tensors = tuple(torch.from_numpy(a) for a in arrays)
         with torch.inference_mode():
@@ -81,7 +82,7 @@ def main() -> None:
         feed = dict(zip(names, arrays))
         rows.append(row("full_meta net only (onnxruntime)", size, b, timeit(lambda: sess.run(None, feed), args.reps)))
         rows.append(row("full_meta physics+features only", size, b, timeit(
-            lambda: compact_inputs(x, tables, np.zeros(b, np.int64), evidence=evidence), args.reps)))
+            lambda: compact_inputs(x, tables, np.zeros(b, np.int64), evidence=evidence, **extra), args.reps)))
 
     for name in NAMES[1:]:
         if not (WEIGHTS_DIR / f"{name}.pt").is_file():

@@ -108,7 +108,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     maps: the residual to the 5x5 box filter and the Laplacian / sqrt(20) (unit variance on white
     noise; a linear ramp leaves none), both divided by the model's sigma shape (unit RMS per patch)
     and the image's reference scale (:func:`reference_sigma`), and the intensity / 255 - 0.5.
-    scalars: log reference, the sources' shares of sigma_model^2 (3), per residual the log mean
+    scalars: log reference, the paper's three sources' shares of their summed variance (3), per residual the log mean
     square and its block quantiles (2 x 4). No metadata scale: see the module docstring.
     ``evidence``: also the texture evidence of the confidence head (``evidence.texture_evidence``).
     ``upper``: also ``phys["upper"]``, the image-only upper bound of the noise (``bound.noise_upper_bound``).
@@ -127,8 +127,11 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     resid = np.divide(np.subtract(noisy, smooth, out=maps[:, 0]), norm, out=maps[:, 0])
     lap = np.divide(laplacian(noisy), np.sqrt(LAPLACIAN_GAIN, dtype=np.float32) * norm, out=maps[:, 1])
     np.subtract(np.divide(noisy, np.float32(255.0), out=maps[:, 2]), np.float32(0.5), out=maps[:, 2])
-    total = np.maximum(phys["total"], SIGMA_MODEL_FLOOR)
-    shares = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1) / total[:, None] ** 2
+    # the paper's sources' shares of their own sum: an effect the stated model adds (``extra``) stays out of the
+    # network's inputs, as in all its training data (issue 15 item 3: the stated model kept out of the measurement)
+    var = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1)
+    paper = np.maximum(np.sqrt(var[:, 0] + var[:, 1] + var[:, 2]), SIGMA_MODEL_FLOOR)
+    shares = var / paper[:, None] ** 2
     energy = [np.log(np.mean(np.square(r), axis=(1, 2)).astype(np.float64) + 1e-6)[:, None] for r in (resid, lap)]
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),
                               energy[1], block_energy_quantiles(lap)]

@@ -332,15 +332,18 @@ class Monitor:
     def _patches_to_use(self, est: dict[str, np.ndarray], ok: np.ndarray) -> tuple[np.ndarray, bool]:
         """(patches the frame's medians use, whether xi rests on the image-only bound alone).
 
-        The patches the estimator can measure (its confidence output), else every patch
-        (``patches_measurable`` = 0 tells). When it declines every one, the frame's median reading still
-        decides when its alarm decision is clear given the median predicted error (a high noise level's
-        larger error in DN); otherwise texture hides the noise: xi is what the image proves
-        (:meth:`_xi_bound`)."""
-        if ok.any():
-            return ok, False
+        The patches the estimator can measure (its confidence output) and the declined ones whose own alarm
+        decision is clear given their predicted error (``inference.clear_decisions``: a noisy patch read to
+        0.6 DN with xi = -4 DN alarms whatever its error); without either, every patch (``patches_measurable``
+        = 0 tells): the frame's median reading then decides when its alarm decision is clear given the median
+        predicted error (a high noise level's larger error in DN); otherwise texture hides the noise: xi is
+        what the image proves (:meth:`_xi_bound`)."""
         if "sigma_image_error" not in est or "sigma_image_upper" not in est:
-            return np.ones_like(ok), False
+            return (ok, False) if ok.any() else (np.ones_like(ok), False)
+        patch = {k: np.asarray(est[k], dtype=np.float64).reshape(-1) for k in ("xi", "sigma_image_error", "sigma_image")}
+        use = ok | clear_decisions(patch, self.config.xi_threshold_dn)
+        if use.any():
+            return use, False
         frame = {k: np.array([np.median(np.asarray(est[k], dtype=np.float64))]) for k in ("xi", "sigma_image_error", "sigma_image")}
         return np.ones_like(ok), not bool(clear_decisions(frame, self.config.xi_threshold_dn)[0])
 

@@ -1,6 +1,8 @@
 """The measurement's confidence head: unmeasurable patches are declined, the measurement itself unchanged."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -123,8 +125,11 @@ def test_fine_tuning_weights_with_a_head_keeps_it(tmp_path):
 
 def test_pixel_scale_gratings_are_declined_or_measured_right(meta):
     """The blind spot of the head without texture evidence: a sine grating of 4 px period read as almost no
-    noise (xi +2.8 DN) at a predicted error of 0.06 DN. Every grating of 2-6 px period, 5-40 DN amplitude and
-    random orientation is now declined or its xi is within 0.5 DN; flat patches stay measurable."""
+    noise (xi +2.8 DN) at a predicted error of 0.06 DN. Each of these 36 gratings of 2-6 px period, 5-40 DN
+    amplitude and random orientation is now declined or its xi is within 0.5 DN (on gratings in general
+    neither the earlier nor the current pair holds this everywhere: ``bench/estimator_gratings.py``); flat
+    patches stay measurable. The gratings are hard: an image-only reading (the upper bound) is off by more than
+    0.5 DN on most of them."""
     est = load("full_meta", device="cpu")
     rng = np.random.default_rng(11)
     clean = [sine_grating(64, period, amp, a, rng.uniform(0, 6.3))
@@ -132,18 +137,18 @@ def test_pixel_scale_gratings_are_declined_or_measured_right(meta):
     clean += [np.full((64, 64), level) for level in (30.0, 100.0, 200.0)]
     sims = [est.prior.model.simulate(c.astype(np.float32), meta, rng, mode="sequential") for c in clean]
     out = est.predict(np.stack([s[0] for s in sims]), meta)
-    xi_true = out["sigma_model"] - np.array([s[1]["total"] for s in sims])
-    wrong = np.abs(out["xi"] - xi_true) > 0.5
+    truth = np.array([s[1]["total"] for s in sims])
+    wrong = np.abs(out["xi"] - (out["sigma_model"] - truth)) > 0.5
     assert not np.any(out["measurable"] & wrong), np.flatnonzero(out["measurable"] & wrong)
-    assert wrong[:-3].sum() >= 10  # the gratings do fool the measurement: the head is what protects
+    assert (out["sigma_image_upper"][:-3] - truth[:-3] > 0.5).sum() >= 10  # hard for any image-only reading
     assert np.all(out["measurable"][-3:])
 
 
 def test_anchor_keeps_the_reading_of_declined_patches(tmp_path):
-    """``anchor`` pulls the fine-tuned measurement toward the init's reading on the patches the init declines."""
-    from noise_monitor.estimator.inference import WEIGHTS_DIR
-
-    init = WEIGHTS_DIR / "full_meta.pt"
+    """``anchor`` pulls the fine-tuned measurement toward the init's reading on the patches the init declines.
+    The init is a committed experiment's pair (G2, ``experiments/full_meta_more_data``), not the bundled weights,
+    so that what 40 steps move does not change with each shipped network."""
+    init = Path(__file__).resolve().parents[2] / "experiments" / "full_meta_more_data" / "full_meta.pt"
     data = generate(96, 32, seed=11, group=8, procedural=4, progress=False)
     with pytest.raises(ValueError, match="--init"):
         train(TrainSettings("full_meta", steps=1, anchor=1.0), data, tmp_path / "x", threads=1, progress=False)

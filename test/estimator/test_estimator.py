@@ -164,6 +164,38 @@ def test_sigma_image_does_not_follow_the_stated_model(meta):
     assert np.median(ratio) <= 0.05 and np.quantile(ratio, 0.9) <= 0.15  # per patch: shape changes with clipping
 
 
+def test_share_inputs_are_the_paper_sources_own_and_ignore_a_stated_effect():
+    """The network's three share scalars are the paper's sources' shares of their summed variance: bit-identical to
+    their shares of sigma_model^2 where the stated model has only those sources (every training patch, the bundled
+    profiles), and unchanged when the stated model adds an effect (sigma_model grows; the shares, which never held
+    one in training, do not). On patches of one intensity, where the stated shape is flat up to the noise of the
+    smoothed level, no input of the network moves by more than 0.01 (the one-intensity leakage test below reads
+    the result)."""
+    from noise_monitor.estimator.features import SIGMA_MODEL_FLOOR, compact_inputs
+    from noise_monitor.estimator.physics_prior import PhysicsPrior
+    from noise_monitor.physics import NoiseModel
+
+    meta = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
+    rng = np.random.default_rng(4)
+    textured = np.clip(60.0 + 120.0 * rng.random((6, 1, 1)) + 30.0 * rng.standard_normal((6, 64, 64)), 0, 255)
+    flat = np.broadcast_to(np.array([40.0, 120.0, 200.0])[:, None, None], (3, 64, 64))
+    noisy = np.stack([NoiseModel().simulate(c.astype(np.float32), meta, rng)[0]
+                      for c in np.concatenate([textured, flat])]).astype(np.float32)
+    group_of = np.zeros(len(noisy), dtype=np.int64)
+    inputs = {}
+    for name, model in (("paper", NoiseModel()), ("prnu", NoiseModel(extra={"prnu": {"sigma_pct": 3.0}}))):
+        tables = PhysicsPrior(model).tables(meta)[None]
+        inputs[name] = compact_inputs(noisy, tables, group_of)
+    _, scalars, phys = inputs["paper"]
+    before = (np.stack([phys[k] ** 2 for k in ("pn", "dcsn", "rn")], axis=1)
+              / np.maximum(phys["total"], SIGMA_MODEL_FLOOR)[:, None] ** 2).astype(np.float32)
+    assert np.array_equal(scalars[:, 1:4], before)
+    assert np.all(inputs["prnu"][2]["total"] > 1.05 * phys["total"])
+    assert np.array_equal(inputs["prnu"][1][:, 1:4], scalars[:, 1:4])
+    assert np.abs(inputs["prnu"][1][-3:] - scalars[-3:]).max() < 0.01
+    assert np.abs(inputs["prnu"][0][-3:] - inputs["paper"][0][-3:]).max() < 0.01
+
+
 def test_sigma_image_of_one_intensity_does_not_follow_the_stated_shape():
     """Item 3 of issue 15 for a changed model *composition*: patches of one intensity noised with 3 % PRNU, read
     with the stated model without and with it (sigma_model ~1.4-2.4x). The per-pixel shape is flat either way, so
