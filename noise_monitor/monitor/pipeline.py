@@ -91,7 +91,7 @@ class FrameResult:
     xi_model: float | None = None  # analytic sigma_model (this model, these patches) - estimated image noise
     xi_image: float | None = None  # the single-image measurement's xi (per Monitor.xi_source)
     xi_bound: float | None = None  # median over the patches of sigma_model - the image-only noise bound: xi >= it
-    xi_bounded: bool = False  # no patch measurable: the single image's xi is what the bound proves, max(xi_bound, 0)
+    xi_bounded: bool = False  # no patch measurable or clear: the single image's xi is what the bound proves, max(xi_bound, 0)
     xi_temporal: float | None = None  # the model's temporal noise - the frame differences' (static holds)
     temporal_weight: float = 0.0  # share of xi_temporal in xi (inverse-variance weights)
     temporal_frames: int = 0  # frames of the current static hold measured
