@@ -130,7 +130,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     # the paper's sources' shares of their own sum: an effect the stated model adds (``extra``) stays out of the
     # network's inputs, as in all its training data (issue 15 item 3: the stated model kept out of the measurement)
     var = np.stack([phys[s] ** 2 for s in ("pn", "dcsn", "rn")], axis=1)
-    paper = np.maximum(np.sqrt(var[:, 0] + var[:, 1] + var[:, 2]), SIGMA_MODEL_FLOOR)
+    paper = np.maximum(np.sqrt(var.sum(axis=1)), SIGMA_MODEL_FLOOR)
     shares = var / paper[:, None] ** 2
     energy = [np.log(np.mean(np.square(r), axis=(1, 2)).astype(np.float64) + 1e-6)[:, None] for r in (resid, lap)]
     scalars = np.concatenate([np.log(ref)[:, None], shares, energy[0], block_energy_quantiles(resid),

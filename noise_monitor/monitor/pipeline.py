@@ -339,12 +339,12 @@ class Monitor:
         predicted error (a high noise level's larger error in DN); otherwise texture hides the noise: xi is
         what the image proves (:meth:`_xi_bound`)."""
         if "sigma_image_error" not in est or "sigma_image_upper" not in est:
-            return (ok, False) if ok.any() else (np.ones_like(ok), False)
+            return (ok if ok.any() else np.ones_like(ok)), False
         patch = {k: np.asarray(est[k], dtype=np.float64).reshape(-1) for k in ("xi", "sigma_image_error", "sigma_image")}
         use = ok | clear_decisions(patch, self.config.xi_threshold_dn)
         if use.any():
             return use, False
-        frame = {k: np.array([np.median(np.asarray(est[k], dtype=np.float64))]) for k in ("xi", "sigma_image_error", "sigma_image")}
+        frame = {k: np.array([np.median(v)]) for k, v in patch.items()}
         return np.ones_like(ok), not bool(clear_decisions(frame, self.config.xi_threshold_dn)[0])
 
     @staticmethod
