@@ -98,22 +98,25 @@ def rms_cell(s: dict | None) -> str:
     """An RMS (DN), with its 95 % interval when the scores carry one."""
     if s is None:
         return "-"
-    ci = s.get("rms_ci95")
-    return f"{s['rms']:.3f}" + (f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else "")
+    ci, by_image = s.get("rms_ci95"), s.get("rms_ci95_images")
+    return (f"{s['rms']:.3f}" + (f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else "")
+            + (f" (images {by_image[0]:.3f}-{by_image[1]:.3f})" if by_image else ""))
 
 
-def rate_cell(rate: float, ci: list[float] | None) -> str:
-    """A rate in percent, with its 95 % interval when the scores carry one."""
-    return f"{100 * rate:.1f} %" + (f" [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]" if ci else "")
+def rate_cell(rate: float, ci: list[float] | None, by_image: list[float] | None = None) -> str:
+    """A rate in percent, with its 95 % interval when the scores carry one (and that over the source images)."""
+    return (f"{100 * rate:.1f} %" + (f" [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]" if ci else "")
+            + (f" (images {100 * by_image[0]:.1f}-{100 * by_image[1]:.1f})" if by_image else ""))
 
 
 def declined_alarms(d: dict) -> str:
     if "false_alarm_rate" in d:
-        return f"false {rate_cell(d['false_alarm_rate'], d.get('false_alarm_ci95'))}"
+        return f"false {rate_cell(d['false_alarm_rate'], d.get('false_alarm_ci95'), d.get('false_alarm_ci95_images'))}"
     if d.get("hit_rate") is None:
         return "-"
     acc = d.get("hit_rate_accepted")
-    return f"hits {rate_cell(d['hit_rate'], d.get('hit_ci95'))} / {'-' if acc is None else f'{100 * acc:.1f} %'}"
+    hits = rate_cell(d["hit_rate"], d.get("hit_ci95"), d.get("hit_ci95_images"))
+    return f"hits {hits} / {'-' if acc is None else f'{100 * acc:.1f} %'}"
 
 
 def _benchmark(name: str, label: str, results: dict) -> list[str]:
