@@ -138,10 +138,6 @@ class CompactConfig:
     shape_trend: bool = False
     #: the line-robust spectral scale as an input too (``features.spectral_scale``; after the trend's)
     spectral: bool = False
-    #: the confidence head sees only the physics-level inputs (the scalars, the measurement and the evidence), not
-    #: the trunk's pooled features nor the MLP's last hidden layer: learned features tell the training images'
-    #: content apart and carry less to an image not trained on (``experiments/head_generalization/``)
-    head_physics_inputs: bool = False
 
     @property
     def n_pooled(self) -> int:
@@ -205,16 +201,14 @@ class ImageNoiseNet(nn.Module):
         mlp.append(nn.Linear(n_in, 1))
         self.mlp = nn.Sequential(*mlp)
         if cfg.confidence:
-            n_conf = (0 if cfg.head_physics_inputs else cfg.n_pooled + n_in) + cfg.n_scalars + 1 + cfg.evidence
+            n_conf = cfg.n_pooled + cfg.n_scalars + n_in + 1 + cfg.evidence
             self.confidence = dense_block(n_conf, cfg.confidence)
             # standardisation of the head's inputs, set from the training data (train.fit_confidence_inputs)
             self.register_buffer("conf_mean", torch.zeros(n_conf))
             self.register_buffer("conf_std", torch.ones(n_conf))
 
     def confidence_inputs(self, maps: torch.Tensor, scalars: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(measurement (N,), the confidence head's raw inputs (N, n_conf) but the evidence: with
-        ``cfg.head_physics_inputs`` the scalars and the measurement, else the pooled features, scalars, last hidden
-        layer and measurement)."""
+        """(measurement (N,), the confidence head's raw inputs (N, n_conf))."""
         f = self.convs(maps)
         value, logit = self.attend(f).flatten(2).chunk(2, dim=1)
         attended = (torch.softmax(logit, dim=2) * value).sum(dim=2)
@@ -224,8 +218,6 @@ class ImageNoiseNet(nn.Module):
         for layer in list(self.mlp)[:-1]:
             h = layer(h)
         mu = self.mlp[-1](h).squeeze(1)
-        if self.cfg.head_physics_inputs:
-            return mu, torch.cat([scalars, mu[:, None]], dim=1)
         return mu, torch.cat([z, h, mu[:, None]], dim=1)
 
     def forward(self, maps: torch.Tensor, scalars: torch.Tensor, evidence: torch.Tensor | None = None) -> torch.Tensor:

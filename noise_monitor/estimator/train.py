@@ -45,8 +45,6 @@ class TrainSettings:
     #: full_meta: the network also takes the line-robust spectral scale (``features.spectral_scale``); from an
     #: ``init`` without it, its input weights start at zero (the init's reading unchanged)
     spectral: bool = False
-    #: with ``confidence``: the new head sees only the physics-level inputs (``CompactConfig.head_physics_inputs``)
-    head_physics_inputs: bool = False
 
 
 def meta_norm_of(data: dict[str, np.ndarray]) -> np.ndarray:
@@ -133,8 +131,6 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     torch.manual_seed(settings.seed)
     if settings.confidence and (settings.variant != "full_meta" or init is None):
         raise ValueError("a confidence head is trained on a full_meta network given by --init")
-    if settings.head_physics_inputs and not settings.confidence:
-        raise ValueError("--head-physics-inputs chooses the inputs of a new confidence head: it needs --confidence")
     if settings.anchor < 0 or (settings.anchor and settings.confidence):
         raise ValueError("--anchor must be >= 0 and is for fine-tuning the measurement, not with --confidence")
     ck_init = None
@@ -151,16 +147,14 @@ def train(settings: TrainSettings, data: dict[str, np.ndarray], out_dir: Path, r
     # --confidence trains a new head with the texture evidence in its place
     init_cfg = (ck_init or {}).get("config", {})
     head, evidence = tuple(init_cfg.get("confidence") or ()), int(init_cfg.get("evidence", 0))
-    physics_inputs = bool(init_cfg.get("head_physics_inputs"))
     if settings.confidence and ck_init is not None:  # (--confidence needs --init: checked above)
-        head, evidence, physics_inputs = CONFIDENCE_HIDDEN, N_EVIDENCE, settings.head_physics_inputs
+        head, evidence = CONFIDENCE_HIDDEN, N_EVIDENCE
         ck_init = {**ck_init, "state_dict": {k: v for k, v in ck_init["state_dict"].items()
                                               if not k.startswith(("confidence.", "conf_"))}}
     trend = settings.shape_trend or bool(init_cfg.get("shape_trend"))
     spectral = settings.spectral or bool(init_cfg.get("spectral"))
     if (head or trend or spectral) and settings.variant == "full_meta":
-        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence, shape_trend=trend, spectral=spectral,
-                                    head_physics_inputs=physics_inputs))
+        net = ImageNoiseNet(replace(net.cfg, confidence=head, evidence=evidence, shape_trend=trend, spectral=spectral))
     if (trend or spectral) and ck_init is not None:  # the optional scalars follow the base ones, in this order
         at = net.cfg.n_pooled + N_SCALARS
         for key, wanted, extra in (("shape_trend", trend, N_SHAPE_TREND), ("spectral", spectral, N_SPECTRAL)):
@@ -260,7 +254,7 @@ def _layers(config: dict) -> dict:
     """A network configuration without its operating patch size and confidence head (the measurement's
     weight shapes depend on the rest; weights from before ``shape_trend`` / ``spectral`` have none)."""
     return {"shape_trend": False, "spectral": False,
-            **{k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence", "head_physics_inputs")}}
+            **{k: v for k, v in config.items() if k not in ("patch_size", "confidence", "evidence")}}
 
 
 @torch.no_grad()

@@ -68,9 +68,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--confidence", action="store_true",
                    help="full_meta with --init: add a confidence head (the measurement's predicted error; patches "
                         "it cannot measure are declined) and train it alone, the measurement frozen")
-    p.add_argument("--head-physics-inputs", action="store_true",
-                   help="with --confidence: the head sees only the measurement's scalar inputs, its reading and the "
-                        "texture evidence, not the learned features (carries better to images not trained on)")
     p.add_argument("--anchor", type=float, default=0.0, metavar="W",
                    help="full_meta with --init (weights with a confidence head): pull the measurement toward the "
                         "init's reading on the patches the init declines, with weight W (keeps the reading of content "
@@ -114,8 +111,6 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError("--lr must be > 0")
     if args.confidence and (args.variant != "full_meta" or args.init is None):
         raise ValueError("--confidence needs --variant full_meta and --init (the measurement to qualify)")
-    if args.head_physics_inputs and not args.confidence:
-        raise ValueError("--head-physics-inputs chooses the inputs of a new confidence head: it needs --confidence")
     if args.anchor < 0 or (args.anchor and (args.variant != "full_meta" or args.init is None or args.confidence)):
         raise ValueError("--anchor must be >= 0 and needs --variant full_meta and --init (weights with a confidence "
                          "head), without --confidence")
@@ -191,8 +186,7 @@ def run(args: argparse.Namespace) -> int:
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth, confidence=args.confidence,
                              checkpoint_every=args.checkpoint_every, keep_checkpoints=args.keep_checkpoints,
-                             anchor=args.anchor, shape_trend=args.shape_trend, spectral=args.spectral,
-                             head_physics_inputs=args.head_physics_inputs)
+                             anchor=args.anchor, shape_trend=args.shape_trend, spectral=args.spectral)
     path = train(settings, data, args.out, resume=args.resume, device=args.device, threads=args.threads, init=args.init)
     summary = {"variant": args.variant, "command": _command(args), "data_seed": args.data_seed, "weights": str(path), "data": str(data_path),
                "effects": effects, "sensor": sensor, "scheme": scheme(args).as_dict(),

@@ -60,35 +60,6 @@ def test_confidence_training_freezes_the_measurement(tmp_path, meta):
     assert 0.3 < np.sqrt(np.mean(rel**2)) / np.sqrt(np.mean(err**2)) < 3.0
 
 
-def test_a_head_of_physics_inputs_sees_no_learned_feature(tmp_path):
-    """``head_physics_inputs``: whatever the trunk, the head's prediction is a function of the scalars, the reading
-    and the evidence alone; trained through ``train`` it keeps the flag, loads, and its ONNX companion reads like
-    torch."""
-    torch.manual_seed(0)
-    cfg = CompactConfig(width=8, heads=2, patch_size=32, confidence=(8,), evidence=6, head_physics_inputs=True)
-    net = ImageNoiseNet(cfg).eval()
-    assert net.confidence[0].in_features == N_SCALARS + 1 + 6  # the learned features are not among them
-    maps, scalars, evidence = torch.rand(5, N_MAPS, 32, 32), torch.rand(5, N_SCALARS), torch.rand(5, 6)
-    with torch.no_grad():
-        for trial in range(2):  # the trunk as built, then scrambled
-            out = net(maps, scalars, evidence)
-            z = torch.cat([scalars, out[:, :1], evidence], 1)
-            assert torch.allclose(net.confidence((z - net.conf_mean) / net.conf_std).squeeze(1), out[:, 1])
-            for p in net.convs.parameters():
-                p.add_(torch.randn_like(p))
-    data = generate(48, 32, seed=7, group=8, progress=False)
-    base = train(TrainSettings("full_meta", steps=2, batch=8), data, tmp_path / "base", threads=1, progress=False)
-    with pytest.raises(ValueError, match="--confidence"):
-        train(TrainSettings("full_meta", steps=1, head_physics_inputs=True), data, tmp_path / "x", threads=1,
-              progress=False, init=base)
-    path = train(TrainSettings("full_meta", steps=20, batch=16, lr=1e-2, confidence=True, head_physics_inputs=True),
-                 data, tmp_path / "phys", threads=1, progress=False, init=base)
-    assert torch.load(path, weights_only=True)["config"]["head_physics_inputs"]
-    a = load("full_meta", device="cpu", weights=path, backend="torch").predict(data["noisy"], metas_of(data))
-    b = load("full_meta", device="cpu", weights=path, backend="onnx").predict(data["noisy"], metas_of(data))
-    assert np.allclose(a["sigma_image_error"], b["sigma_image_error"], rtol=1e-4)
-
-
 def test_score_with_declined_patches():
     data = {"truth_xi": np.array([0.0, 0.0, 3.0, -3.0, 0.5]), "truth_sigma_image": np.full(5, 2.0)}
     ok = np.array([True, False, True, False, True])
