@@ -19,8 +19,9 @@ bootstrap over the patches for the RMS): on 600 patches a rate of 3 % is known t
 smaller differences between two weights are not evidence. Those intervals treat the patches as independent
 draws; they are not when the set has few source images, each with its own content and so its own error (the
 ``photos`` set: 6). Where the data records each patch's image (``source_index``) every interval also comes over
-the images (``*_ci95_images``: a percentile bootstrap that resamples the images with replacement, all patches of
-each drawn one; see ``image_ci``): how far the figure could move on other images of the same kind.
+the images (``*_ci95_images``: the standard error from a bootstrap that resamples the images with replacement,
+all patches of each drawn one, and Student's t; see ``image_ci``): how far the figure could move on other images
+of the same kind.
 """
 from __future__ import annotations
 
