@@ -22,6 +22,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))
+from estimator_per_image import rms  # noqa: E402
 from estimator_tuning import tuning_set  # noqa: E402
 
 from noise_monitor.estimator import data as D  # noqa: E402
@@ -65,10 +66,6 @@ def head(out: Path, name: str, keep: list[int] | None, patches: int, seed: int, 
     with mock.patch.object(training, "fit_confidence_inputs", physics_inputs_only if physics_only else fit_inputs):
         train(settings, data, out / name, device="cpu", threads=2, progress=False, init=weights_path("full_meta"))
     return weights
-
-
-def rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
 
 
 def main() -> None:

@@ -28,7 +28,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))
 import estimator_tuning as tuning  # noqa: E402
-from estimator_per_image import dataset  # noqa: E402
+from estimator_per_image import dataset, rms  # noqa: E402
 from scipy.stats import mannwhitneyu  # noqa: E402
 
 from noise_monitor.estimator import data as D  # noqa: E402
@@ -72,10 +72,6 @@ class Features:
                 z = torch.cat([z, torch.from_numpy(phys["evidence"])], dim=1)
                 rows.append(((z - self.net.conf_mean) / self.net.conf_std).numpy())
         return np.concatenate(rows).astype(np.float64), out
-
-
-def rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
 
 
 def ood(sets: list[str]) -> None:

@@ -119,10 +119,10 @@ def image_ci(num: np.ndarray, den: np.ndarray, images: np.ndarray, root: bool = 
 def xi_stats(xi: np.ndarray, xi_true: np.ndarray, images: np.ndarray | None = None) -> dict:
     """``stats`` of xi with the interval of its RMS (``rms_ci95``; over the source images too, ``rms_ci95_images``,
     when ``images`` gives each patch's)."""
-    out = {**stats(xi, xi_true), "rms_ci95": rms_ci(xi - xi_true)}
+    err = np.asarray(xi, dtype=float) - np.asarray(xi_true, dtype=float)
+    out = {**stats(xi, xi_true), "rms_ci95": rms_ci(err)}
     if images is not None:
-        sq = np.square(np.asarray(xi, dtype=float) - np.asarray(xi_true, dtype=float))
-        out["rms_ci95_images"] = image_ci(sq, np.ones(len(sq)), images, root=True)
+        out["rms_ci95_images"] = image_ci(np.square(err), np.ones(len(err)), images, root=True)
     return out
 
 

@@ -156,10 +156,9 @@ def _table(results: dict) -> str:
             ci = r.get("false_alarm_ci95", r.get("hit_ci95"))
             by_image = r.get("false_alarm_ci95_images", r.get("hit_ci95_images"))
             xi_ci, xi_images = r.get("xi", {}).get("rms_ci95"), r.get("xi", {}).get("rms_ci95_images")
-            lines.append(f"  {name:<28} {cells}  {'' if rate is None else rate_cell(rate, ci, by_image)}"
-                         + (f"  (xi RMS {xi_ci[0]:.3f}-{xi_ci[1]:.3f}" if xi_ci else "")
-                         + (f"; images {xi_images[0]:.3f}-{xi_images[1]:.3f}" if xi_ci and xi_images else "")
-                         + (")" if xi_ci else ""))
+            xi_cell = "" if not xi_ci else f"  (xi RMS {xi_ci[0]:.3f}-{xi_ci[1]:.3f}" + (
+                f"; images {xi_images[0]:.3f}-{xi_images[1]:.3f})" if xi_images else ")")
+            lines.append(f"  {name:<28} {cells}  {'' if rate is None else rate_cell(rate, ci, by_image)}{xi_cell}")
             d = r.get("declined")
             if d is not None:
                 lines.append(f"  {'  declined unmeasurable':<28} coverage {100 * d['coverage']:.1f} %, xi RMS on accepted "
