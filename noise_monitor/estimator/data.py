@@ -21,7 +21,7 @@ static fields) fixes the sensor while the operating conditions stay random.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -96,21 +96,26 @@ def _metadata(rng: np.random.Generator, sensor: Mapping[str, Any] | None) -> Cam
 def generate(n: int, patch_size: int, seed: int, split: str = "train", scheme: Scheme = Scheme(),
              group: int = 8, progress: bool = True, effects: EffectSpecs | None = None,
              sensor: Mapping[str, Any] | None = None, photo_variants: int = 0,
-             procedural: int = 0, imagery: Imagery = Imagery()) -> dict[str, np.ndarray]:
+             procedural: int = 0, imagery: Imagery = Imagery(),
+             images: Sequence[np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """A seeded dataset of ``n`` noisy patches with truths, metadata and the analytic tables per group.
 
     ``effects``: effect specs beyond the paper's sources (name -> parameters); ``sensor``: static
     metadata fields that replace the random sensor (operating conditions stay random);
     ``photo_variants``, ``procedural``, ``imagery``: see ``images.source_images`` (the defaults keep
-    every earlier dataset bit-identical).
+    every earlier dataset bit-identical); ``images``: clean grayscale DN images to crop instead of the
+    split's (``split`` then only names the set; e.g. ``user_images.load_image_set``).
     """
     if n < 1 or patch_size < 8:
         raise ValueError("need n >= 1 patches of at least 8x8 px")
+    if images is not None and (photo_variants or procedural or not imagery.is_default()):
+        raise ValueError("own images replace the split's imagery: no photo variants, procedural or imagery options")
     rng = np.random.default_rng(seed)
     prior = PhysicsPrior(camera_model(effects))  # validates the specs before any work
-    images = source_images(split, rng, variants=photo_variants, procedural=procedural, imagery=imagery)
+    if images is None:
+        images = source_images(split, rng, variants=photo_variants, procedural=procedural, imagery=imagery)
     n_groups = -(-n // group)
-    clean, source = sample_clean_patches(images, rng, n, patch_size)
+    clean, source = sample_clean_patches(list(images), rng, n, patch_size)
     noisy = np.empty_like(clean)
     truth = {k: np.zeros(n) for k in TRUTH_KEYS}
     overridden = np.zeros((n, len(SOURCES)), dtype=bool)

@@ -3,7 +3,8 @@
 Held-out images come from other packages than training: the benchmark uses matplotlib's sample
 images plus dead-leaves images (most of its patches), the ``photos`` set matplotlib's and PyWavelets'
 sample images only (2x downsampled like every photograph), ``photos_native`` the same images at their
-native resolution (an unknown camera's scale may be either); noise and crops come from seeds never used in training. Metrics are the paper's:
+native resolution (an unknown camera's scale may be either); noise and crops come from seeds never used in training.
+A user's own clean images make a set too (:func:`image_set_data`, ``user_images``), scored per image (:func:`per_image`). Metrics are the paper's:
 Bias = |mean(est - truth)|, Std = std(est - truth), RMS = sqrt(Bias^2 + Std^2). Alarms: false alarms = |xi| > 1 DN on (a); hits on
 (b)/(c) = |xi| > 1 DN with the true sign, among patches with |xi_true| > 2 DN. Peers measure sigma_image
 (xi = physics sigma_model - their estimate). With a confidence output (``measurable``), ``declined``
@@ -39,6 +40,7 @@ from .data import PARTS, generate, load, metas_of, save
 from .inference import clear_decisions
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
+from .user_images import SEEDS, ImageSet
 
 
 class HeldoutSet(NamedTuple):
@@ -126,6 +128,21 @@ def xi_stats(xi: np.ndarray, xi_true: np.ndarray, images: np.ndarray | None = No
     return out
 
 
+def image_set_data(part: str, n: int, patch_size: int, image_set: ImageSet, cache_dir: Path | None = None,
+                   progress: bool = True) -> dict[str, np.ndarray]:
+    """A part of a user's own images as a held-out set (``user_images``), cached as
+    ``images-<key>_<part>_p<size>_n<n>.npz`` in ``cache_dir`` (the key covers the pixels and the downsampling)."""
+    if part not in PARTS:
+        raise ValueError(f"part must be one of {tuple(PARTS)}, got {part!r}")
+    path = None if cache_dir is None else Path(cache_dir) / f"images-{image_set.key}_{part}_p{patch_size}_n{n}.npz"
+    if path is not None and path.is_file():
+        return load(path)
+    data = generate(n, patch_size, SEEDS[part], "images", PARTS[part], progress=progress, images=image_set.images)
+    if path is not None:
+        save(data, path)
+    return data
+
+
 def heldout(part: str, n: int, patch_size: int, cache_dir: Path | None = None, progress: bool = True,
             heldout_set: str = "benchmark") -> dict[str, np.ndarray]:
     """The held-out data of a part of a set (``HELDOUT_SETS``), cached as
@@ -163,10 +180,49 @@ def score(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -
             ok = np.asarray(pred["measurable"], dtype=bool)
             out["declined"] = _declined(xi, xi_true, ok, part, images)
             if "sigma_image_error" in pred:
-                lower = pred.get("xi_lower", np.full(len(xi), -np.inf))
-                proven = ~ok & (lower > ALARM_DN)  # the image-only bound proves the alarm
-                xi_d = np.where(proven, np.maximum(xi, lower), xi)
-                out["decided"] = _declined(xi_d, xi_true, ok | clear_decisions(pred, ALARM_DN) | proven, part, images)
+                xi_d, decided = _decided(pred)
+                out["decided"] = _declined(xi_d, xi_true, decided, part, images)
+    return out
+
+
+def _decided(pred: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(xi, which patches decide) under the ``decided`` rule: the measurable ones, the declined ones with a clear
+    decision, and those whose image-only bound proves the alarm (xi raised to ``xi_lower`` there)."""
+    xi, ok = np.asarray(pred["xi"], dtype=float), np.asarray(pred["measurable"], dtype=bool)
+    lower = pred.get("xi_lower", np.full(len(xi), -np.inf))
+    proven = ~ok & (lower > ALARM_DN)  # the image-only bound proves the alarm
+    return np.where(proven, np.maximum(xi, lower), xi), ok | clear_decisions(pred, ALARM_DN) | proven
+
+
+def per_image(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -> list[dict]:
+    """Scores of each source image (``source_index``) of a part: patches, xi RMS and mean error over every patch,
+    and with a confidence output the accepted share, the accepted patches' xi RMS and the alarm rates (false
+    alarms on (a), hits among the candidates on (b) / (c)) with the declined patches never alarming
+    (``*_accepted``) and under the ``decided`` rule (``*_decided``: what the node's frame takes)."""
+    xi, xi_true = np.asarray(pred["xi"], dtype=float), np.asarray(data["truth_xi"], dtype=float)
+    src = np.asarray(data["source_index"])
+    confident = "measurable" in pred and "sigma_image_error" in pred
+    if confident:
+        ok = np.asarray(pred["measurable"], dtype=bool)
+        xi_d, decided = _decided(pred)
+    out = []
+    for k in np.unique(src):
+        m = src == k
+        err = xi[m] - xi_true[m]
+        row: dict = {"image": int(k), "patches": int(m.sum()), "xi_rms": round(float(np.sqrt(np.mean(err**2))), 4),
+                     "xi_mean_error": round(float(err.mean()), 4)}
+        if confident:
+            acc = ok[m]
+            row["coverage"] = round(float(acc.mean()), 4)
+            row["xi_rms_accepted"] = round(float(np.sqrt(np.mean(err[acc] ** 2))), 4) if acc.any() else None
+            for rule, (x, use) in {"accepted": (xi[m], acc), "decided": (xi_d[m], decided[m])}.items():
+                alarm, hit, big = _alarms(x, xi_true[m], use)
+                if part == "a":
+                    row[f"false_alarm_rate_{rule}"] = round(float(alarm.mean()), 4)
+                else:
+                    row[f"hit_rate_{rule}"] = round(float(hit[big].mean()), 4) if big.any() else None
+                    row["hit_candidates"] = int(big.sum())
+        out.append(row)
     return out
 
 

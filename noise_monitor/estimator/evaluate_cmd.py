@@ -1,4 +1,5 @@
-"""`noise-monitor evaluate`: the held-out benchmark of the estimators, classical peers and the sweep."""
+"""`noise-monitor evaluate`: the held-out benchmark of the estimators, classical peers and the sweep; with
+``--images``, the same parts drawn from a user's own clean images, scored per image too."""
 from __future__ import annotations
 
 import argparse
@@ -12,14 +13,20 @@ from .data import PARTS
 from .evaluate import (
     HELDOUT_SETS,
     heldout,
+    image_set_data,
     paired_difference,
     peer_predictions,
+    per_image,
     score,
     sensitivity_sweep,
     timed_predict,
 )
 from .inference import NAMES, WEIGHTS_DIR, load
 from .physics_prior import PhysicsPrior
+from .user_images import ImageSet, load_image_set, own_noise_floor
+
+#: The ``--heldout`` name of a user's own images (``--images``).
+IMAGES = "images"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,10 +42,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="evaluate every variant on patches of this size, one benchmark per size given (default: each "
                         "variant's training size; the paper's protocol is 128)")
     p.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
-    p.add_argument("--heldout", nargs="+", default=["benchmark"], choices=list(HELDOUT_SETS),
+    p.add_argument("--heldout", nargs="+", default=None, choices=list(HELDOUT_SETS),
                    help="held-out sets: benchmark (matplotlib images + dead leaves), photos (matplotlib + PyWavelets "
                         "images only, 2x downsampled) and/or photos_native (the same at native resolution); one run per "
-                        "set and patch size")
+                        "set and patch size (default: benchmark, or none with --images)")
+    p.add_argument("--images", nargs="+", type=Path, default=None, metavar="PATH",
+                   help="also (or, without --heldout, only) evaluate on your own clean images: files or directories of "
+                        "PNG / JPEG / TIFF / BMP / PGM / NPY images of the scenes your camera sees; scored per image too, "
+                        "with each image's own noise floor")
+    p.add_argument("--image-downsample", type=int, default=2,
+                   help="area-downsample --images by this factor first (1-4; default 2, as the bundled photographs)")
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
     p.add_argument("--cache", type=Path, default=Path("out/estimator_eval"), help="held-out data cache directory")
@@ -52,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--patches must be >= 10")
     if any(size < 16 for size in args.patch_size or []):
         raise ValueError("--patch-size must be >= 16")
+    if args.images and args.cards:
+        raise ValueError("--cards writes the model cards from the bundled held-out sets; leave out --images")
+    sets = args.heldout or ([] if args.images else ["benchmark"])
     names = args.variants or [n for n in NAMES if (args.weights_dir / f"{n}.pt").is_file()]
     if not names:
         raise FileNotFoundError(f"no estimator weights in {args.weights_dir}")
@@ -59,17 +75,21 @@ def run(args: argparse.Namespace) -> int:
     labels = compared(args.compare, names)
     for label, path in labels.items():
         estimators[label] = load("full_meta", args.device, weights=path)
+    largest = max(args.patch_size or [e.patch_size for e in estimators.values()])
+    args.image_set = load_image_set(args.images, args.image_downsample, largest) if args.images else None
     runs = {_label(size, hs): evaluate(estimators, args, size, hs, list(labels))
-            for hs in args.heldout for size in args.patch_size or [None]}
+            for hs in sets + ([IMAGES] if args.images else []) for size in args.patch_size or [None]}
     for label, results in runs.items():
         print(f"== patches {label}\n{_table(results)}")
+        if results["heldout"] == IMAGES:
+            print(_image_table(results))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(next(iter(runs.values())) if len(runs) == 1 else {"runs": runs}, indent=2))
     if args.cards:
         sizes = f" --patch-size {' '.join(map(str, args.patch_size))}" if args.patch_size else ""
-        sets = f" --heldout {' '.join(args.heldout)}" if args.heldout != ["benchmark"] else ""
-        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}{sizes}{sets}"
+        held = f" --heldout {' '.join(sets)}" if sets != ["benchmark"] else ""
+        command = f"noise-monitor evaluate --patches {args.patches} --parts {' '.join(args.parts)}{sizes}{held}"
         for name in names:
             print(f"model card: {write_card(name, args.weights_dir, runs, command)}")
     return 0
@@ -107,16 +127,27 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
     results: dict = {"heldout": heldout_set, "patches_per_part": args.patches, "patch_size": size_of, "parts": {},
                      "ms_per_patch": {}}
     prior = PhysicsPrior()
+    image_set: ImageSet | None = None
+    if heldout_set == IMAGES:
+        image_set = args.image_set
+        if image_set is None:
+            raise ValueError("the images set needs --images")
+        results["images"] = [{"name": name, "size": [int(im.shape[1]), int(im.shape[0])],
+                              "own_noise_floor_dn": round(own_noise_floor(im, min(size_of.values())), 3)}
+                             for name, im in zip(image_set.names, image_set.images)]
     for part in args.parts:
         results["parts"][part] = {}
         for size in sorted(set(size_of.values())):
-            data = heldout(part, args.patches, size, args.cache, heldout_set=heldout_set)
+            data = (heldout(part, args.patches, size, args.cache, heldout_set=heldout_set) if image_set is None
+                    else image_set_data(part, args.patches, size, image_set, args.cache))
             preds = {}
             for name, est in estimators.items():
                 if size_of[name] != size:
                     continue
                 preds[name], dt = timed_predict(est, data)
                 results["parts"][part][name] = score(preds[name], data, part)
+                if heldout_set == IMAGES and "xi" in preds[name]:
+                    results["parts"][part][name]["per_image"] = per_image(preds[name], data, part)
                 results["ms_per_patch"].setdefault(name, []).append(1000.0 * dt / len(data["noisy"]))
             for label in compared_labels or []:
                 if label in preds and BASELINE in preds:
@@ -131,6 +162,31 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
         results["sensitivity_full_meta"] = sensitivity_sweep(
             lambda x, m: fm.predict(x, m)["total"][0], size_of["full_meta"], model=fm.prior.model)
     return results
+
+
+def _image_table(results: dict) -> str:
+    """Per image of ``--images``: each estimator's xi error, the accepted share and their error, the alarm rate
+    (declined patches decide only when clear) and the image's own noise floor."""
+    info = results["images"]
+    lines = [f"per image ({len(info)}; own floor: the clean image's own noise-like content, DN, counted as scene by "
+             "the truth: where it is near the noise, the error is the image's)"]
+    for part, rows in results["parts"].items():
+        rate = "false alarms" if part == "a" else "hits"
+        for name, r in rows.items():
+            if "per_image" not in r:
+                continue
+            lines.append(f"part ({part}) {name}: image | patches | xi RMS / mean error DN | accepted | accepted xi RMS DN "
+                         f"| {rate}: declined never alarm / + clear decisions | own floor DN")
+            for row in r["per_image"]:
+                im = info[row["image"]]
+                acc = "-" if row.get("coverage") is None else f"{100 * row['coverage']:.0f} %"
+                acc_rms = "-" if row.get("xi_rms_accepted") is None else f"{row['xi_rms_accepted']:.3f}"
+                key = "false_alarm_rate" if part == "a" else "hit_rate"
+                alarm = " / ".join("-" if row.get(f"{key}_{rule}") is None else f"{100 * row[f'{key}_{rule}']:.1f} %"
+                                   for rule in ("accepted", "decided"))
+                lines.append(f"  {im['name']:<30} {row['patches']:5d} | {row['xi_rms']:.3f} / {row['xi_mean_error']:+.3f} "
+                             f"| {acc} | {acc_rms} | {alarm} | {im['own_noise_floor_dn']:.2f}")
+    return "\n".join(lines)
 
 
 def _differences(diff: dict[str, list[float]]) -> str:
