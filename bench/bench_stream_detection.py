@@ -29,22 +29,20 @@ Prints figures; asserts nothing.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import tempfile
 from pathlib import Path
 from typing import Any
-from unittest import mock
 
 import numpy as np
 
-from noise_monitor.bag import campaign
 from noise_monitor.bag.reader import BagReader
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import FrameTable, alarm_episodes
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.estimator.images import MATPLOTLIB_PHOTOS, PYWAVELETS_PHOTOS, matplotlib_photos, pywavelets_photos
+from noise_monitor.estimator.user_images import ImageSet
 
 PROFILE = "ev76c661"
 GAIN_OFFSET_DB = -6.0
@@ -165,11 +163,9 @@ def main() -> None:
               for seed in args.heldout_seeds)]
         for label, scenario, seed, photo in runs:
             stem = f"{scenario}_{seed}_{photo or 'all'}"
-            one_photo = (mock.patch.object(campaign, "_photos", lambda variant, image=photos[photo]: [image])
-                         if photo else contextlib.nullcontext())
-            with one_photo:
-                bag = simulate_bag(Path(tmp) / f"{stem}.mcap", PROFILE, scenario, frames=args.frames,
-                                   width=args.width, height=args.height, fps=10.0, seed=seed)
+            one_photo = ImageSet((photo,), (photos[photo],), 1) if photo else None
+            bag = simulate_bag(Path(tmp) / f"{stem}.mcap", PROFILE, scenario, frames=args.frames,
+                               width=args.width, height=args.height, fps=10.0, seed=seed, images=one_photo)
             low = stated_gain_copy(bag, Path(tmp) / f"{stem}_low.mcap", GAIN_OFFSET_DB)
             row = measure_bag(bag, low, args.params, args.threads)
             row["seed"] = seed

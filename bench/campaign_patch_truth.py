@@ -20,17 +20,16 @@ import argparse
 import tempfile
 from pathlib import Path
 from typing import Any
-from unittest import mock
 
 import numpy as np
 from bench_stream_detection import PROFILE
 
-from noise_monitor.bag import campaign
 from noise_monitor.bag.reader import BagReader
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.estimator.features import compact_inputs
 from noise_monitor.estimator.images import MATPLOTLIB_PHOTOS, PYWAVELETS_PHOTOS, matplotlib_photos, pywavelets_photos
 from noise_monitor.estimator.inference import FullMetaEstimator
+from noise_monitor.estimator.user_images import ImageSet
 from noise_monitor.monitor.patches import select_patches
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.physics import CameraMetadata
@@ -61,9 +60,10 @@ def recorded_images(bag: Path) -> list[np.ndarray]:
 def patch_rows(runtime: MonitorRuntime, photo: np.ndarray, seed: int, frames: int) -> np.ndarray:
     """(patches, 7): accepted, sigma_image, reference, true noise, sigma_model, model on the clean patch, gain."""
     hook = KeepClean()
-    with tempfile.TemporaryDirectory() as tmp, mock.patch.object(campaign, "_photos", lambda variant: [photo]):
+    with tempfile.TemporaryDirectory() as tmp:
         bag = simulate_bag(Path(tmp) / "one_photo.mcap", PROFILE, "campaign_heldout", frames=frames, width=320,
-                           height=256, fps=10.0, seed=seed, frame_hook=hook, progress=False)
+                           height=256, fps=10.0, seed=seed, frame_hook=hook, progress=False,
+                           images=ImageSet(("photo",), (photo,), 1))
         images = recorded_images(bag)
     est, size = runtime.estimator, runtime.monitor.patch_size
     if not isinstance(est, FullMetaEstimator):

@@ -21,7 +21,7 @@ from estimator_tuning import tuning_set
 
 from noise_monitor.estimator import images
 from noise_monitor.estimator.data import metas_of
-from noise_monitor.estimator.evaluate import heldout
+from noise_monitor.estimator.evaluate import heldout, per_image
 from noise_monitor.estimator.inference import FullMetaEstimator, PaperEstimator, load
 
 NAMES = {"photos": images.MATPLOTLIB_PHOTOS + images.PYWAVELETS_PHOTOS,
@@ -81,11 +81,12 @@ def main() -> None:
                   f"xi RMS {rms(err[ok]):.3f} DN")
             print(f"   {'source image':32s} {'n':>4s} {'xi RMS':>7s} {'mean':>7s} {'accepted':>9s} {'acc. RMS':>9s} "
                   f"{'sigma med':>9s}")
-            for k, image in enumerate(NAMES[name]):
-                m = d["source_index"] == k
-                if m.any():
-                    print(f"   {image:32s} {m.sum():4d} {rms(err[m]):7.3f} {err[m].mean():+7.3f} {ok[m].mean():9.0%} "
-                          f"{rms(err[m & ok]):9.3f} {np.median(d['truth_sigma_image'][m]):9.2f}", flush=True)
+            for row in per_image(pred, d, part):
+                k = row["image"]
+                acc = float("nan") if row["xi_rms_accepted"] is None else row["xi_rms_accepted"]
+                sigma = np.median(d["truth_sigma_image"][d["source_index"] == k])
+                print(f"   {NAMES[name][k]:32s} {row['patches']:4d} {row['xi_rms']:7.3f} {row['xi_mean_error']:+7.3f} "
+                      f"{row['coverage']:9.0%} {acc:9.3f} {sigma:9.2f}", flush=True)
 
 
 if __name__ == "__main__":

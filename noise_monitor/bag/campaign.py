@@ -5,11 +5,13 @@ that changes every frame, and vignetting in sensor coordinates.
 
 Two variants: ``tuned`` (scikit-image photographs, procedural textures; the lab was developed on it) and
 ``heldout`` (matplotlib and PyWavelets photographs, other textures, hold lengths, pans, exposure and
-temperature laws; never used to tune the lab).
+temperature laws; never used to tune the lab). Either can take a user's own scenes for its photo panels
+(``make_world(..., photos=...)``, ``simulate-bag --images``).
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -77,16 +79,20 @@ def _procedural(rng: np.random.Generator, h: int, w: int, variant: str) -> np.nd
     return (out - out.min()) / max(float(np.ptp(out)), 1e-6)
 
 
-def make_world(rng: np.random.Generator, height: int, width: int, variant: str = "tuned") -> np.ndarray:
+def make_world(rng: np.random.Generator, height: int, width: int, variant: str = "tuned",
+               photos: Sequence[np.ndarray] | None = None) -> np.ndarray:
     """A float32 world in DN larger than the view: panels of photographs (random crops, contrast and
-    gamma) and procedural textures, with a few small flat chart patches (8..247 DN) on top."""
+    gamma) and procedural textures, with a few small flat chart patches (8..247 DN) on top. ``photos``:
+    grayscale DN images (e.g. a user's own scenes) instead of the variant's photographs."""
     if variant not in LAWS:
         raise ValueError(f"campaign variant must be one of {', '.join(LAWS)}, got {variant!r}")
     if height < 32 or width < 32:
         raise ValueError(f"image size must be at least 32x32 pixels for a campaign, got {width}x{height}")
     law = LAWS[variant]
     wh, ww = int(round(height * WORLD_SCALE[0])), int(round(width * WORLD_SCALE[1]))
-    photos = _photos(variant)
+    photos = _photos(variant) if photos is None else list(photos)
+    if not photos or any(p.ndim != 2 or min(p.shape) < 8 for p in photos):
+        raise ValueError("a campaign's photos must be grayscale images of at least 8x8 pixels")
     pr, pc = law.panels
     world = np.empty((wh, ww), np.float32)
     ys, xs = np.linspace(0, wh, pr + 1).astype(int), np.linspace(0, ww, pc + 1).astype(int)

@@ -16,6 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 from tqdm import tqdm
 
+from noise_monitor.estimator.user_images import ImageSet
 from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel, load_profile
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
@@ -88,6 +89,7 @@ def simulate_bag(
     hardware_id: str | None = None,
     start_ns: int = START_NS,
     frame_hook: FrameHook | None = None,
+    images: ImageSet | None = None,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -100,7 +102,9 @@ def simulate_bag(
     ``hardware_id``: the camera's id in the metadata messages (default: the profile name); ``start_ns``: the
     first frame's stamp (a field campaign's bags are recorded at different times). ``frame_hook``: an
     effect outside the noise model (:class:`FrameHook`), e.g. a response non-linearity or amplifier glow;
-    it draws from its own random generator, so the model's noise is that of the bag without it.
+    it draws from its own random generator, so the model's noise is that of the bag without it. ``images``:
+    a campaign's photo panels from these images (a user's own scenes, ``user_images.load_image_set``) instead of
+    its variant's photographs; named in the truth sidecar.
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -116,6 +120,9 @@ def simulate_bag(
         raise ValueError(f"hold_s must be in [0, 1e6] s, got {hold_s}")
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
+    if images is not None and not scen.campaign:
+        raise ValueError(f"own images make the photo panels of a campaign scenario; {scen.name!r} is none "
+                         f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
     if scen.name == "ptc":
         from noise_monitor.profiles.ptc_sim import simulate_ptc
 
@@ -128,7 +135,7 @@ def simulate_bag(
     rng = np.random.default_rng(seed)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
     if scen.campaign:
-        world = campaign.make_world(rng, height, width, scen.campaign)
+        world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images)
         plans = campaign.plan(rng, frames, scen.campaign)
         vignette = campaign.vignetting(height, width, campaign.LAWS[scen.campaign].vignetting)
         steps = [Step(gain_db=p.gain_db, exposure_time_s=p.exposure_time_s, sensor_temperature_c=p.sensor_temperature_c,
@@ -187,6 +194,7 @@ def simulate_bag(
     truth = {
         "bag": out.name, "profile": prof.name, "scenario": scen.name, "description": scen.description,
         "effects": effect_specs, **({"frame_hook": frame_hook.truth} if frame_hook is not None else {}),
+        **({"images": list(images.names), "images_key": images.key} if images is not None else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "

@@ -4,11 +4,16 @@ from __future__ import annotations
 import argparse
 import json
 from datetime import UTC, datetime
+from pathlib import Path
 
+from noise_monitor.estimator.user_images import load_image_set
 from noise_monitor.physics import load_plugin_file
 
 from .scenarios import SCENARIOS
 from .simulate import START_NS, load_truth, simulate_bag, truth_path
+
+#: Smallest side (pixels, after downsampling) of an image for a campaign's photo panels.
+CAMPAIGN_IMAGE_MIN = 32
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hardware-id", help="camera id in the metadata messages (default: the profile name)")
     parser.add_argument("--start", metavar="UTC", help="first frame's time, ISO 8601 (default 2023-11-14T22:13:20Z)")
     parser.add_argument("--json", metavar="PATH", help="write a summary JSON (bag, truth file, episodes)")
+    parser.add_argument("--images", nargs="+", type=Path, default=None, metavar="PATH",
+                        help="campaign scenarios: photo panels from your own clean scenes (files or directories of "
+                             "PNG / JPEG / TIFF / BMP / PGM / NPY images) instead of the bundled photographs")
+    parser.add_argument("--image-downsample", type=int, default=2,
+                        help="area-downsample --images by this factor first (1-4; default 2)")
 
 
 def _start_ns(text: str | None) -> int:
@@ -52,14 +62,15 @@ def _start_ns(text: str | None) -> int:
 def run(args: argparse.Namespace) -> int:
     for f in args.effect_plugin:
         load_plugin_file(f, override=args.replace_builtin_effects)
+    images = load_image_set(args.images, args.image_downsample, CAMPAIGN_IMAGE_MIN) if args.images else None
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,
-                       start_ns=_start_ns(args.start))
+                       start_ns=_start_ns(args.start), images=images)
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),
                "profile": truth["profile"], "scenario": truth["scenario"], "effects": truth["effects"],
-               "episodes": truth["episodes"]}
+               "episodes": truth["episodes"], **({"images": truth["images"]} if "images" in truth else {})}
     print(f"wrote {bag} ({summary['frames']} frames, {truth['profile']}, scenario {truth['scenario']}) "
           f"and {summary['truth']}")
     for ep in truth["episodes"]:
