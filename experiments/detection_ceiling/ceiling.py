@@ -33,11 +33,12 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "experiments/head_generalization"))
-from probe import Features  # noqa: E402
+from probe import Features, _head  # noqa: E402
 
 from noise_monitor.estimator import data as D  # noqa: E402
 from noise_monitor.estimator import images  # noqa: E402
 from noise_monitor.estimator.evaluate import ALARM_DN, HIT_TRUTH_DN  # noqa: E402
+from noise_monitor.estimator.inference import CLEAR_DECISION_K, is_measurable  # noqa: E402
 from noise_monitor.estimator.residuals import block_energies, immerkaer, quantiles  # noqa: E402
 
 NAMES = ("grace_hopper", "MRI", "hillshade", "Minduka", "aero", "ascent")
@@ -86,8 +87,8 @@ def classical(x: np.ndarray) -> np.ndarray:
     return np.concatenate(cols, axis=1)
 
 
-def features(feats: Features, d: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """(all features, the shipped xi) of a dataset."""
+def features(feats: Features, d: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(all features, the shipped estimator's outputs) of a dataset; the head's own inputs come first."""
     head, out = feats(d)
     log = {k: np.log(np.clip(np.asarray(out[k], dtype=float), 1e-3, 300.0))  # the bound is inf when too clipped
            for k in ("sigma_image", "sigma_image_error", "sigma_image_upper", "sigma_model")}
@@ -95,7 +96,7 @@ def features(feats: Features, d: dict[str, np.ndarray]) -> tuple[np.ndarray, np.
                     log["sigma_image_upper"] - log["sigma_model"]], axis=1)
     cl = classical(d["noisy"].astype(np.float32))
     rel = cl[:, :6] - log["sigma_model"][:, None]  # block RMS over the stated model's sigma
-    return np.concatenate([head, own, cl, rel], axis=1), np.asarray(out["xi"], dtype=float)
+    return np.concatenate([head, own, cl, rel], axis=1), out
 
 
 def labels(xi_true: np.ndarray) -> np.ndarray:
@@ -203,11 +204,97 @@ def cnn_ceiling(k: int, im: np.ndarray, n: int, cache: Path, epochs: int = 10) -
     print(f"{NAMES[k]}: CNN on the pixels, (c) hits {hits / cands:.1%} of {cands} candidates")
 
 
+def feature_rows(photos: list[np.ndarray], n: int, cache: Path) -> dict[tuple[int, int], dict[str, np.ndarray]]:
+    """Per (image, half): features, the shipped outputs and the truths of its three parts (cached)."""
+    path = cache / f"features_n{n}.npz"
+    keys = ("x", "xi", "truth", "part", "sigma", "error", "truth_sigma")
+    if path.is_file():
+        z = np.load(path)
+        return {(k, h): {key: z[f"{k}_{h}_{key}"] for key in keys} for k in range(len(photos)) for h in (0, 1)}
+    feats = Features()
+    rows: dict[tuple[int, int], dict[str, np.ndarray]] = {}
+    for k, im in enumerate(photos):
+        for h, sub in enumerate(halves(im)):
+            cols: dict[str, list[np.ndarray]] = {key: [] for key in keys}
+            for part in "abc":
+                d = half_data(k, h, sub, part, n, cache)
+                f, out = features(feats, d)
+                for key, v in (("x", f), ("xi", out["xi"]), ("truth", d["truth_xi"]),
+                               ("part", np.full(len(f), "abc".index(part))), ("sigma", out["sigma_image"]),
+                               ("error", out["sigma_image_error"]), ("truth_sigma", d["truth_sigma_image"])):
+                    cols[key].append(np.asarray(v))
+            rows[k, h] = {key: np.concatenate(v) for key, v in cols.items()}
+            print(f"{NAMES[k]} half {h}: {sub.shape}, features {rows[k, h]['x'].shape}", flush=True)
+    np.savez(path, **{f"{k}_{h}_{key}": v for (k, h), r in rows.items() for key, v in r.items()})
+    return rows
+
+
+def _rates(r: dict[str, np.ndarray], error: np.ndarray) -> dict[str, float]:
+    """Coverage and accepted xi RMS per part, false alarms on (a) (declined never alarm / + clear decisions) and
+    hits of (b) / (c) with clear decisions, under the shipped decline rule with predicted errors ``error`` (DN)."""
+    ok = is_measurable(error, error / r["sigma"])
+    clear = (np.abs(np.abs(r["xi"]) - ALARM_DN) > CLEAR_DECISION_K * error) & (error <= 0.3 * r["sigma"])
+    alarm = np.abs(r["xi"]) > ALARM_DN
+    out: dict[str, float] = {}
+    for p, name in enumerate("abc"):
+        m = r["part"] == p
+        err = (r["xi"] - r["truth"])[m & ok]
+        out[f"coverage_{name}"] = float(ok[m].mean())
+        out[f"rms_{name}"] = float(np.sqrt(np.mean(err**2))) if err.size else float("nan")
+        if name == "a":
+            out["fa"] = float((alarm & ok)[m].mean())
+            out["fa_clear"] = float((alarm & (ok | clear))[m].mean())
+        else:
+            big = m & (np.abs(r["truth"]) > HIT_TRUTH_DN)
+            hit = alarm & (ok | clear) & (np.sign(r["xi"]) == np.sign(r["truth"]))
+            out[f"hits_{name}"] = float(hit[big].mean())
+    return out
+
+
+def head_ceiling(rows: dict[tuple[int, int], dict[str, np.ndarray]], n_images: int) -> None:
+    """Confidence heads (the head's own 90 inputs, Gaussian NLL of the absolute log error; ``probe._head``) trained
+    on the other half of the same photograph or the other halves of all six, against the shipped head."""
+    n_head = 90
+
+    def inputs(r: dict[str, np.ndarray]) -> np.ndarray:
+        # standardised by the shipped head; a few reach 300, which sends the NLL's exp to NaN: clipped at 10
+        return np.clip(r["x"][:, :n_head], -10.0, 10.0).astype(np.float32)
+
+    def fit(parts: list[dict[str, np.ndarray]], seed: int) -> torch.nn.Module:
+        x = np.concatenate([inputs(r) for r in parts])
+        y = np.concatenate([np.abs(np.log(r["sigma"] / r["truth_sigma"])) for r in parts]).astype(np.float32)
+        return _head(x, y, seed)
+
+    pooled = {h: fit([rows[k, h] for k in range(n_images)], 7380 + h) for h in (0, 1)}
+    scored: dict[str, list[dict[str, np.ndarray]]] = {"shipped": [], "per-image": [], "pooled": []}
+    for k in range(n_images):
+        own = {h: fit([rows[k, h]], 7300 + 10 * k + h) for h in (0, 1)}
+        for h in (0, 1):
+            r = rows[k, 1 - h]  # scored: the half the heads did not see
+            x = torch.from_numpy(inputs(r))
+            with torch.no_grad():
+                rel = {"per-image": own[h](x).squeeze(1).exp().numpy(), "pooled": pooled[h](x).squeeze(1).exp().numpy()}
+            scored["shipped"].append({**r, "pred": r["error"], "image": np.full(len(r["xi"]), k)})
+            for name, v in rel.items():
+                scored[name].append({**r, "pred": r["sigma"] * v, "image": np.full(len(r["xi"]), k)})
+    print("heads scored on the half they did not see (all six photographs; per image: false alarms / accepted (a) RMS):")
+    for name, parts in scored.items():
+        r = {key: np.concatenate([p[key] for p in parts]) for key in ("xi", "truth", "part", "sigma", "pred", "image")}
+        t = _rates(r, r["pred"])
+        per = [(NAMES[k], _rates({key: v[r["image"] == k] for key, v in r.items()}, r["pred"][r["image"] == k]))
+               for k in range(n_images)]
+        print(f"  {name:9s} coverage {t['coverage_a']:.0%} / {t['coverage_b']:.0%} / {t['coverage_c']:.0%}, accepted xi "
+              f"RMS {t['rms_a']:.3f} / {t['rms_b']:.3f} / {t['rms_c']:.3f} DN, false alarms {t['fa']:.1%} (+ clear "
+              f"{t['fa_clear']:.1%}), hits with clear decisions {t['hits_b']:.1%} / {t['hits_c']:.1%}")
+        print("            " + "; ".join(f"{nm} {q['fa']:.1%} / {q['rms_a']:.2f}" for nm, q in per), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1500)
     ap.add_argument("--cache", type=Path, default=ROOT / "out/s37/ceiling")
     ap.add_argument("--cnn", choices=NAMES, default=None)
+    ap.add_argument("--head", action="store_true", help="confidence heads instead of detectors (see head_ceiling)")
     args = ap.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(2)
@@ -215,21 +302,10 @@ def main() -> None:
     if args.cnn:
         cnn_ceiling(NAMES.index(args.cnn), photos[NAMES.index(args.cnn)], args.n, args.cache)
         return
-    feats = Features()
-    rows: dict[tuple[int, int], dict[str, np.ndarray]] = {}
-    for k, im in enumerate(photos):
-        for h, sub in enumerate(halves(im)):
-            fx, xs, ts, ps = [], [], [], []
-            for part in "abc":
-                d = half_data(k, h, sub, part, args.n, args.cache)
-                f, xi = features(feats, d)
-                fx.append(f)
-                xs.append(xi)
-                ts.append(d["truth_xi"])
-                ps.append(np.full(len(xi), "abc".index(part)))
-            rows[k, h] = {"x": np.concatenate(fx), "xi": np.concatenate(xs), "truth": np.concatenate(ts),
-                          "part": np.concatenate(ps)}
-            print(f"{NAMES[k]} half {h}: {sub.shape}, features {rows[k, h]['x'].shape}", flush=True)
+    rows = feature_rows(photos, args.n, args.cache)
+    if args.head:
+        head_ceiling(rows, len(photos))
+        return
     pooled = {h: mlp(np.concatenate([rows[k, h]["x"] for k in range(len(photos))]),
                      np.concatenate([labels(rows[k, h]["truth"]) for k in range(len(photos))]), seed=7390 + h)
               for h in (0, 1)}
