@@ -71,8 +71,10 @@ def _read(path: Path) -> np.ndarray:
         a = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if a is None:
             raise ValueError(f"--images: {path} could not be read as an image")
-        if a.ndim == 3:
-            a = cv2.cvtColor(a, cv2.COLOR_BGRA2RGB if a.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+        if a.ndim == 3 and a.shape[2] in (3, 4):  # OpenCV reads colour as BGR(A)
+            a = a[..., 2::-1]
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
     if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (3, 4)) or a.dtype.kind not in "uifb":
         raise ValueError(f"--images: {path} must be a grayscale or colour image, got shape {a.shape}, dtype {a.dtype}")
     if not np.isfinite(a).all():

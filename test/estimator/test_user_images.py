@@ -55,6 +55,7 @@ def test_bad_images_get_clear_errors(tmp_path):
     (tmp_path / "broken.png").write_bytes(b"not a png at all")
     np.save(tmp_path / "nan.npy", np.full((200, 200), np.nan))
     np.save(tmp_path / "cube.npy", np.zeros((4, 200, 200)))
+    np.save(tmp_path / "two.npy", np.zeros((200, 200, 2)))
     cv2.imwrite(str(tmp_path / "small.png"), np.zeros((100, 300), np.uint8))
     cv2.imwrite(str(tmp_path / "ok.png"), np.zeros((200, 200), np.uint8))
     with pytest.raises(FileNotFoundError, match="not found"):
@@ -65,8 +66,9 @@ def test_bad_images_get_clear_errors(tmp_path):
         load_image_set([tmp_path / "broken.png"])
     with pytest.raises(ValueError, match="non-finite"):
         load_image_set([tmp_path / "nan.npy"])
-    with pytest.raises(ValueError, match="grayscale or colour"):
-        load_image_set([tmp_path / "cube.npy"])
+    for name in ("cube.npy", "two.npy"):
+        with pytest.raises(ValueError, match="grayscale or colour"):
+            load_image_set([tmp_path / name])
     with pytest.raises(ValueError, match="smaller than a 64 px patch"):
         load_image_set([tmp_path / "small.png"])
     with pytest.raises(ValueError, match="1-4"):
