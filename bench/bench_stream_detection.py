@@ -6,15 +6,8 @@ photographs) and ``--scenario campaign_heldout`` (held-out: matplotlib / PyWavel
 on), ev76c661, 320x256 (``--width``/``--height``) at 10 Hz, several seeds. Each bag is replayed twice: as recorded (true metadata) and
 from a copy whose metadata states ``gain_db`` 6 dB below the truth (every frame; nothing else changes).
 
-Definitions (per bag, over the images; frames the monitor skipped in either replay are not counted):
-- view: a maximal run of frames with the same true gain and exposure (an auto-exposure step starts one);
-- true xi of a frame in the low-gain replay = sigma_model(stated) - sigma_model(true) on the same patches
-  (patch selection reads the image only, so both replays choose the same patches; the per-frame model
-  medians are compared). The simulator draws the noise from the same model with the true metadata, so the
-  true xi of the clean replay is 0 up to the model's own approximation (measured: ``clean xi error``);
-- detected within 5 frames: the alarm is on at that frame or at one of the next 4 frames of the same view;
-- clean xi error: the per-frame ``xi`` (and ``xi_filtered``) of the clean replay against 0;
-- false alarm episode: an alarm episode in the clean replay.
+Definitions and the per-bag figures: :mod:`noise_monitor.bag.stream_eval` (for one set of campaigns, also the command
+``noise-monitor evaluate-stream``); this bench runs the tuned and held-out sets side by side.
 
 ``--single-photo``: besides, for every held-out seed and held-out photograph, a ``campaign_heldout`` bag whose
 photo panels all come from that one photograph (its procedural panels and flat chart patches unchanged), the
@@ -36,108 +29,12 @@ from typing import Any
 
 import numpy as np
 
-from noise_monitor.bag.reader import BagReader
-from noise_monitor.bag.replay import replay
-from noise_monitor.bag.results import FrameTable, alarm_episodes
-from noise_monitor.bag.simulate import load_truth, simulate_bag
-from noise_monitor.bag.writer import BagWriter
+from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.bag.stream_eval import GAIN_OFFSET_DB, measure_bag, stated_gain_copy, summarize
 from noise_monitor.estimator.images import MATPLOTLIB_PHOTOS, PYWAVELETS_PHOTOS, matplotlib_photos, pywavelets_photos
 from noise_monitor.estimator.user_images import ImageSet
 
 PROFILE = "ev76c661"
-GAIN_OFFSET_DB = -6.0
-WITHIN = 5  # frames: the frame itself and the next 4 of the same view
-MIN_TRUE_XI = 1.0
-
-
-def stated_gain_copy(src: Path, dst: Path, offset_db: float) -> Path:
-    """A copy of a simulated bag whose metadata (DiagnosticArray key ``gain_db``) states ``offset_db`` more."""
-    reader = BagReader(src, detect_topics=True)
-    meta_topic = reader.metadata_topic
-    try:
-        with BagWriter(dst) as writer:
-            for topic, log_ns, msg in reader.messages(list(reader.topics)):
-                if topic == meta_topic:
-                    values = msg.status[0].values
-                    found = [kv for kv in values if kv.key == "gain_db"]
-                    if len(found) != 1:
-                        raise ValueError(f"{src}: metadata message without one gain_db value")
-                    found[0].value = repr(float(found[0].value) + offset_db)
-                writer.write(topic, msg, log_ns)
-    finally:
-        reader.close()
-    return dst
-
-
-def views(truth: dict[str, Any]) -> np.ndarray:
-    """View index per frame: a new view whenever the true gain or exposure changes."""
-    out, key, v = [], None, -1
-    for r in truth["frames"]:
-        k = (r["true_metadata"]["gain_db"], r["true_metadata"]["exposure_time_s"])
-        if k != key:
-            key, v = k, v + 1
-        out.append(v)
-    return np.asarray(out)
-
-
-def detected(alarm: np.ndarray, view: np.ndarray, i: int) -> bool:
-    """Alarm on at frame i or at one of the next WITHIN-1 frames of the same view."""
-    j = np.arange(i, min(i + WITHIN, alarm.size))
-    j = j[view[j] == view[i]]
-    return bool(alarm[j].any())
-
-
-def measure_bag(bag: Path, low: Path, params: str | None, threads: int) -> dict[str, Any]:
-    truth = load_truth(bag)
-    view = views(truth)
-    tables = {}
-    for label, path in (("clean", bag), ("low", low)):
-        t = FrameTable()
-        replay(path, PROFILE, None, config=params, threads=threads, progress=False, table=t)
-        tables[label] = t
-    clean, lowt = tables["clean"], tables["low"]
-    ok_c = clean.column("processed").astype(bool)
-    ok_l = lowt.column("processed").astype(bool)
-    xi_c = clean.numbers("xi").astype(np.float64)
-    xif_c = clean.numbers("xi_filtered").astype(np.float64)
-    true_xi = lowt.numbers("sigma_model").astype(np.float64) - clean.numbers("sigma_model").astype(np.float64)
-    alarm = lowt.column("alarm").astype(bool)  # as published (a skipped frame reports an active alarm too)
-    need = np.flatnonzero(ok_c & ok_l & (np.abs(true_xi) >= MIN_TRUE_XI))
-    hits = [detected(alarm, view, int(i)) for i in need]
-    at_frame = int(alarm[need].sum())
-    xi_l = lowt.numbers("xi").astype(np.float64)
-    both = ok_c & ok_l
-    return {
-        "frames": len(clean), "processed_clean": int(ok_c.sum()), "processed_low": int(ok_l.sum()),
-        "views": int(view.max() + 1),
-        "clean_xi": xi_c[ok_c].tolist(), "clean_xi_filtered": xif_c[ok_c].tolist(),
-        "false_alarm_episodes": len(alarm_episodes(clean)),
-        "need": len(need), "hits": int(sum(hits)), "alarmed_at_frame": at_frame,
-        "missed_frames": [int(i) for i, h in zip(need, hits) if not h],
-        "not_alarmed_at_frame": [int(i) for i in need if not alarm[i]],
-        "need_true_xi": [round(float(true_xi[i]), 3) for i in need],
-        "low_xi_error": (xi_l[both] - true_xi[both]).tolist(),
-        "low_alarm_episodes": len(alarm_episodes(lowt)),
-        "view_of_need": [int(view[i]) for i in need],
-    }
-
-
-def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    xi = np.concatenate([r["clean_xi"] for r in rows])
-    xif = np.concatenate([r["clean_xi_filtered"] for r in rows])
-    err = np.concatenate([r["low_xi_error"] for r in rows])
-    need, hits = sum(r["need"] for r in rows), sum(r["hits"] for r in rows)
-    at_frame = sum(r["alarmed_at_frame"] for r in rows)
-    return {
-        "bags": len(rows), "frames": sum(r["frames"] for r in rows),
-        "clean_xi_rms": float(np.sqrt(np.mean(xi**2))), "clean_xi_mean": float(xi.mean()),
-        "clean_xi_filtered_rms": float(np.sqrt(np.mean(xif**2))),
-        "false_alarm_episodes": sum(r["false_alarm_episodes"] for r in rows),
-        "need": need, "hits": hits, "detection": hits / need if need else float("nan"),
-        "alarmed_at_frame": at_frame, "at_frame": at_frame / need if need else float("nan"),
-        "low_xi_error_rms": float(np.sqrt(np.mean(err**2))),
-        "views_with_need": sum(len(set(r["view_of_need"])) for r in rows),
-    }
 
 
 def main() -> None:
@@ -167,7 +64,7 @@ def main() -> None:
             bag = simulate_bag(Path(tmp) / f"{stem}.mcap", PROFILE, scenario, frames=args.frames,
                                width=args.width, height=args.height, fps=10.0, seed=seed, images=one_photo)
             low = stated_gain_copy(bag, Path(tmp) / f"{stem}_low.mcap", GAIN_OFFSET_DB)
-            row = measure_bag(bag, low, args.params, args.threads)
+            row = measure_bag(bag, low, PROFILE, args.params, args.threads)
             row["seed"] = seed
             per_bag.setdefault(label, []).append(row)
             print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
@@ -191,7 +88,7 @@ def main() -> None:
         s["at_text"] = f"{100 * s['at_frame']:.1f} % ({s['alarmed_at_frame']}/{s['need']})"
     print(f"{'  ... alarm on at the frame itself':44s} {t['at_text']:>16s} {h['at_text']:>16s}")
     print(f"{'gain 6 dB low: views with such frames':44s} {t['views_with_need']:>16d} {h['views_with_need']:>16d}")
-    print(f"{'gain 6 dB low: xi error RMS (DN)':44s} {t['low_xi_error_rms']:>16.3f} {h['low_xi_error_rms']:>16.3f}")
+    print(f"{'gain 6 dB low: xi error RMS (DN)':44s} {t['offset_xi_error_rms']:>16.3f} {h['offset_xi_error_rms']:>16.3f}")
     for label, s in summary.items():
         if label.startswith("photo "):
             print(f"{label[6:]:32s} clean xi error RMS / mean {s['clean_xi_rms']:.3f} / {s['clean_xi_mean']:+.3f} DN, "
