@@ -277,7 +277,8 @@ def head_ceiling(rows: dict[tuple[int, int], dict[str, np.ndarray]], n_images: i
             scored["shipped"].append({**r, "pred": r["error"], "image": np.full(len(r["xi"]), k)})
             for name, v in rel.items():
                 scored[name].append({**r, "pred": r["sigma"] * v, "image": np.full(len(r["xi"]), k)})
-    print("heads scored on the half they did not see (all six photographs; per image: false alarms / accepted (a) RMS):")
+    print("heads scored on the half they did not see (all six photographs; per image: false alarms / accepted xi RMS "
+          "(a) / (c) with (c)'s coverage):")
     for name, parts in scored.items():
         r = {key: np.concatenate([p[key] for p in parts]) for key in ("xi", "truth", "part", "sigma", "pred", "image")}
         t = _rates(r, r["pred"])
@@ -286,7 +287,8 @@ def head_ceiling(rows: dict[tuple[int, int], dict[str, np.ndarray]], n_images: i
         print(f"  {name:9s} coverage {t['coverage_a']:.0%} / {t['coverage_b']:.0%} / {t['coverage_c']:.0%}, accepted xi "
               f"RMS {t['rms_a']:.3f} / {t['rms_b']:.3f} / {t['rms_c']:.3f} DN, false alarms {t['fa']:.1%} (+ clear "
               f"{t['fa_clear']:.1%}), hits with clear decisions {t['hits_b']:.1%} / {t['hits_c']:.1%}")
-        print("            " + "; ".join(f"{nm} {q['fa']:.1%} / {q['rms_a']:.2f}" for nm, q in per), flush=True)
+        print("            " + "; ".join(f"{nm} {q['fa']:.1%} / {q['rms_a']:.2f} / {q['rms_c']:.2f} ({q['coverage_c']:.0%})"
+                                         for nm, q in per), flush=True)
 
 
 def main() -> None:
