@@ -194,20 +194,24 @@ def _decided(pred: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     return np.where(proven, np.maximum(xi, lower), xi), ok | clear_decisions(pred, ALARM_DN) | proven
 
 
-def per_image(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -> list[dict]:
+def per_image(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str, n_images: int | None = None) -> list[dict]:
     """Scores of each source image (``source_index``) of a part: patches, xi RMS and mean error over every patch,
     and with a confidence output the accepted share, the accepted patches' xi RMS and the alarm rates (false
     alarms on (a), hits among the candidates on (b) / (c)) with the declined patches never alarming
-    (``*_accepted``) and under the ``decided`` rule (``*_decided``: what the node's frame takes)."""
+    (``*_accepted``) and under the ``decided`` rule (``*_decided``: what the node's frame takes). With
+    ``n_images``, a row for every image, one that drew no patch with ``patches`` 0 and nothing else."""
     xi, xi_true = np.asarray(pred["xi"], dtype=float), np.asarray(data["truth_xi"], dtype=float)
     src = np.asarray(data["source_index"])
     confident = "measurable" in pred and "sigma_image_error" in pred
     if confident:
         ok = np.asarray(pred["measurable"], dtype=bool)
         xi_d, decided = _decided(pred)
-    out = []
-    for k in np.unique(src):
+    out: list[dict] = []
+    for k in range(n_images) if n_images is not None else np.unique(src):
         m = src == k
+        if not m.any():
+            out.append({"image": int(k), "patches": 0})
+            continue
         err = xi[m] - xi_true[m]
         row: dict = {"image": int(k), "patches": int(m.sum()), "xi_rms": round(float(np.sqrt(np.mean(err**2))), 4),
                      "xi_mean_error": round(float(err.mean()), 4)}

@@ -146,8 +146,9 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
                     continue
                 preds[name], dt = timed_predict(est, data)
                 results["parts"][part][name] = score(preds[name], data, part)
-                if heldout_set == IMAGES and "xi" in preds[name]:
-                    results["parts"][part][name]["per_image"] = per_image(preds[name], data, part)
+                if image_set is not None and "xi" in preds[name]:
+                    results["parts"][part][name]["per_image"] = per_image(preds[name], data, part,
+                                                                          len(image_set.names))
                 results["ms_per_patch"].setdefault(name, []).append(1000.0 * dt / len(data["noisy"]))
             for label in compared_labels or []:
                 if label in preds and BASELINE in preds:
@@ -165,8 +166,8 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
 
 
 def _image_table(results: dict) -> str:
-    """Per image of ``--images``: each estimator's xi error, the accepted share and their error, the alarm rate
-    (declined patches decide only when clear) and the image's own noise floor."""
+    """Per image of ``--images``: each estimator's xi error, the accepted share and their error, the alarm rates
+    (declined patches never alarming / with the clear decisions) and the image's own noise floor."""
     info = results["images"]
     lines = [f"per image ({len(info)}; own floor: the clean image's own noise-like content, DN, counted as scene by "
              "the truth: where it is near the noise, the error is the image's)"]
@@ -179,6 +180,10 @@ def _image_table(results: dict) -> str:
                          f"| {rate}: declined never alarm / + clear decisions | own floor DN")
             for row in r["per_image"]:
                 im = info[row["image"]]
+                if not row["patches"]:
+                    lines.append(f"  {im['name']:<30}     0 | no patch drawn (raise --patches) | own floor "
+                                 f"{im['own_noise_floor_dn']:.2f}")
+                    continue
                 acc = "-" if row.get("coverage") is None else f"{100 * row['coverage']:.0f} %"
                 acc_rms = "-" if row.get("xi_rms_accepted") is None else f"{row['xi_rms_accepted']:.3f}"
                 key = "false_alarm_rate" if part == "a" else "hit_rate"

@@ -113,3 +113,19 @@ def test_evaluate_scores_each_own_image_with_its_floor(tmp_path, capsys):
     assert cli_main(args + ["--cards"]) == 2 and "leave out --images" in capsys.readouterr().err
     assert cli_main(args[:2] + [str(tmp_path / "nowhere")] + args[3:]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_per_image_rows_cover_every_image_and_both_alarm_rules():
+    """One row per image, one that drew no patch included; the accepted and decided rules differ where a declined
+    patch's decision is clear."""
+    from noise_monitor.estimator.evaluate import per_image
+
+    xi = np.array([0.0, 2.0, -3.0, 0.1])
+    pred = {"xi": xi, "measurable": np.array([True, True, False, True]), "sigma_image": np.array([3.0, 3.0, 6.0, 3.0]),
+            "sigma_image_error": np.array([0.1, 0.1, 0.5, 0.1]), "xi_lower": np.full(4, -np.inf)}
+    data = {"truth_xi": np.zeros(4), "source_index": np.array([0, 0, 2, 2])}
+    rows = per_image(pred, data, "a", n_images=3)
+    assert [r["image"] for r in rows] == [0, 1, 2] and rows[1] == {"image": 1, "patches": 0}
+    assert rows[0]["false_alarm_rate_accepted"] == rows[0]["false_alarm_rate_decided"] == 0.5
+    assert rows[2]["false_alarm_rate_accepted"] == 0.0 and rows[2]["false_alarm_rate_decided"] == 0.5
+    assert rows[2]["coverage"] == 0.5 and rows[2]["xi_rms_accepted"] == 0.1
