@@ -24,6 +24,7 @@ from .evaluate import (
 from .inference import NAMES, WEIGHTS_DIR, load
 from .physics_prior import PhysicsPrior
 from .user_images import ImageSet, load_image_set, own_noise_floor
+from .user_images_plot import plot_image_set
 
 #: The ``--heldout`` name of a user's own images (``--images``).
 IMAGES = "images"
@@ -52,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "with each image's own noise floor")
     p.add_argument("--image-downsample", type=int, default=2,
                    help="area-downsample --images by this factor first (1-4; default 2, as the bundled photographs)")
+    p.add_argument("--plot", type=Path, default=None, metavar="PNG",
+                   help="with --images: a plot of the noise read against the noise put in, per image and part")
     p.add_argument("--no-peers", action="store_true", help="skip the classical peers")
     p.add_argument("--no-sweep", action="store_true", help="skip the metadata sensitivity sweep")
     p.add_argument("--cache", type=Path, default=Path("out/estimator_eval"), help="held-out data cache directory")
@@ -67,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--patch-size must be >= 16")
     if args.images and args.cards:
         raise ValueError("--cards writes the model cards from the bundled held-out sets; leave out --images")
+    if args.plot and not args.images:
+        raise ValueError("--plot draws the per-image figures of --images; give --images")
     sets = args.heldout or ([] if args.images else ["benchmark"])
     names = args.variants or [n for n in NAMES if (args.weights_dir / f"{n}.pt").is_file()]
     if not names:
@@ -83,6 +88,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"== patches {label}\n{_table(results)}")
         if results["heldout"] == IMAGES:
             print(_image_table(results))
+            if args.plot:
+                name = BASELINE if BASELINE in estimators else names[0]
+                size = results["patch_size"][name]
+                data = {part: image_set_data(part, args.patches, size, args.image_set, args.cache, progress=False)
+                        for part in args.parts}
+                floors = [im["own_noise_floor_dn"] for im in results["images"]]
+                plot = args.plot if len(runs) == 1 else args.plot.with_name(f"{args.plot.stem}_{size}{args.plot.suffix}")
+                print(f"plot: {plot_image_set(estimators[name], args.image_set, data, floors, plot)}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(next(iter(runs.values())) if len(runs) == 1 else {"runs": runs}, indent=2))

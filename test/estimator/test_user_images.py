@@ -108,8 +108,12 @@ def test_evaluate_scores_each_own_image_with_its_floor(tmp_path, capsys):
             assert grainy["xi_mean_error"] < -1.0  # its own noise read as the camera's
         else:
             assert smooth["hit_rate_decided"] >= 0.97 and smooth["hit_rate_accepted"] <= smooth["hit_rate_decided"]
-    assert cli_main(args + ["--json", str(tmp_path / "again.json")]) == 0
+    assert cli_main(args + ["--json", str(tmp_path / "again.json"), "--plot", str(tmp_path / "p.png")]) == 0
     assert json.loads((tmp_path / "again.json").read_text())["parts"] == r["parts"]
+    png = cv2.imread(str(tmp_path / "p.png"))
+    assert png is not None and png.shape[0] > 300 and png.shape[1] > 400  # two parts x two images
+    assert cli_main(["evaluate", "--plot", str(tmp_path / "q.png"), "--no-peers"]) == 2
+    assert "give --images" in capsys.readouterr().err
     assert cli_main(args + ["--cards"]) == 2 and "leave out --images" in capsys.readouterr().err
     assert cli_main(args[:2] + [str(tmp_path / "nowhere")] + args[3:]) == 2
     assert "not found" in capsys.readouterr().err
