@@ -34,6 +34,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
               "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"),
     "evaluate": ("noise_monitor.estimator.evaluate_cmd",
                  "evaluate estimators on the held-out benchmark (parts a/b/c, peers, metadata sensitivity sweep)"),
+    "scenes": ("noise_monitor.bag.scenes_cmd",
+               "clean images of the scenes a recording saw: the temporal mean of each static hold, one PNG each "
+               "(for evaluate --images)"),
     "evaluate-stream": ("noise_monitor.bag.evaluate_stream_cmd",
                         "the monitor per frame on field-like campaigns of your own scenes (--images), clean and with the "
                         "gain stated wrong: xi error, false alarms, detection"),

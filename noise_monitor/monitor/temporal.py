@@ -45,12 +45,46 @@ class TemporalMeasurement:
     meta: CameraMetadata  # the measured frames' mean metadata (what the model is evaluated at)
 
 
-def _same_conditions(a: CameraMetadata, b: CameraMetadata) -> bool:
+def _same_conditions(a: CameraMetadata, b: CameraMetadata, temperature_tol_c: float = TEMPERATURE_TOL_C) -> bool:
     return (a.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
             == b.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
             and abs(a.gain_db - b.gain_db) <= GAIN_TOL_DB
             and abs(a.exposure_time_s - b.exposure_time_s) <= EXPOSURE_TOL_REL * a.exposure_time_s
-            and abs(a.sensor_temperature_c - b.sensor_temperature_c) <= TEMPERATURE_TOL_C)
+            and abs(a.sensor_temperature_c - b.sensor_temperature_c) <= temperature_tol_c)
+
+
+class StillCamera:
+    """Whether each frame continues a static hold: the conditions of the hold's first frame (within the
+    tolerances above; the temperature's within ``temperature_tol_c``) and a global shift from the previous frame
+    within ``STATIC_SHIFT_PX``."""
+
+    def __init__(self, temperature_tol_c: float = TEMPERATURE_TOL_C) -> None:
+        self.temperature_tol_c = temperature_tol_c
+        self.hold_meta: CameraMetadata | None = None  # the current hold's first frame's metadata
+        self._small: np.ndarray | None = None
+        self._scale = 1.0
+
+    def reset(self) -> None:
+        self.hold_meta, self._small = None, None
+
+    def _motion_image(self, image: np.ndarray) -> np.ndarray:
+        h, w = image.shape
+        self._scale = max(1.0, max(h, w) / MOTION_SIZE_PX)
+        size = (max(8, round(w / self._scale)), max(8, round(h / self._scale)))
+        return cv2.resize(image.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+
+    def continues(self, image: np.ndarray, meta: CameraMetadata) -> bool:
+        """Whether this frame continues the current hold; one that does not starts the next hold."""
+        small = self._motion_image(image)
+        prev, self._small = self._small, small
+        still = (prev is not None and prev.shape == small.shape and self.hold_meta is not None
+                 and _same_conditions(self.hold_meta, meta, self.temperature_tol_c))
+        if still and prev is not None:
+            dx, dy, _ = global_shift(prev, small)
+            still = math.hypot(dx, dy) * self._scale <= STATIC_SHIFT_PX
+        if not still:
+            self.hold_meta = meta
+        return still
 
 
 class TemporalNoise:
@@ -62,32 +96,22 @@ class TemporalNoise:
         self._metas: deque[CameraMetadata] = deque(maxlen=max_frames)
         self._corners: list[tuple[int, int]] = []
         self._size = 0
-        self._meta: CameraMetadata | None = None
-        self._small: np.ndarray | None = None
-        self._scale = 1.0
+        self._still = StillCamera()
         self.holds = 0  # static holds started (resets)
 
     def reset(self) -> None:
         self._stack.clear()
         self._metas.clear()
-        self._corners, self._meta, self._small = [], None, None
-
-    def _motion_image(self, image: np.ndarray) -> np.ndarray:
-        h, w = image.shape
-        self._scale = max(1.0, max(h, w) / MOTION_SIZE_PX)
-        size = (max(8, round(w / self._scale)), max(8, round(h / self._scale)))
-        return cv2.resize(image.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+        self._corners = []
+        self._still.reset()
 
     def _static(self, image: np.ndarray, meta: CameraMetadata, size: int) -> bool:
-        """Whether this frame continues the current hold (and updates the motion reference)."""
-        small = self._motion_image(image)
-        prev, self._small = self._small, small
-        if prev is None or prev.shape != small.shape or self._meta is None or size != self._size:
-            return False
-        if not _same_conditions(self._meta, meta):
-            return False
-        dx, dy, _ = global_shift(prev, small)
-        return math.hypot(dx, dy) * self._scale <= STATIC_SHIFT_PX
+        """Whether this frame continues the current hold (and updates the motion reference); a new patch size
+        starts a new hold."""
+        if self._still.continues(image, meta) and size == self._size:
+            return True
+        self._still.hold_meta = meta
+        return False
 
     def update(self, image: np.ndarray, meta: CameraMetadata, corners: list[tuple[int, int]],
                size: int) -> TemporalMeasurement | None:
@@ -98,7 +122,7 @@ class TemporalNoise:
         if not self._static(image, meta, size):
             self._stack.clear()
             self._metas.clear()
-            self._corners, self._size, self._meta = list(corners), size, meta
+            self._corners, self._size = list(corners), size
             self.holds += 1
         if not self._corners:
             return None
