@@ -96,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
               f"{1e3 * hold.exposure_time_s:.1f} ms, temporal noise left ~{hold.noise_left_dn():.2f} DN")
     if not scenes:
         raise ValueError(f"{args.bag}: no static hold of {args.min_frames} usable frames or more")
-    print(f"{len(scenes)} scene(s) in {args.out}: noise-monitor evaluate --images {args.out}")
+    print(f"{len(scenes)} scene(s) in {args.out}: noise-monitor evaluate --images {args.out} --image-downsample 1 "
+          "(your camera's pixel scale; the noise left in a scene counts in its floor: 2 halves it)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(scenes, indent=1))
