@@ -23,14 +23,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from noise_monitor.bag.simulate import simulate_bag
-from noise_monitor.bag.stream_eval import GAIN_OFFSET_DB, measure_bag, stated_gain_copy, summarize
+from noise_monitor.bag.stream_eval import evaluate_stream, summarize
 from noise_monitor.estimator.images import MATPLOTLIB_PHOTOS, PYWAVELETS_PHOTOS, matplotlib_photos, pywavelets_photos
 from noise_monitor.estimator.user_images import ImageSet
 
@@ -52,27 +50,22 @@ def main() -> None:
     args = ap.parse_args()
     per_bag: dict[str, list[dict[str, Any]]] = {"tuned": [], "held-out": []}
     photos = dict(zip(MATPLOTLIB_PHOTOS + PYWAVELETS_PHOTOS, matplotlib_photos() + pywavelets_photos()))
-    with tempfile.TemporaryDirectory() as tmp:
-        runs: list[tuple[str, str, int, str | None]] = [
-            *(("tuned", "campaign", seed, None) for seed in args.seeds),
-            *(("held-out", "campaign_heldout", seed, None) for seed in args.heldout_seeds),
-            *((f"photo {name}", "campaign_heldout", seed, name) for name in (photos if args.single_photo else ())
-              for seed in args.heldout_seeds)]
-        for label, scenario, seed, photo in runs:
-            stem = f"{scenario}_{seed}_{photo or 'all'}"
-            one_photo = ImageSet((photo,), (photos[photo],), 1) if photo else None
-            bag = simulate_bag(Path(tmp) / f"{stem}.mcap", PROFILE, scenario, frames=args.frames,
-                               width=args.width, height=args.height, fps=10.0, seed=seed, images=one_photo)
-            low = stated_gain_copy(bag, Path(tmp) / f"{stem}_low.mcap", GAIN_OFFSET_DB)
-            row = measure_bag(bag, low, PROFILE, args.params, args.threads)
-            row["seed"] = seed
-            per_bag.setdefault(label, []).append(row)
-            print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
-                  f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "
-                  f"(missed frames {row['missed_frames']}), alarm on at the frame {row['alarmed_at_frame']} (not at "
-                  f"{row['not_alarmed_at_frame']}); true |xi| of these frames "
-                  f"{min(map(abs, row['need_true_xi']), default=float('nan')):.2f}.."
-                  f"{max(map(abs, row['need_true_xi']), default=float('nan')):.2f} DN", flush=True)
+    runs: list[tuple[str, str, int, str | None]] = [
+        *(("tuned", "campaign", seed, None) for seed in args.seeds),
+        *(("held-out", "campaign_heldout", seed, None) for seed in args.heldout_seeds),
+        *((f"photo {name}", "campaign_heldout", seed, name) for name in (photos if args.single_photo else ())
+          for seed in args.heldout_seeds)]
+    for label, scenario, seed, photo in runs:
+        one_photo = ImageSet((photo,), (photos[photo],), 1) if photo else None
+        row = evaluate_stream(PROFILE, [seed], one_photo, scenario, args.frames, args.width, args.height,
+                              params=args.params, threads=args.threads)["bags"][0]
+        per_bag.setdefault(label, []).append(row)
+        print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
+              f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "
+              f"(missed frames {row['missed_frames']}), alarm on at the frame {row['alarmed_at_frame']} (not at "
+              f"{row['not_alarmed_at_frame']}); true |xi| of these frames "
+              f"{min(map(abs, row['need_true_xi']), default=float('nan')):.2f}.."
+              f"{max(map(abs, row['need_true_xi']), default=float('nan')):.2f} DN", flush=True)
     summary = {k: summarize(v) for k, v in per_bag.items()}
     t, h = summary["tuned"], summary["held-out"]
     print(f"\n{'':44s} {'tuned':>16s} {'held-out':>16s}")

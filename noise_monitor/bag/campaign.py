@@ -20,6 +20,8 @@ import numpy as np
 #: World size relative to the camera view (the camera pans over the extra area).
 WORLD_SCALE = (1.6, 1.8)  # (rows, columns)
 VARIANTS = ("tuned", "heldout")
+#: Smallest side (pixels, after downsampling) of a user's image read for a campaign's photo panels.
+MIN_PHOTO_SIDE = 32
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,8 @@ from pathlib import Path
 
 from noise_monitor.estimator.user_images import load_image_set
 
+from .campaign import MIN_PHOTO_SIDE
 from .scenarios import SCENARIOS
-from .simulate_cmd import CAMPAIGN_IMAGE_MIN
 from .stream_eval import GAIN_OFFSET_DB, TARGET_CLEAN_XI_DN, TARGET_DETECTION, WITHIN, evaluate_stream
 
 CAMPAIGNS = sorted(name for name, s in SCENARIOS.items() if s.campaign)
@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    images = load_image_set(args.images, args.image_downsample, CAMPAIGN_IMAGE_MIN) if args.images else None
+    images = load_image_set(args.images, args.image_downsample, MIN_PHOTO_SIDE) if args.images else None
     result = evaluate_stream(args.profile, args.seeds, images, args.scenario, args.frames, args.width, args.height,
                              args.fps, args.gain_offset_db, args.params, args.threads, args.keep_bags)
     for r in result["bags"]:

@@ -9,11 +9,9 @@ from pathlib import Path
 from noise_monitor.estimator.user_images import load_image_set
 from noise_monitor.physics import load_plugin_file
 
+from .campaign import MIN_PHOTO_SIDE
 from .scenarios import SCENARIOS
 from .simulate import START_NS, load_truth, simulate_bag, truth_path
-
-#: Smallest side (pixels, after downsampling) of an image for a campaign's photo panels.
-CAMPAIGN_IMAGE_MIN = 32
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -62,7 +60,7 @@ def _start_ns(text: str | None) -> int:
 def run(args: argparse.Namespace) -> int:
     for f in args.effect_plugin:
         load_plugin_file(f, override=args.replace_builtin_effects)
-    images = load_image_set(args.images, args.image_downsample, CAMPAIGN_IMAGE_MIN) if args.images else None
+    images = load_image_set(args.images, args.image_downsample, MIN_PHOTO_SIDE) if args.images else None
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,

@@ -89,13 +89,7 @@ def run(args: argparse.Namespace) -> int:
         if results["heldout"] == IMAGES:
             print(_image_table(results))
             if args.plot:
-                name = BASELINE if BASELINE in estimators else names[0]
-                size = results["patch_size"][name]
-                data = {part: image_set_data(part, args.patches, size, args.image_set, args.cache, progress=False)
-                        for part in args.parts}
-                floors = [im["own_noise_floor_dn"] for im in results["images"]]
-                plot = args.plot if len(runs) == 1 else args.plot.with_name(f"{args.plot.stem}_{size}{args.plot.suffix}")
-                print(f"plot: {plot_image_set(estimators[name], args.image_set, data, floors, plot)}")
+                print(f"plot: {_plot_images(args, estimators[BASELINE if BASELINE in estimators else names[0]], results, len(runs))}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(next(iter(runs.values())) if len(runs) == 1 else {"runs": runs}, indent=2))
@@ -176,6 +170,16 @@ def evaluate(estimators: dict, args: argparse.Namespace, patch_size: int | None,
         results["sensitivity_full_meta"] = sensitivity_sweep(
             lambda x, m: fm.predict(x, m)["total"][0], size_of["full_meta"], model=fm.prior.model)
     return results
+
+
+def _plot_images(args: argparse.Namespace, estimator, results: dict, n_runs: int) -> Path:
+    """``--plot`` of one ``--images`` run (a file per patch size when there are several runs)."""
+    size = results["patch_size"][estimator.name]
+    data = {part: image_set_data(part, args.patches, size, args.image_set, args.cache, progress=False)
+            for part in args.parts}
+    floors = [im["own_noise_floor_dn"] for im in results["images"]]
+    path = args.plot if n_runs == 1 else args.plot.with_name(f"{args.plot.stem}_{size}{args.plot.suffix}")
+    return plot_image_set(estimator, args.image_set, data, floors, path)
 
 
 def _image_table(results: dict) -> str:

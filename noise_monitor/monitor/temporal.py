@@ -77,9 +77,9 @@ class StillCamera:
         """Whether this frame continues the current hold; one that does not starts the next hold."""
         small = self._motion_image(image)
         prev, self._small = self._small, small
-        still = (prev is not None and prev.shape == small.shape and self.hold_meta is not None
-                 and _same_conditions(self.hold_meta, meta, self.temperature_tol_c))
-        if still and prev is not None:
+        still = False
+        if prev is not None and prev.shape == small.shape and self.hold_meta is not None \
+                and _same_conditions(self.hold_meta, meta, self.temperature_tol_c):
             dx, dy, _ = global_shift(prev, small)
             still = math.hypot(dx, dy) * self._scale <= STATIC_SHIFT_PX
         if not still:
