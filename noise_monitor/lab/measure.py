@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import t as t_dist
 
 from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, camera_shift
 from ..monitor.config import MonitorConfig
@@ -70,6 +71,13 @@ NOT_HELD = "not in a static hold (camera moving, or metadata changed at this fra
 MIN_PARTNER_SHIFT_PX = 16.0
 #: most partner views per hold
 MAX_PARTNERS = 8
+#: components that are cross energies between views when a segment has partners (zero-mean noise either way)
+CROSS_VIEW = ("fixed", "column", "row")
+#: the partner views show the scene when one of a cell's mean cross energies lies below 0 (a fixed pattern's
+#: is a_s * a_p >= 0 in every view) with a one-sided p-value (Student t over its blocks) below this, beyond
+#: chance over the recording's ~10^3 cells x views: the scene repeats under the views' shifts (a periodic
+#: texture), and every cell's errors of that component take the views' spread (Birge ratio)
+PARTNER_NEGATIVE_P = 1e-6
 #: largest standard error of a block's cross-view fixed variance, relative to its temporal variance
 CROSS_SE_MAX = 0.5
 #: an outlier pixel is confirmed when a partner view shows it beyond this many robust sigmas, same sign
@@ -146,6 +154,9 @@ class SegmentMeasurement:
     partner_sigma_dn: np.ndarray | None = None  # (B, P) the block's robust sigma in each partner view
     #: (B, P) whether the block in each partner view can confirm an outlier pixel (CONFIRM_MAX_OTHERS)
     partner_confirms: np.ndarray | None = None
+    #: component -> (B, P) the block's cross energy with each partner view (fixed, column, row; used where
+    #: ``partner_weight`` > 0)
+    partner_values: dict[str, np.ndarray] | None = None
     #: pixels of the accepted blocks whose temporal variance is a SPIKE_FACTOR outlier, and the number
     #: white temporal noise would give
     temporal_spikes: int = 0
@@ -174,6 +185,9 @@ class Cell:
     block_index: np.ndarray  # indices into the segment's block arrays
     values: dict[str, float]
     errors: dict[str, float]
+    #: cross-view component -> (its partner views' lowest p-value of a mean below 0, their Birge ratio):
+    #: :func:`partner_views`
+    partner_views: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 @dataclass
@@ -195,6 +209,8 @@ class Measurements:
     not_measured: dict[str, str] = field(default_factory=dict)
     #: the fixed pattern's kurtosis (None: no segment with three partner views at distinct poses)
     fixed_shape: FixedShape | None = None
+    #: cross-view components whose errors took the partner views' spread (the scene showed in their views)
+    scene_in_views: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
         shape = (self.fixed_shape.summary() if self.fixed_shape else
@@ -205,6 +221,7 @@ class Measurements:
             "frames_used": self.frames_used,
             "frames_skipped": dict(self.skipped),
             "not_measured": dict(self.not_measured),
+            "scene_in_partner_views": list(self.scene_in_views),
             "segments": len(self.segments),
             "cells": len(self.cells),
             "image_shape": list(self.shape),
@@ -479,6 +496,7 @@ class _Full:
     partner_v: np.ndarray | None = None  # (N, P)
     partner_robust: np.ndarray | None = None  # (N, P)
     partner_confirms: np.ndarray | None = None  # (N, P)
+    partner_values: dict[str, np.ndarray] | None = None  # component -> (N, P)
     fourth: np.ndarray | None = None  # (N,) see SegmentMeasurement.fixed_fourth
     square: np.ndarray | None = None  # (N,)
 
@@ -510,6 +528,7 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         partner_intensity_dn=None if f.partner_v is None else f.partner_v[keep],
         partner_sigma_dn=None if f.partner_robust is None else f.partner_robust[keep],
         partner_confirms=None if f.partner_confirms is None else f.partner_confirms[keep],
+        partner_values=None if f.partner_values is None else {c: a[keep] for c, a in f.partner_values.items()},
         temporal_spikes=int(f.spikes[keep].sum()),
         temporal_spikes_expected=spikes_expected,
         fixed_fourth=None if f.fourth is None else f.fourth[keep],
@@ -548,8 +567,9 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         # inverse-variance weights: a cross energy's noise grows with the partner's white variance
         inv = valid / np.maximum(np.stack([g.white for g in cands], axis=1), MIN_VAR_ERR_DN2)
         weight = inv / np.maximum(inv.sum(axis=1), 1e-300)[:, None]
-        for j, comp in enumerate(("fixed", "column", "row")):
-            f.values[comp] = np.sum(np.stack([p[j] for p in parts], axis=1) * weight, axis=1)
+        f.partner_values = {comp: np.stack([p[j] for p in parts], axis=1) for j, comp in enumerate(CROSS_VIEW)}
+        for comp, per_partner in f.partner_values.items():
+            f.values[comp] = np.sum(per_partner * weight, axis=1)
         # an outlier pixel (hot pixel, defect) stays where it is on the sensor; a scene detail moves:
         # keep the outliers that stand out with the same sign (> CONFIRM_SIGMAS) in CONFIRM_VIEWS partner
         # views (all of them when fewer are valid): one view confirms a scene speck by chance (texture
@@ -594,8 +614,6 @@ POOLED = ("column", "row", "outlier", "temporal_column", "temporal_row")
 #: pooled components whose gross outliers (an edge that slipped through) are trimmed
 TRIMMED = ("column", "row", "temporal_column", "temporal_row")
 TRIM_MADS = 8.0
-#: components that are cross energies between views when a segment has partners (zero-mean noise either way)
-CROSS_VIEW = ("fixed", "column", "row")
 
 
 def _inliers(x: np.ndarray, symmetric: bool = False) -> np.ndarray:
@@ -624,8 +642,46 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
             comp: max(float(arr[sel[comp]].std(ddof=1)), floor[comp], MIN_VAR_ERR_DN2) / math.sqrt(sel[comp].size)
             for comp, arr in seg.values.items()
         }
-        out.append(Cell(seg.index, int(k), float(seg.intensity_dn[idx].mean()), idx, vals, errs))
+        views = {}
+        for comp, per_partner in (seg.partner_values or {}).items():
+            assert seg.partner_weight is not None
+            views[comp] = partner_views(per_partner[sel[comp]], seg.partner_weight[sel[comp]] > 0)
+        out.append(Cell(seg.index, int(k), float(seg.intensity_dn[idx].mean()), idx, vals, errs, views))
     return out
+
+
+def _widen_where_the_scene_shows(cells: list[Cell]) -> list[str]:
+    """The cross-view components in which some cell's partner view lies below 0 beyond chance
+    (``PARTNER_NEGATIVE_P``: the scene repeats under the views' shifts somewhere in the recording); their errors
+    take the views' spread (Birge ratio) in every cell, whatever its sign, so the widening selects no sign."""
+    shown = [comp for comp in CROSS_VIEW if any(c.partner_views.get(comp, (1.0, 1.0))[0] < PARTNER_NEGATIVE_P
+                                                 for c in cells)]
+    for c in cells:
+        for comp in shown:
+            c.errors[comp] *= c.partner_views.get(comp, (1.0, 1.0))[1]
+    return shown
+
+
+def partner_views(per_partner: np.ndarray, used: np.ndarray) -> tuple[float, float]:
+    """(the lowest one-sided p-value of a view's mean cross energy being that far below 0 (Student t over its
+    blocks), the Birge ratio of the views' means (>= 1)) of a cell: ``per_partner`` (N, P) each block's cross
+    energy with each partner view, ``used`` (N, P) where the view is used; views with fewer than 3 blocks are
+    left out ((1, 1) when fewer than two views remain).
+
+    A fixed pattern stays in sensor coordinates and gives each view a_s * a_p >= 0 (its own value: the views
+    differ in exposure, gain, intensity); a scene that repeats under the views' shifts (a grating) gives each
+    view a bias of either sign (the scene's autocorrelation at that shift), the same in every block of the
+    cell, which the blocks' scatter cannot show but the views' spread does."""
+    n = used.sum(axis=0)
+    cols = np.flatnonzero(n >= 3)
+    if cols.size < 2:
+        return 1.0, 1.0
+    x, m, k = per_partner[:, cols], used[:, cols], n[cols]
+    mean = np.sum(x * m, axis=0) / k
+    se = np.sqrt(np.maximum(np.sum(((x - mean) * m) ** 2, axis=0) / (k - 1), MIN_VAR_ERR_DN2**2) / k)
+    w = se**-2.0
+    chi2 = float(np.sum(w * (mean - np.sum(w * mean) / np.sum(w)) ** 2))
+    return float(np.min(t_dist.cdf(mean / se, k - 1))), max(1.0, math.sqrt(chi2 / (cols.size - 1)))
 
 
 def _theoretical_se(vals: dict[str, float], k: int, b: int) -> dict[str, float]:
@@ -772,4 +828,5 @@ def measure_frames(
         shape=(shape[0], shape[1]),
         not_measured=not_measured,
         fixed_shape=shape_of_fixed,
+        scene_in_views=_widen_where_the_scene_shows(cells),
     )

@@ -223,7 +223,11 @@ def position_pattern(comp: Comparison, name: str, extra: Sequence[Effect] = (),
     segment); ``strength``: the block excess variance (DN^4 summed over blocks) the shape explains.
 
     The fixed component counts only in segments measured across views: a single view's fixed pattern is
-    the hold mean's residual, where a region of fine scene texture would read as a position law."""
+    the hold mean's residual, where a region of fine scene texture would read as a position law. A
+    component whose partner views showed the scene (``Measurements.scene_in_views``) has no position
+    pattern: the scene's share of each block follows the optics (vignetting), not the sensor."""
+    if name in comp.meas.scene_in_views:
+        return None
     xs, segs, pos, vs = [], [], [], []
     for j, (sb, comps) in enumerate(comp.predict_with(extra)):
         if name not in sb.seg.values or (name == "fixed" and not sb.seg.partners):
