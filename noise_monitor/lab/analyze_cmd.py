@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .analyze import analyze, component_change_text, write_json
+from .measure import scene_in_views_text
 from .shape import fixed_shape_text
 
 
@@ -57,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
     for what, why in m["not_measured"].items():
         print(f"  not measured ({what}): {why}")
     print(f"  {fixed_shape_text(m['fixed_pattern_shape'])}")
+    if m["scene_in_partner_views"]:
+        print(f"  {scene_in_views_text(m['scene_in_partner_views'])}")
     top = summary["candidates"][:5]
     for c in top:
         mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "

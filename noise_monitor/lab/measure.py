@@ -650,6 +650,15 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
     return out
 
 
+def scene_in_views_text(components: list[str]) -> str:
+    """One line for people from ``Measurements.summary()['scene_in_partner_views']`` ('' when empty)."""
+    if not components:
+        return ""
+    return (f"the scene repeats under the camera's shifts (a periodic texture) in the {', '.join(components)} "
+            "measurements across views: their errors take the views' spread, and a weak pattern there cannot be told "
+            "from the scene")
+
+
 def _widen_where_the_scene_shows(cells: list[Cell]) -> list[str]:
     """The cross-view components in which some cell's partner view lies below 0 beyond chance
     (``PARTNER_NEGATIVE_P``: the scene repeats under the views' shifts somewhere in the recording); their errors

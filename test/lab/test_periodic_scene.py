@@ -41,7 +41,7 @@ def test_views_biased_each_its_own_way_give_their_birge_ratio() -> None:
 
 @pytest.mark.parametrize("name, angle_rad, effect", [("columns", 0.0, None), ("oblique", 0.5, None),
                                                     ("oblique", 0.5, "prnu=3")])
-def test_lab_reads_no_grating_as_fixed_noise(tmp_path, name, angle_rad, effect) -> None:
+def test_lab_reads_no_grating_as_fixed_noise(tmp_path, capsys, name, angle_rad, effect) -> None:
     """Clean bags over a 3 px grating of 60 DN: before, the vertical one read "fixed noise the model lacks
     (columns)" (column z = 11) and the oblique one "(pixel-wise (white))" (fixed z = 24); now nothing, the
     scene named in the measurement. With a hidden 3 % PRNU over the oblique one: found first, within 0.3 points
@@ -52,11 +52,14 @@ def test_lab_reads_no_grating_as_fixed_noise(tmp_path, name, angle_rad, effect) 
     args = ["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "campaign_heldout", "--images",
             str(image), "--image-downsample", "1", "--frames", "120", "--seed", "7"]
     assert cli_main(args + (["--effect", effect] if effect else [])) == 0
+    capsys.readouterr()
     assert cli_main(["analyze", str(bag), "--profile", "ev76c661", "--no-estimator", "--quiet", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
     lab = json.loads(out.read_text())
     top = lab["candidates"][0]
     if effect is None:
         assert "column" in lab["measurement"]["scene_in_partner_views"]
+        assert "the scene repeats under the camera's shifts" in printed
         assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
         assert not any(c["significant"] for c in lab["candidates"])
     else:
