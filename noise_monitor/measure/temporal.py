@@ -23,7 +23,9 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
+from scipy.stats import norm as norm_dist
 
 #: largest |global shift| (px) between consecutive frames of a static run (phase correlation on a
 #: weakly textured noisy frame scatters by up to ~0.1 px; slower drifts are left to the block test)
@@ -129,6 +131,62 @@ class BlockTemporal:
         return s, err / (2.0 * max(s, 1e-6))
 
 
+def _scene_p(residual: np.ndarray, b: int) -> np.ndarray:
+    """(N,) p-value that what the scene-change regressors leave of each frame's deviation from the hold mean
+    (``residual``, k x N x b*b) is white noise of the same energy in every frame, after its row and column
+    means (line noise changing from frame to frame is no scene change): the smaller of Bartlett's test of
+    equal energies over the frames (a textured object passing through part of the hold) and a one-sided test
+    of the neighbours' correlation (a smooth texture moving under the block all hold long: its deviations are
+    smooth, noise is white; calibrated on white noise: ``WHITE_LAG``). A white texture moving under the
+    block all hold long passes both: locally it is noise."""
+    k = residual.shape[0]
+    energy, lag = _energy_and_lag(residual, b)
+    energy = np.maximum(energy, 1e-12)
+    nu = (b - 1) ** 2 - (N_REGRESSORS - 1)  # per frame, after the line means and the other regressors
+    stat = nu * (k * np.log(energy.mean(axis=0)) - np.log(energy).sum(axis=0)) / (1.0 + (k + 1) / (3.0 * k * nu))
+    mu, sd = _white_lag(k, b)
+    return np.minimum(chi2_dist.sf(stat, k - 1), norm_dist.sf((lag / energy.sum(axis=0) - mu) / sd))
+
+
+def _energy_and_lag(residual: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """((k, N) energy of each frame's residual after its row and column means in each block, (N,) the sum over
+    frames of its products with its right and lower neighbours) for ``residual`` (k, N, b*b)."""
+    k = residual.shape[0]
+    r = residual.reshape(k, -1, b, b)
+    r = r - r.mean(axis=2, keepdims=True) - r.mean(axis=3, keepdims=True) + r.mean(axis=(2, 3), keepdims=True)
+    lag = np.sum(r[:, :, 1:, :] * r[:, :, :-1, :], axis=(0, 2, 3)) + np.sum(r[:, :, :, 1:] * r[:, :, :, :-1], axis=(0, 2, 3))
+    return np.sum(r * r, axis=(2, 3)), lag
+
+
+#: block side -> (mean, standard deviation x sqrt(k - 1)) of :func:`_scene_p`'s neighbour correlation on white
+#: noise of k frames; 8 x 8 from :func:`white_lag_monte_carlo` (4,096 blocks per k: mean -0.254 at every k from 2 to
+#: 64, spread 0.170-0.184 rising slowly with k; the largest is kept, so the test errs towards accepting noise)
+WHITE_LAG = {8: (-0.254, 0.184)}
+
+
+def _white_lag(k: int, b: int) -> tuple[float, float]:
+    """Mean and standard deviation of :func:`_scene_p`'s neighbour correlation on white noise of k frames."""
+    mean, spread = WHITE_LAG[b] if b in WHITE_LAG else white_lag_monte_carlo(b)
+    return mean, spread / math.sqrt(k - 1)
+
+
+@lru_cache(maxsize=8)
+def white_lag_monte_carlo(b: int, k: int = 64) -> tuple[float, float]:
+    """(mean, standard deviation x sqrt(k - 1)) of :func:`_scene_p`'s neighbour correlation on white noise of k
+    frames of b x b blocks (seeded Monte-Carlo through the same regressors, 4,096 blocks)."""
+    rng = np.random.default_rng(12345)
+    x = rng.normal(0.0, 1.0, (k, 64 * b, 64 * b)) + 100.0
+    mean = x.mean(axis=0)
+    gy, gx = np.gradient(mean)
+    mb = blocks_of(mean, b)
+    design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, b), blocks_of(gy, b)], axis=2)
+    q, _ = np.linalg.qr(design)
+    d = blocks_of(x, b) - mb[None]
+    energy, lag = _energy_and_lag(d - np.einsum("knr,npr->knp", np.einsum("knp,npr->knr", d, q), q), b)
+    rho = lag / energy.sum(axis=0)
+    return float(rho.mean()), float(rho.std() * math.sqrt(k - 1))
+
+
 def blocks_of(img: np.ndarray, b: int) -> np.ndarray:
     """(..., N, b*b) blocks of the last two axes, row-major over the block grid (edges cut)."""
     h, w = (img.shape[-2] // b) * b, (img.shape[-1] // b) * b
@@ -160,12 +218,13 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
                        blocks_of(gy, block)], axis=2) * use[:, :, None]  # (N, n, 4)
     q, _ = np.linalg.qr(design)
     d = (blocks_of(x, block) - mb[None]) * use[None]  # (k, N, n)
-    explained = np.sum(np.einsum("knp,npr->knr", d, q) ** 2, axis=(0, 2))
+    coef = np.einsum("knp,npr->knr", d, q)
+    explained = np.sum(coef**2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
     m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
     d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (m - N_REGRESSORS)
     ratio = (explained / d1) / np.maximum((total - explained) / d2, 1e-12)
-    p = f_dist.sf(ratio, d1, d2)
+    p = np.minimum(f_dist.sf(ratio, d1, d2), _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
     per_pixel = np.sum(d * d, axis=0) / (k - 1)  # (N, n), zero where excluded
     var = per_pixel.sum(axis=1) / m
     spread = np.sqrt(np.maximum(np.sum(use * (per_pixel - var[:, None]) ** 2, axis=1) / (m - 1), 0.0))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from noise_monitor.measure import block_temporal, global_shift, static_runs
-from noise_monitor.measure.temporal import camera_shift
+from noise_monitor.measure.temporal import WHITE_LAG, camera_shift, white_lag_monte_carlo
 
 H, W = 128, 160
 
@@ -106,6 +106,31 @@ def test_residual_motion_and_flicker_are_rejected_where_the_scene_has_texture() 
     frames[2] = frames[2] * 1.02
     bt = block_temporal(np.stack(frames) + rng.normal(0.0, 1.0, (6, H, W)))
     assert bt.accepted.mean() < 0.05
+
+
+def test_a_fine_texture_moving_under_the_blocks_is_no_noise() -> None:
+    """An object with a fine texture (1 px blur, 12 DN) moving 4 px per frame under every block all hold long:
+    the scene-change regressors (the hold mean's gradients) miss it and the F-test alone accepted 68 % of the
+    blocks as noise; its frame deviations are correlated between neighbours, noise is not. White noise keeps
+    passing. (A *white* texture moving so is noise to any local test: accepted.)"""
+    rng = np.random.default_rng(5)
+    k, side, speed = 3, 128, 4
+    noise = rng.normal(0.0, 2.0, (k, side, side))
+    assert block_temporal(100.0 + noise).accepted.mean() > 0.99
+    tex = cv2.GaussianBlur(rng.standard_normal((side, side + speed * k + 8)), (0, 0), 1.0)
+    tex *= 12.0 / tex.std()
+    moving = np.stack([100.0 + tex[:, 4 + speed * j:4 + speed * j + side] for j in range(k)])
+    assert block_temporal(moving + noise).accepted.mean() < 0.05
+
+
+@pytest.mark.parametrize("k", [2, 8, 32])
+def test_white_noise_neighbour_correlation_constants_hold(k: int) -> None:
+    """The pure-noise test's white-noise calibration for 8 x 8 blocks (``WHITE_LAG``) against a fresh seeded
+    Monte-Carlo: the mean within 0.005, the spread at most 3 % above the constant (which errs towards accepting)."""
+    mean, spread = WHITE_LAG[8]
+    mc_mean, mc_spread = white_lag_monte_carlo(8, k)
+    assert mc_mean == pytest.approx(mean, abs=0.005)
+    assert spread * 0.9 < mc_spread <= spread * 1.03
 
 
 def test_bad_input() -> None:
