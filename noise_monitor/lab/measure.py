@@ -472,8 +472,8 @@ class _SegmentAccumulator:
             # frame differences that do not fit pure noise: residual motion, flicker, a moving object
             # (blinking pixels are temporal noise, measured as temporal_spikes, not a scene change)
             blinking = self._blinking(k)
-            moving = keep & (~block_temporal(np.stack(self.images), b, exclude=blinking).accepted
-                             | (_largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER))
+            static = block_temporal(np.stack(self.images), b, exclude=blinking, whiteness=True).accepted
+            moving = keep & (~static | (_largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER))
             excluded["not_static"] = int(np.sum(moving))
             keep &= ~moving
         self.images = []

@@ -197,11 +197,14 @@ def blocks_of(img: np.ndarray, b: int) -> np.ndarray:
 
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
-                   exclude: np.ndarray | None = None) -> BlockTemporal:
+                   exclude: np.ndarray | None = None, whiteness: bool = False) -> BlockTemporal:
     """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN).
 
     ``exclude``: (N, block * block) pixels left out of the test and the variance (e.g. blinking pixels,
-    noise that is not a scene change but would correlate with the brightness regressor)."""
+    noise that is not a scene change but would correlate with the brightness regressor). ``whiteness``: the
+    pure-noise test also asks what the regressors leave to be white and of equal energy in every frame
+    (:func:`_scene_p`: an object moving under the block; about twice the time, so the lab's, not the live
+    monitor's, whose median over patches keeps such blocks from the frame)."""
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
@@ -224,7 +227,9 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
     d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (m - N_REGRESSORS)
     ratio = (explained / d1) / np.maximum((total - explained) / d2, 1e-12)
-    p = np.minimum(f_dist.sf(ratio, d1, d2), _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
+    p = f_dist.sf(ratio, d1, d2)
+    if whiteness:
+        p = np.minimum(p, _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
     per_pixel = np.sum(d * d, axis=0) / (k - 1)  # (N, n), zero where excluded
     var = per_pixel.sum(axis=1) / m
     spread = np.sqrt(np.maximum(np.sum(use * (per_pixel - var[:, None]) ** 2, axis=1) / (m - 1), 0.0))
