@@ -6,7 +6,8 @@ that changes every frame, and vignetting in sensor coordinates.
 Two variants: ``tuned`` (scikit-image photographs, procedural textures; the lab was developed on it) and
 ``heldout`` (matplotlib and PyWavelets photographs, other textures, hold lengths, pans, exposure and
 temperature laws; never used to tune the lab). Either can take a user's own scenes for its photo panels
-(``make_world(..., photos=...)``, ``simulate-bag --images``).
+(``make_world(..., photos=...)``, ``simulate-bag --images``) and objects moving through the view while the
+camera holds still (``moving_objects``, ``simulate-bag --moving-objects``).
 """
 from __future__ import annotations
 
@@ -185,3 +186,47 @@ def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray) -> tuple[np.n
     y = fp.y * (world.shape[0] - h - 1)
     win = cv2.getRectSubPix(world, (w, h), (x + (w - 1) / 2.0, y + (h - 1) / 2.0))
     return np.clip(win * vignette * np.float32(fp.brightness), 0.0, 255.0), (round(x, 4), round(y, 4))
+
+
+@dataclass(frozen=True)
+class MovingObject:
+    """An object crossing the view (a person or a vehicle passing a parked camera), in view coordinates: its
+    top-left corner at frame 0 and its velocity (px, px per frame; it wraps around the view), and its clean
+    texture (DN; its shape)."""
+
+    y0: float
+    x0: float
+    vy: float
+    vx: float
+    texture: np.ndarray
+
+
+def moving_objects(rng: np.random.Generator, n: int, height: int, width: int) -> list[MovingObject]:
+    """``n`` objects of 30-90 x 15-40 px with a smooth texture (2.5 px blur, 25 DN about a level of 30-220 DN),
+    2-8 px per frame across the view and up to 2 down or up."""
+    out = []
+    for _ in range(n):
+        tex = cv2.GaussianBlur(rng.standard_normal((90, 40)), (0, 0), 2.5)
+        y0, x0 = rng.uniform(0, height * 200 / 256), rng.uniform(-width * 100 / 320, width * 300 / 320)
+        vy, vx = rng.uniform(-2, 2), rng.choice([-1, 1]) * rng.uniform(2, 8)
+        h, w = int(rng.integers(30, 90)), int(rng.integers(15, 40))
+        level = rng.uniform(30, 220)
+        out.append(MovingObject(y0, x0, vy, vx, (level + 25.0 * tex / tex.std())[:h, :w].astype(np.float32)))
+    return out
+
+
+def paint(clean: np.ndarray, objects: Sequence[MovingObject], index: int) -> tuple[np.ndarray, bool]:
+    """The clean view with the objects at frame ``index`` painted over it (clipped to 0..255), and whether any
+    object is in view."""
+    out = clean.copy()
+    h, w = out.shape
+    seen = False
+    for o in objects:
+        th, tw = o.texture.shape
+        y = int(o.y0 + o.vy * index) % (h + 60) - 30
+        x = int(o.x0 + o.vx * index) % (w + 80) - 40
+        ys, xs = slice(max(y, 0), min(y + th, h)), slice(max(x, 0), min(x + tw, w))
+        if ys.start < ys.stop and xs.start < xs.stop:
+            out[ys, xs] = np.clip(o.texture[ys.start - y:ys.stop - y, xs.start - x:xs.stop - x], 0, 255)
+            seen = True
+    return out, seen

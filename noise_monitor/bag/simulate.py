@@ -90,6 +90,7 @@ def simulate_bag(
     start_ns: int = START_NS,
     frame_hook: FrameHook | None = None,
     images: ImageSet | None = None,
+    moving_objects: int = 0,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -104,7 +105,10 @@ def simulate_bag(
     effect outside the noise model (:class:`FrameHook`), e.g. a response non-linearity or amplifier glow;
     it draws from its own random generator, so the model's noise is that of the bag without it. ``images``:
     a campaign's photo panels from these images (a user's own scenes, ``user_images.load_image_set``) instead of
-    its variant's photographs; named in the truth sidecar.
+    its variant's photographs; named in the truth sidecar. ``moving_objects``: that many objects crossing a
+    campaign's view (:func:`.campaign.moving_objects`: people or vehicles passing while the camera holds still),
+    painted into the clean view before the noise, from their own random generator (the campaign is that of the
+    seed without them).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -120,6 +124,11 @@ def simulate_bag(
         raise ValueError(f"hold_s must be in [0, 1e6] s, got {hold_s}")
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
+    if moving_objects and not scen.campaign:
+        raise ValueError(f"moving objects cross a campaign scenario's view; {scen.name!r} is none "
+                         f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
+    if not 0 <= moving_objects <= 100:
+        raise ValueError(f"moving_objects must be 0-100, got {moving_objects}")
     if images is not None and not scen.campaign:
         raise ValueError(f"own images make the photo panels of a campaign scenario; {scen.name!r} is none "
                          f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
@@ -138,6 +147,8 @@ def simulate_bag(
         world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images)
         plans = campaign.plan(rng, frames, scen.campaign)
         vignette = campaign.vignetting(height, width, campaign.LAWS[scen.campaign].vignetting)
+        # their own generator: the campaign's world, plan and noise stay those of the seed without objects
+        movers = campaign.moving_objects(np.random.default_rng([seed, 1]), moving_objects, height, width)
         steps = [Step(gain_db=p.gain_db, exposure_time_s=p.exposure_time_s, sensor_temperature_c=p.sensor_temperature_c,
                       brightness=p.brightness, moving=p.moving) for p in plans]
     else:
@@ -160,6 +171,7 @@ def simulate_bag(
             stated = _stated(true_meta, step)
             if scen.campaign:
                 clean, offset = campaign.render(world, plans[i], vignette)
+                clean = campaign.paint(clean, movers, i)[0]
             else:
                 window, offset = view(world, positions[i], height, width)
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
@@ -195,6 +207,7 @@ def simulate_bag(
         "bag": out.name, "profile": prof.name, "scenario": scen.name, "description": scen.description,
         "effects": effect_specs, **({"frame_hook": frame_hook.truth} if frame_hook is not None else {}),
         **({"images": list(images.names), "images_key": images.key} if images is not None else {}),
+        **({"moving_objects": moving_objects} if moving_objects else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "

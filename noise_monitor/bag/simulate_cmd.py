@@ -42,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "PNG / JPEG / TIFF / BMP / PGM / NPY images) instead of the bundled photographs")
     parser.add_argument("--image-downsample", type=int, default=2,
                         help="area-downsample --images by this factor first (1-4; default 2)")
+    parser.add_argument("--moving-objects", type=int, default=0, metavar="N",
+                        help="campaign scenarios: N objects with a smooth texture crossing the view at 2-8 px per "
+                             "frame (people, vehicles passing a parked camera; default 0)")
 
 
 def _start_ns(text: str | None) -> int:
@@ -64,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,
-                       start_ns=_start_ns(args.start), images=images)
+                       start_ns=_start_ns(args.start), images=images, moving_objects=args.moving_objects)
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),
                "profile": truth["profile"], "scenario": truth["scenario"], "effects": truth["effects"],

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from noise_monitor.bag import campaign
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.scenarios import EPISODE, SCENARIOS, get_scenario
 from noise_monitor.bag.scenes import camera_path, make_world, view
@@ -118,3 +119,23 @@ def test_simulate_bag_command(tmp_path, capsys):
     assert main(["simulate-bag", str(tmp_path / "x.mcap"), "--profile", "ev76c661", "--scenario", "static",
                  "--effect", "nonsense=3"]) == 2
     assert "unknown effect 'nonsense'" in capsys.readouterr().err
+
+
+def test_moving_objects_cross_a_campaign_view_and_only_a_campaign(tmp_path) -> None:
+    """Each object is painted at its own place in each frame (the texture's rows and columns as they enter the
+    view), moving by its velocity; a scenario without campaign views refuses them."""
+    objects = campaign.moving_objects(np.random.default_rng(0), 1, 256, 320)
+    o = objects[0]
+    clean = np.full((256, 320), 100.0, np.float32)
+    frames = [campaign.paint(clean, objects, i) for i in range(12)]
+    for i, (painted, seen) in enumerate(frames):
+        y, x = int(o.y0 + o.vy * i) % (256 + 60) - 30, int(o.x0 + o.vx * i) % (320 + 80) - 40
+        changed = np.argwhere(painted != clean)
+        assert seen == bool(changed.size)
+        if changed.size:
+            assert changed[:, 0].min() >= max(y, 0) and changed[:, 1].min() >= max(x, 0)
+            yy, xx = changed[0]
+            assert painted[yy, xx] == pytest.approx(np.clip(o.texture[yy - y, xx - x], 0, 255))
+    assert sum(seen for _, seen in frames) >= 6
+    with pytest.raises(ValueError, match="campaign scenario"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, moving_objects=2)
