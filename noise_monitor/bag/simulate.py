@@ -171,7 +171,8 @@ def simulate_bag(
             stated = _stated(true_meta, step)
             if scen.campaign:
                 clean, offset = campaign.render(world, plans[i], vignette)
-                clean = campaign.paint(clean, movers, i)[0]
+                if movers:
+                    clean = campaign.paint(clean, movers, i)[0]
             else:
                 window, offset = view(world, positions[i], height, width)
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)

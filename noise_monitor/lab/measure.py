@@ -671,9 +671,7 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
 
 
 def scene_in_views_text(components: list[str]) -> str:
-    """One line for people from ``Measurements.summary()['scene_in_partner_views']`` ('' when empty)."""
-    if not components:
-        return ""
+    """One line for people from ``Measurements.summary()['scene_in_partner_views']`` (not empty)."""
     return (f"the scene repeats under the camera's shifts (a periodic texture) in the {', '.join(components)} "
             "measurements across views: their errors take the views' spread, and a weak pattern there cannot be told "
             "from the scene")

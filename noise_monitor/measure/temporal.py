@@ -174,17 +174,26 @@ def _white_lag(k: int, b: int) -> tuple[float, float]:
 def white_lag_monte_carlo(b: int, k: int = 64) -> tuple[float, float]:
     """(mean, standard deviation x sqrt(k - 1)) of :func:`_scene_p`'s neighbour correlation on white noise of k
     frames of b x b blocks (seeded Monte-Carlo through the same regressors, 4,096 blocks)."""
-    rng = np.random.default_rng(12345)
-    x = rng.normal(0.0, 1.0, (k, 64 * b, 64 * b)) + 100.0
+    x = np.random.default_rng(12345).normal(0.0, 1.0, (k, 64 * b, 64 * b)) + 100.0
+    _, d, q, coef = _regression(x, b, np.ones((64 * 64, b * b), dtype=bool))
+    energy, lag = _energy_and_lag(d - np.einsum("knr,npr->knp", coef, q), b)
+    rho = lag / energy.sum(axis=0)
+    return float(rho.mean()), float(rho.std() * math.sqrt(k - 1))
+
+
+def _regression(x: np.ndarray, b: int, use: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(block pixels of the hold mean (N, n), the frames' deviations from it (k, N, n), the scene-change
+    regressors' orthonormal basis (N, n, 4), the deviations' coefficients on it (k, N, 4)) of ``x`` (k x H x W)
+    in b x b blocks, pixels outside ``use`` (N, n) left out: an offset, a brightness scaling and sub-pixel motion
+    along the mean image's gradients."""
     mean = x.mean(axis=0)
     gy, gx = np.gradient(mean)
     mb = blocks_of(mean, b)
-    design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, b), blocks_of(gy, b)], axis=2)
+    design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, b),
+                       blocks_of(gy, b)], axis=2) * use[:, :, None]
     q, _ = np.linalg.qr(design)
-    d = blocks_of(x, b) - mb[None]
-    energy, lag = _energy_and_lag(d - np.einsum("knr,npr->knp", np.einsum("knp,npr->knr", d, q), q), b)
-    rho = lag / energy.sum(axis=0)
-    return float(rho.mean()), float(rho.std() * math.sqrt(k - 1))
+    d = (blocks_of(x, b) - mb[None]) * use[None]
+    return mb, d, q, np.einsum("knp,npr->knr", d, q)
 
 
 def blocks_of(img: np.ndarray, b: int) -> np.ndarray:
@@ -211,17 +220,11 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
-    mean = x.mean(axis=0)
-    gy, gx = np.gradient(mean)
-    mb = blocks_of(mean, block)  # (N, n)
-    use = np.ones(mb.shape, dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
-    if use.shape != mb.shape:
-        raise ValueError(f"exclude must have shape {mb.shape} (blocks x pixels), got {use.shape}")
-    design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, block),
-                       blocks_of(gy, block)], axis=2) * use[:, :, None]  # (N, n, 4)
-    q, _ = np.linalg.qr(design)
-    d = (blocks_of(x, block) - mb[None]) * use[None]  # (k, N, n)
-    coef = np.einsum("knp,npr->knr", d, q)
+    n_blocks = (x.shape[1] // block) * (x.shape[2] // block)
+    use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    if use.shape != (n_blocks, block * block):
+        raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
+    mb, d, q, coef = _regression(x, block, use)
     explained = np.sum(coef**2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
     m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
