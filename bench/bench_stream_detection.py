@@ -16,6 +16,7 @@ errors sit per image.
 
 Usage: .venv/bin/python bench/bench_stream_detection.py [--seeds 1 2 3] [--heldout-seeds 21 22 23]
        [--frames 100] [--width 320 --height 256] [--params config/node.yaml] [--threads 1] [--single-photo]
+       [--vibration PX]
        [--json out/stream_detection.json]
 Prints figures; asserts nothing.
 """
@@ -46,6 +47,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1, help="torch threads")
     ap.add_argument("--single-photo", action="store_true",
                     help="also held-out campaigns whose photo panels come from one photograph each")
+    ap.add_argument("--vibration", type=float, default=0.0, metavar="PX",
+                    help="the cameras vibrate by PX rms per axis, independently per frame (simulate-bag --vibration)")
     ap.add_argument("--json")
     args = ap.parse_args()
     per_bag: dict[str, list[dict[str, Any]]] = {"tuned": [], "held-out": []}
@@ -58,7 +61,7 @@ def main() -> None:
     for label, scenario, seed, photo in runs:
         one_photo = ImageSet((photo,), (photos[photo],), 1) if photo else None
         row = evaluate_stream(PROFILE, [seed], one_photo, scenario, args.frames, args.width, args.height,
-                              params=args.params, threads=args.threads)["bags"][0]
+                              params=args.params, threads=args.threads, vibration_px=args.vibration)["bags"][0]
         per_bag.setdefault(label, []).append(row)
         print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
               f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "

@@ -7,7 +7,8 @@ Two variants: ``tuned`` (scikit-image photographs, procedural textures; the lab 
 ``heldout`` (matplotlib and PyWavelets photographs, other textures, hold lengths, pans, exposure and
 temperature laws; never used to tune the lab). Either can take a user's own scenes for its photo panels
 (``make_world(..., photos=...)``, ``simulate-bag --images``) and objects moving through the view while the
-camera holds still (``moving_objects``, ``simulate-bag --moving-objects``).
+camera holds still (``moving_objects``, ``simulate-bag --moving-objects``), and a camera that vibrates (``vibration``,
+``simulate-bag --vibration``: a parked robot with its motors running, a mast in the wind).
 """
 from __future__ import annotations
 
@@ -178,14 +179,24 @@ def vignetting(height: int, width: int, strength: float) -> np.ndarray:
     return (1.0 - strength * r2 / 2.0).astype(np.float32)
 
 
-def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
+def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray,
+           shake: tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, tuple[float, float]]:
     """The clean view (DN, float32) of a frame: bilinear sub-pixel crop of the world, times the
-    brightness and the vignetting, clipped to 0..255; and its top-left corner in world pixels."""
+    brightness and the vignetting, clipped to 0..255; and its nominal top-left corner in world pixels.
+    ``shake``: the view's displacement (dx, dy, px) from that corner by vibration."""
     h, w = vignette.shape
     x = fp.x * (world.shape[1] - w - 1)
     y = fp.y * (world.shape[0] - h - 1)
-    win = cv2.getRectSubPix(world, (w, h), (x + (w - 1) / 2.0, y + (h - 1) / 2.0))
+    cx = min(max(x + shake[0], 0.0), world.shape[1] - w - 1.0) + (w - 1) / 2.0
+    cy = min(max(y + shake[1], 0.0), world.shape[0] - h - 1.0) + (h - 1) / 2.0
+    win = cv2.getRectSubPix(world, (w, h), (cx, cy))
     return np.clip(win * vignette * np.float32(fp.brightness), 0.0, 255.0), (round(x, 4), round(y, 4))
+
+
+def vibration(rng: np.random.Generator, frames: int, rms_px: float) -> np.ndarray:
+    """(frames, 2) displacements (dx, dy, px) of a vibrating camera, independent from frame to frame (a
+    vibration far faster than the frame rate), Gaussian with ``rms_px`` per axis."""
+    return rng.normal(0.0, rms_px, (frames, 2)) if rms_px > 0 else np.zeros((frames, 2))
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,7 @@ def static_holds(bag: Path, profile: str | Path | None, min_frames: int, max_fra
                     hold.total += image
                     hold.squares += image**2
                 continue
-            still.hold_meta = m
+            still.restart(m)
             if hold is not None and hold.frames >= min_frames:
                 yield hold
             hold = Hold(frame.index, frame.index, 1, image.copy(), image**2, m.gain_db, m.exposure_time_s)

@@ -70,6 +70,8 @@ def _stated(meta, step: Step):
 MIN_SIDE, MAX_SIDE = 8, 8192
 MAX_FRAMES = 1_000_000
 MAX_FPS = 10_000.0
+#: largest rms vibration (px per axis) of a simulated campaign camera
+MAX_VIBRATION_PX = 5.0
 
 
 def simulate_bag(
@@ -91,6 +93,7 @@ def simulate_bag(
     frame_hook: FrameHook | None = None,
     images: ImageSet | None = None,
     moving_objects: int = 0,
+    vibration_px: float = 0.0,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -108,7 +111,9 @@ def simulate_bag(
     its variant's photographs; named in the truth sidecar. ``moving_objects``: that many objects crossing a
     campaign's view (:func:`.campaign.moving_objects`: people or vehicles passing while the camera holds still),
     painted into the clean view before the noise, from their own random generator (the campaign is that of the
-    seed without them).
+    seed without them). ``vibration_px``: a campaign camera that vibrates, its view displaced every frame by an
+    independent Gaussian of this rms per axis (:func:`.campaign.vibration`, own generator; the truth's
+    ``offset_px`` and ``moving`` stay the nominal pose's, ``shake_px`` holds the displacement).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -129,6 +134,11 @@ def simulate_bag(
                          f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
     if not 0 <= moving_objects <= 100:
         raise ValueError(f"moving_objects must be 0-100, got {moving_objects}")
+    if vibration_px and not scen.campaign:
+        raise ValueError(f"vibration shakes a campaign scenario's camera; {scen.name!r} is none "
+                         f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
+    if not 0 <= vibration_px <= MAX_VIBRATION_PX:
+        raise ValueError(f"vibration_px must be 0-{MAX_VIBRATION_PX:g} px, got {vibration_px}")
     if images is not None and not scen.campaign:
         raise ValueError(f"own images make the photo panels of a campaign scenario; {scen.name!r} is none "
                          f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
@@ -149,6 +159,7 @@ def simulate_bag(
         vignette = campaign.vignetting(height, width, campaign.LAWS[scen.campaign].vignetting)
         # their own generator: the campaign's world, plan and noise stay those of the seed without objects
         movers = campaign.moving_objects(np.random.default_rng([seed, 1]), moving_objects, height, width)
+        shakes = campaign.vibration(np.random.default_rng([seed, 2]), frames, vibration_px)
         steps = [Step(gain_db=p.gain_db, exposure_time_s=p.exposure_time_s, sensor_temperature_c=p.sensor_temperature_c,
                       brightness=p.brightness, moving=p.moving) for p in plans]
     else:
@@ -170,7 +181,7 @@ def simulate_bag(
                                       sensor_temperature_c=step.sensor_temperature_c)
             stated = _stated(true_meta, step)
             if scen.campaign:
-                clean, offset = campaign.render(world, plans[i], vignette)
+                clean, offset = campaign.render(world, plans[i], vignette, (shakes[i, 0], shakes[i, 1]))
                 if movers:
                     clean = campaign.paint(clean, movers, i)[0]
             else:
@@ -199,6 +210,7 @@ def simulate_bag(
                 "corrupted": step.corrupted,
                 "brightness": round(step.brightness, 5),
                 "offset_px": list(offset),
+                **({"shake_px": [round(float(v), 4) for v in shakes[i]]} if vibration_px else {}),
                 "moving": prev_offset is not None and offset != prev_offset,
                 **({"hold": plans[i].hold} if scen.campaign else {}),
                 "mean_dn": round(float(clean.mean()), 3),
@@ -209,6 +221,7 @@ def simulate_bag(
         "effects": effect_specs, **({"frame_hook": frame_hook.truth} if frame_hook is not None else {}),
         **({"images": list(images.names), "images_key": images.key} if images is not None else {}),
         **({"moving_objects": moving_objects} if moving_objects else {}),
+        **({"vibration_px": vibration_px} if vibration_px else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "

@@ -41,7 +41,7 @@ from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as t_dist
 
-from ..measure.temporal import STATIC_SHIFT_PX, block_temporal, camera_shift
+from ..measure.temporal import HOLD_SHIFT_PX, block_temporal, camera_shift, steady_run
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
@@ -396,10 +396,7 @@ class _SegmentAccumulator:
         self.slope += blocks @ self.slopes
         self.s1 += r
         self.s2_pixel += r * r
-        energy, col, row = _energies(r, self.b)
-        self.s2 += energy
-        self.s2_col += col
-        self.s2_row += row
+        self._add_energies(r)
         self.mean += blocks.mean(axis=1)
         self.frames.append(frame_index)
         self.metas.append(meta)
@@ -411,7 +408,26 @@ class _SegmentAccumulator:
         level = np.median(vp, axis=1, keepdims=True) / (chi2_dist.median(k - 1) / (k - 1))
         return vp > SPIKE_FACTOR * level
 
+    def _add_energies(self, r: np.ndarray) -> None:
+        energy, col, row = _energies(r, self.b)
+        self.s2 += energy
+        self.s2_col += col
+        self.s2_row += row
+
+    def _steady(self) -> None:
+        """The frames' energies again, with the camera's vibration taken out of every pixel
+        (:func:`..measure.temporal.steady_run`; nothing when the camera did not move). The frames themselves stay
+        for the pure-noise test, which rejects the blocks where the motion shows, and the per-pixel sums for the
+        blinking pixels (calibrated on k - 1 degrees of freedom per pixel, fewer after the regression)."""
+        steady = steady_run(np.stack(self.images), self.b)[0] if len(self.images) >= 4 else None
+        if steady is None:
+            return
+        self.s2, self.s2_col, self.s2_row = np.zeros_like(self.s2), np.zeros_like(self.s2), np.zeros_like(self.s2)
+        for img in steady:
+            self._add_energies(_blocks(img, self.b) @ self.proj)
+
     def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> _Full:
+        self._steady()
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
@@ -799,10 +815,11 @@ def measure_frames(
         hist += np.bincount(idx.ravel(), minlength=hist.size)
         meta = fr.metadata
         assert meta is not None  # skip_reason checked it
-        # a segment is a static hold: the camera does not move (global shift) and the metadata agree
+        # a segment is a static hold: the camera stays within HOLD_SHIFT_PX of the hold's first frame (global
+        # shifts accumulated: a vibrating camera returns about one pose) and the metadata agree
         shift = np.asarray(camera_shift(prev, img)) if prev is not None else np.zeros(2)
-        moved = math.hypot(*shift) > STATIC_SHIFT_PX
         pose = pose + shift
+        moved = acc is not None and math.hypot(*(pose - acc.pose)) > HOLD_SHIFT_PX
         prev = img
         if (acc is None or moved or len(acc.frames) >= tolerance.max_frames
                 or not tolerance.same(acc.metas[0], meta)):

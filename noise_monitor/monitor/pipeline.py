@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from noise_monitor.estimator.inference import clear_decisions
+from noise_monitor.measure.temporal import blocks_of
 from noise_monitor.physics import CameraMetadata, EffectError, NoiseModel
 from noise_monitor.physics.constants import PAPER_EFFECTS as SOURCES
 from noise_monitor.physics.constants import SMOOTH_KERNEL
@@ -26,6 +27,7 @@ from .frame import skip_reason as frame_skip_reason
 from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
+from .temporal import BLOCK as TEMPORAL_BLOCK
 from .temporal import TemporalMeasurement, TemporalNoise
 
 #: MonitorConfig fields that may change while the monitor runs (thresholds, alarm and filter settings).
@@ -370,12 +372,18 @@ class Monitor:
         """(xi of the static hold's temporal measurement, its standard error), None without accepted blocks.
 
         The model is evaluated on the hold's temporal mean (the scene without its temporal noise) at the
-        hold frames' mean metadata (the measurement pools those frames)."""
+        hold frames' mean metadata (the measurement pools those frames), on the blocks measured: where only
+        some pass the pure-noise test (a vibrating camera keeps the flat ones) their intensities are not the
+        patch's."""
         ok = np.isfinite(tm.sigma_dn)
         if not ok.any():
             return None
         smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in tm.mean_patches[ok]])
-        model_t = predict_patches(self.temporal_model, smooth, tm.meta, self.config.model_mode)["total"]
+        blocks = blocks_of(smooth, TEMPORAL_BLOCK)  # (patches, blocks, pixels)
+        per_block = predict_patches(self.temporal_model, blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK), tm.meta,
+                                    self.config.model_mode)["total"].reshape(blocks.shape[:2])
+        acc = tm.accepted[ok]
+        model_t = np.sqrt(np.sum(acc * per_block**2, axis=1) / acc.sum(axis=1))
         d = model_t - tm.sigma_dn[ok]
         n = int(ok.sum())
         spread = float(np.std(d)) if n > 1 else 0.0

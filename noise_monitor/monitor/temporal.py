@@ -1,6 +1,6 @@
 """The stream's measurement of the noise: frame differences on static patches (``sigma_temporal``).
 
-While the camera holds still (global shift between consecutive frames below a fraction of a pixel,
+While the camera holds still (within a pixel of the hold's first frame by global shift,
 same gain and exposure, temperature within a tolerance), the patches chosen on the first frame of the
 hold are cut from every frame at the same sensor position. Frame differences cancel the scene, so
 their statistics measure the temporal noise without reading texture as noise; each 8x8 block must pass
@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from noise_monitor.measure import block_temporal, global_shift
-from noise_monitor.measure.temporal import STATIC_SHIFT_PX
+from noise_monitor.measure.temporal import HOLD_SHIFT_PX
 from noise_monitor.physics import CameraMetadata
 
 #: edge (px) of the downsampled frame the global motion is estimated on
@@ -42,6 +42,7 @@ class TemporalMeasurement:
     mean_patches: np.ndarray  # (K, size, size) temporal mean of the hold: the scene without temporal noise
     frames: int
     accepted_fraction: float
+    accepted: np.ndarray  # (K, (size // BLOCK)^2) the blocks measured, row-major in each patch
     meta: CameraMetadata  # the measured frames' mean metadata (what the model is evaluated at)
 
 
@@ -55,17 +56,22 @@ def _same_conditions(a: CameraMetadata, b: CameraMetadata, temperature_tol_c: fl
 
 class StillCamera:
     """Whether each frame continues a static hold: the conditions of the hold's first frame (within the
-    tolerances above; the temperature's within ``temperature_tol_c``) and a global shift from the previous frame
-    within ``STATIC_SHIFT_PX``."""
+    tolerances above; the temperature's within ``temperature_tol_c``) and a global shift from the hold's first
+    frame within ``HOLD_SHIFT_PX`` (a vibrating camera stays about its pose; a pan or a drift leaves it)."""
 
     def __init__(self, temperature_tol_c: float = TEMPERATURE_TOL_C) -> None:
         self.temperature_tol_c = temperature_tol_c
         self.hold_meta: CameraMetadata | None = None  # the current hold's first frame's metadata
-        self._small: np.ndarray | None = None
+        self._ref: np.ndarray | None = None  # the hold's first frame, downsampled
+        self._latest: np.ndarray | None = None
         self._scale = 1.0
 
     def reset(self) -> None:
-        self.hold_meta, self._small = None, None
+        self.hold_meta, self._ref, self._latest = None, None, None
+
+    def restart(self, meta: CameraMetadata) -> None:
+        """The latest frame starts the next hold (whatever :meth:`continues` said: e.g. another image size)."""
+        self.hold_meta, self._ref = meta, self._latest
 
     def _motion_image(self, image: np.ndarray) -> np.ndarray:
         h, w = image.shape
@@ -75,15 +81,14 @@ class StillCamera:
 
     def continues(self, image: np.ndarray, meta: CameraMetadata) -> bool:
         """Whether this frame continues the current hold; one that does not starts the next hold."""
-        small = self._motion_image(image)
-        prev, self._small = self._small, small
+        self._latest = small = self._motion_image(image)
         still = False
-        if prev is not None and prev.shape == small.shape and self.hold_meta is not None \
+        if self._ref is not None and self._ref.shape == small.shape and self.hold_meta is not None \
                 and _same_conditions(self.hold_meta, meta, self.temperature_tol_c):
-            dx, dy, _ = global_shift(prev, small)
-            still = math.hypot(dx, dy) * self._scale <= STATIC_SHIFT_PX
+            dx, dy, _ = global_shift(self._ref, small)
+            still = math.hypot(dx, dy) * self._scale <= HOLD_SHIFT_PX
         if not still:
-            self.hold_meta = meta
+            self.restart(meta)
         return still
 
 
@@ -110,7 +115,7 @@ class TemporalNoise:
         starts a new hold."""
         if self._still.continues(image, meta) and size == self._size:
             return True
-        self._still.hold_meta = meta
+        self._still.restart(meta)
         return False
 
     def update(self, image: np.ndarray, meta: CameraMetadata, corners: list[tuple[int, int]],
@@ -145,7 +150,7 @@ class TemporalNoise:
             sigma = np.sqrt(np.maximum(v, 0.0))
             sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
-                                   float(stats.accepted.mean()), mean_metadata(self._metas))
+                                   float(stats.accepted.mean()), acc, mean_metadata(self._metas))
 
 
 def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:

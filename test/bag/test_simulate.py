@@ -139,3 +139,24 @@ def test_moving_objects_cross_a_campaign_view_and_only_a_campaign(tmp_path) -> N
     assert sum(seen for _, seen in frames) >= 6
     with pytest.raises(ValueError, match="campaign scenario"):
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, moving_objects=2)
+
+
+def test_a_vibrating_campaign_camera_shakes_about_its_nominal_pose(tmp_path) -> None:
+    """``--vibration``: every frame's view displaced by an independent Gaussian (recorded as ``shake_px``, rms
+    as asked), the nominal pose, holds and the noise's generator those of the bag without it; refused outside a
+    campaign and beyond its range."""
+    still = load_truth(simulate_bag(tmp_path / "a.mcap", "ev76c661", "campaign_heldout", frames=40, seed=3))
+    shaken = load_truth(simulate_bag(tmp_path / "b.mcap", "ev76c661", "campaign_heldout", frames=40, seed=3,
+                                     vibration_px=0.3))
+    assert shaken["vibration_px"] == 0.3 and "vibration_px" not in still
+    shake = np.array([f["shake_px"] for f in shaken["frames"]])
+    assert shake.std() == pytest.approx(0.3, rel=0.3) and np.abs(np.diff(shake, axis=0)).max() > 0.3
+    for a, b in zip(still["frames"], shaken["frames"]):
+        assert (a["offset_px"], a["moving"], a["hold"]) == (b["offset_px"], b["moving"], b["hold"])
+    with open_bag(tmp_path / "a.mcap") as ra, open_bag(tmp_path / "b.mcap") as rb:
+        for fa, fb in zip(ra.frames(), rb.frames()):  # the view moved under the noise
+            assert np.abs(np.asarray(fa.image_dn, float) - np.asarray(fb.image_dn, float)).mean() > 0.5
+    with pytest.raises(ValueError, match="campaign scenario"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, vibration_px=0.2)
+    with pytest.raises(ValueError, match="vibration_px"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "campaign", frames=4, vibration_px=9.0)
