@@ -351,7 +351,7 @@ def _largest_cluster(mask: np.ndarray, b: int) -> np.ndarray:
 @lru_cache(maxsize=256)
 def spike_fraction(k: int, pixels: int) -> float:
     """The share of white-noise pixels that ``_SegmentAccumulator._blinking`` flags in a block of ``pixels`` with
-    ``k`` frames. Its level is the block's own median, whose scatter the chi-square tail alone leaves out (it
+    ``k`` frames (k - 1 degrees of freedom per pixel). Its level is the block's own median, whose scatter the chi-square tail alone leaves out (it
     undercounts by 15 % at 2 frames and 50-90 % at 5-9 for 8 x 8 blocks, enough to read a clean recording as
     blinking pixels). A flagged pixel lies above the median, so the median is that of the other ``pixels`` - 1;
     their median is drawn (seeded, ``SPIKE_DRAWS``) and the tail beyond SPIKE_FACTOR x the level it gives averaged."""
@@ -380,6 +380,8 @@ class _SegmentAccumulator:
         self.s2_pixel: Any = None
         self.mean: Any = None
         self.slope: Any = None
+        self.pixel_var: np.ndarray | None = None  # (N, b*b) per-pixel temporal variance once vibration is removed
+        self.dof = 0  # its degrees of freedom (k - 1 without vibration)
 
     def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
         self.images.append(img.astype(np.float32))
@@ -399,13 +401,14 @@ class _SegmentAccumulator:
         self._add_energies(r)
         self.mean += blocks.mean(axis=1)
         self.frames.append(frame_index)
+        self.dof = len(self.frames) - 1
         self.metas.append(meta)
 
     def _blinking(self, k: int) -> np.ndarray:
         """(N, b*b) blinking pixels: per-pixel temporal variance beyond SPIKE_FACTOR x the block's typical
-        one (its median, scaled to the chi-square mean)."""
-        vp = (self.s2_pixel - self.s1**2 / k) / (k - 1)
-        level = np.median(vp, axis=1, keepdims=True) / (chi2_dist.median(k - 1) / (k - 1))
+        one (its median, scaled to the chi-square mean of the ``dof`` degrees of freedom)."""
+        vp = (self.s2_pixel - self.s1**2 / k) / (k - 1) if self.pixel_var is None else self.pixel_var
+        level = np.median(vp, axis=1, keepdims=True) / (chi2_dist.median(self.dof) / self.dof)
         return vp > SPIKE_FACTOR * level
 
     def _add_energies(self, r: np.ndarray) -> None:
@@ -415,16 +418,17 @@ class _SegmentAccumulator:
         self.s2_row += row
 
     def _steady(self) -> None:
-        """The frames' energies again, with the camera's vibration taken out of every pixel
-        (:func:`..measure.temporal.steady_run`; nothing when the camera did not move). The frames themselves stay
-        for the pure-noise test, which rejects the blocks where the motion shows, and the per-pixel sums for the
-        blinking pixels (calibrated on k - 1 degrees of freedom per pixel, fewer after the regression)."""
-        steady = steady_run(np.stack(self.images), self.b)[0] if len(self.images) >= 4 else None
+        """The frames' energies and per-pixel variances again, with the camera's vibration taken out of every pixel
+        (:func:`..measure.temporal.steady_run`; nothing when the camera did not move); the frames themselves stay
+        for the pure-noise test, which rejects the blocks where the motion shows."""
+        steady = steady_run(np.stack(self.images), self.b)
         if steady is None:
             return
         self.s2, self.s2_col, self.s2_row = np.zeros_like(self.s2), np.zeros_like(self.s2), np.zeros_like(self.s2)
-        for img in steady:
+        for img in steady.frames:
             self._add_energies(_blocks(img, self.b) @ self.proj)
+        self.pixel_var = sum((_blocks(r, self.b) @ self.proj) ** 2 for r in steady.residual) / steady.dof
+        self.dof = steady.dof
 
     def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> _Full:
         self._steady()
@@ -499,7 +503,7 @@ class _SegmentAccumulator:
         region = (3 * iy // max(gy, 1)) * 3 + (3 * ix // max(gx, 1))
         h, w = shape if shape is not None else (gy * b, gx * b)
         position = np.stack([(iy + 0.5) * b / h, (ix + 0.5) * b / w], axis=1)
-        return _Full(self.index, _mean_meta(self.metas), self.stamp_ns, list(self.frames), self.pose,
+        return _Full(self.index, _mean_meta(self.metas), self.stamp_ns, list(self.frames), self.dof, self.pose,
                      v, region, values, robust, span, is_out, centred,
                      keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes)
 
@@ -512,6 +516,7 @@ class _Full:
     meta: CameraMetadata
     stamp_ns: int
     frames: list[int]
+    dof: int  # per-pixel temporal degrees of freedom (k - 1, fewer once a vibration is regressed out)
     pose: np.ndarray  # camera position (px) by accumulated global shifts
     v: np.ndarray
     region: np.ndarray
@@ -541,7 +546,7 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
     keep = f.keep
     amp = np.abs(f.centred[keep][f.is_out[keep]])
     k = len(f.frames)
-    spikes_expected = float(keep.sum()) * b * b * spike_fraction(k, b * b) if k >= 2 else 0.0
+    spikes_expected = float(keep.sum()) * b * b * spike_fraction(f.dof + 1, b * b) if k >= 2 else 0.0
     return SegmentMeasurement(
         index=f.index,
         meta=f.meta,

@@ -19,7 +19,8 @@ Three steps, no model and no lab dependencies (the live monitor reuses them for 
    polynomial of the displacement (the scene at a sensor pixel is a smooth function of the camera's pose, the
    noise is independent per frame): a fine texture too weak for the test to reject otherwise puts its change
    under the shift into the variance (+1.8-2.7 % of sigma at 0.4 px rms), which the block's gradient regressors
-   remove only to first order.
+   remove only to first order. A run of 2 or 3 frames that measurably moved has no static block: too few
+   frames to take the motion out.
 """
 from __future__ import annotations
 
@@ -250,16 +251,23 @@ def run_displacement(x: np.ndarray, b: int, deviations: np.ndarray | None = None
     return found, float(1.2533 * 1.4826 * np.sqrt(np.mean(mad**2)) / math.sqrt(per_block.shape[1]))
 
 
+def moved(displacement: np.ndarray, error: float) -> bool:
+    """Whether frames at ``displacement`` (k, 2; px) spread by more than ``MOTION_RMS_PX`` rms and more than
+    ``MOTION_SIGMAS`` x ``error`` (the displacements' standard error, px per axis: a spread their noise makes)."""
+    d = np.asarray(displacement, dtype=np.float64).reshape(-1, 2)
+    d = d - d.mean(axis=0)
+    rms = math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
+    return rms > MOTION_RMS_PX and rms > MOTION_SIGMAS * error
+
+
 def displacement_basis(displacement: np.ndarray, error: float = 0.0) -> np.ndarray | None:
     """(k, P) orthonormal basis of a constant and a polynomial of the frames' displacements ``displacement``
-    (k, 2; px, any origin): linear from 4 frames, quadratic from ``QUADRATIC_FRAMES``; None when the frames
-    spread by at most ``MOTION_RMS_PX`` rms, or by at most ``MOTION_SIGMAS`` x ``error`` (the displacements'
-    standard error, px per axis: a spread their estimate's noise makes), or are too few."""
+    (k, 2; px, any origin): linear from 4 frames, quadratic from ``QUADRATIC_FRAMES``; None when they have not
+    :func:`moved` or are too few."""
     d = np.asarray(displacement, dtype=np.float64).reshape(-1, 2)
     k = d.shape[0]
     d = d - d.mean(axis=0)
-    rms = math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
-    if k < 4 or rms <= MOTION_RMS_PX or rms <= MOTION_SIGMAS * error:
+    if k < 4 or not moved(d, error):
         return None
     cols = [np.ones(k), d[:, 0], d[:, 1]]
     if k >= QUADRATIC_FRAMES:
@@ -268,29 +276,36 @@ def displacement_basis(displacement: np.ndarray, error: float = 0.0) -> np.ndarr
     return q
 
 
-def steady_run(x: np.ndarray, b: int,
-               displacement: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray | None, int]:
-    """(the run ``x`` (k x H x W) with each pixel's dependence on the camera's displacement removed, or None when
-    the camera did not move; the per-pixel degrees of freedom left, k - 1 or fewer). Each pixel's series is
-    regressed on :func:`displacement_basis` of the frames' ``displacement`` and its error (default
-    :func:`run_displacement`) if that explains more of the deviations than noise would (``MOTION_SIGMAS``); each
-    frame's residual is scaled by sqrt((1 - 1/k) / (1 - its leverage)), so that a frame's deviation from the run
-    mean keeps the expected energy it has without motion, and the statistics of the plain deviations stay
-    unbiased."""
+@dataclass
+class SteadyRun:
+    """A run with each pixel's dependence on the camera's displacement removed (:func:`steady_run`)."""
+
+    frames: np.ndarray  # (k, H, W) the run mean plus each frame's residual, scaled to its unmoved energy
+    residual: np.ndarray  # (k, H, W) the residuals as fitted: sum of squares / dof is chi-square like
+    dof: int  # per-pixel degrees of freedom left (k - 1 without motion)
+
+
+def steady_run(x: np.ndarray, b: int, displacement: tuple[np.ndarray, float] | None = None) -> SteadyRun | None:
+    """The run ``x`` (k x H x W) with each pixel's dependence on the camera's displacement removed, or None when
+    the camera did not measurably move. Each pixel's series is regressed on :func:`displacement_basis` of the
+    frames' ``displacement`` and its error (default :func:`run_displacement`) if that explains more of the
+    deviations than noise would (``MOTION_SIGMAS``). In ``frames`` each frame's residual is scaled by
+    sqrt((1 - 1/k) / (1 - its leverage)), so that its deviation from the run mean keeps the expected energy it
+    has without motion and statistics of the plain deviations stay unbiased."""
     k = x.shape[0]
     if k < 4:
-        return None, k - 1
+        return None
     basis = displacement_basis(*(run_displacement(x, b) if displacement is None else displacement))
     if basis is None:
-        return None, k - 1
+        return None
     coef = np.einsum("kr,khw->rhw", basis, x)  # coef[0]: the constant's
     residual = x - np.einsum("kr,rhw->khw", basis, coef)
     p, n = basis.shape[1], x[0].size
     ratio = (np.sum(coef[1:] ** 2) / (p - 1)) / max(float(np.sum(residual**2)) / (k - p), 1e-300)
     if ratio <= 1.0 + MOTION_SIGMAS * math.sqrt(2.0 / (n * (p - 1)) + 2.0 / (n * (k - p))):
-        return None, k - 1  # the displacement explains no more than noise would (e.g. its own estimate's noise)
+        return None  # the displacement explains no more than noise would (e.g. its own estimate's noise)
     scale = np.sqrt((1.0 - 1.0 / k) / (1.0 - np.sum(basis**2, axis=1)))
-    return x.mean(axis=0) + residual * scale[:, None, None], k - basis.shape[1]
+    return SteadyRun(x.mean(axis=0) + residual * scale[:, None, None], residual, k - p)
 
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
@@ -321,10 +336,15 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     p = f_dist.sf(ratio, d1, d2)
     if whiteness:
         p = np.minimum(p, _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
-    steady, dof = steady_run(x, block, run_displacement(x, block, d, use) if k >= 4 else None)
-    if steady is not None:
-        d = (blocks_of(steady, block) - mb[None]) * use[None]
-    per_pixel = np.sum(d * d, axis=0) / (k - 1)  # (N, n), zero where excluded
+    displacement = run_displacement(x, block, d, use)
+    steady = steady_run(x, block, displacement)
+    if k < 4 and moved(*displacement):
+        p = np.zeros_like(p)  # too few frames to take the camera's motion out: no static run
+    if steady is None:
+        per_pixel, dof = np.sum(d * d, axis=0) / (k - 1), k - 1  # (N, n), zero where excluded
+    else:
+        r = blocks_of(steady.residual, block) * use[None]
+        per_pixel, dof = np.sum(r * r, axis=0) / steady.dof, steady.dof
     var = per_pixel.sum(axis=1) / m
     spread = np.sqrt(np.maximum(np.sum(use * (per_pixel - var[:, None]) ** 2, axis=1) / (m - 1), 0.0))
     gauss = var * np.sqrt(2.0 / (dof * m))

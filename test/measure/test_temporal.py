@@ -160,7 +160,19 @@ def test_a_vibrating_camera_leaves_the_temporal_variance_unbiased(amplitude: flo
     assert np.sqrt(plain[a].mean()) / sigma - 1.0 > raw_excess
     assert np.sqrt(bt.variance_dn2[a].mean()) / sigma == pytest.approx(1.0, abs=0.01)
     still = np.stack([_view(scene, 20.0, 20.0)] * k) + rng.normal(0.0, sigma, clean.shape)
-    assert steady_run(still, 8)[0] is None
+    assert steady_run(still, 8) is None
+
+
+def test_a_short_run_that_moved_has_no_static_block() -> None:
+    """Three frames shaking by 0.4 px over a faint texture: too few to take the motion out (a linear fit would
+    leave no degree of freedom), so no block is a static one; three still frames pass as before."""
+    rng = np.random.default_rng(12)
+    tex = cv2.GaussianBlur(rng.standard_normal((H + 40, W + 40)).astype(np.float32), (0, 0), 0.8)
+    scene = 100.0 + tex / tex.std()
+    shaken = np.stack([_view(scene, 20.0 + dx, 20.0 + dy) for dx, dy in [(0.0, 0.0), (0.5, -0.3), (-0.4, 0.4)]])
+    assert not block_temporal(shaken + rng.normal(0.0, 2.0, shaken.shape)).accepted.any()
+    still = np.stack([_view(scene, 20.0, 20.0)] * 3) + rng.normal(0.0, 2.0, shaken.shape)
+    assert block_temporal(still).accepted.mean() > 0.99
 
 
 @pytest.mark.parametrize("k", [2, 8, 32])
