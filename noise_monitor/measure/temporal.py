@@ -135,6 +135,7 @@ class BlockTemporal:
     variance_err_dn2: np.ndarray  # (N,) its standard error
     p_value: np.ndarray  # (N,) pure-noise test
     accepted: np.ndarray  # (N,) bool: the block's frame differences fit pure noise
+    motion_px: float = 0.0  # the frames' rms displacement about their mean (px, :func:`run_displacement`)
 
     def sigma_dn(self) -> tuple[float, float]:
         """Temporal sigma over all accepted blocks and its standard error (NaN if none)."""
@@ -350,4 +351,6 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     gauss = var * np.sqrt(2.0 / (dof * m))
     err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
-    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value)
+    spread = displacement[0] - displacement[0].mean(axis=0)
+    motion = math.sqrt(float(np.mean(np.sum(spread * spread, axis=1))))
+    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion)

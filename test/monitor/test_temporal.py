@@ -66,6 +66,7 @@ def test_static_textured_scene_measures_temporal_noise_to_005_dn_after_10_frames
     assert abs(last.sigma["temporal"] - hold_truth(mon, noise)) <= 0.05
     assert abs(last.xi_temporal) <= 0.1  # the model is exact for this camera
     assert last.temporal_weight > 0.9
+    assert last.numeric()["temporal_motion_px"] < 0.02  # a still camera
 
 
 def test_temperature_drifting_inside_a_hold_is_compared_at_the_frames_mean(estimator):
@@ -107,6 +108,9 @@ def test_a_vibrating_camera_keeps_its_hold_and_measures_the_noise(estimator):
     assert last.temporal_frames == 12 and last.xi_measurement == "temporal"
     assert abs(last.xi_temporal) <= 0.05  # the model is exact for this camera
     assert last.sigma["temporal"] > hold_truth(mon, noise) + 0.2  # the flat blocks are not the patches
+    # the hold's vibration is reported: the shakes' rms about their mean pose
+    true_rms = float(np.sqrt(np.mean(np.sum((shake - shake.mean(axis=0)) ** 2, axis=1))))
+    assert last.numeric()["temporal_motion_px"] == pytest.approx(true_rms, rel=0.15)
 
 
 def test_moving_object_in_a_static_scene_is_left_out(estimator):
