@@ -72,6 +72,8 @@ MAX_FRAMES = 1_000_000
 MAX_FPS = 10_000.0
 #: largest rms vibration (px per axis) of a simulated campaign camera
 MAX_VIBRATION_PX = 5.0
+#: largest rms light flicker (%) of a simulated recording
+MAX_FLICKER_PCT = 20.0
 
 
 def simulate_bag(
@@ -94,6 +96,7 @@ def simulate_bag(
     images: ImageSet | None = None,
     moving_objects: int = 0,
     vibration_px: float = 0.0,
+    flicker_pct: float = 0.0,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -113,7 +116,9 @@ def simulate_bag(
     painted into the clean view before the noise, from their own random generator (the campaign is that of the
     seed without them). ``vibration_px``: a campaign camera that vibrates, its view displaced every frame by an
     independent Gaussian of this rms per axis (:func:`.campaign.vibration`, own generator; the truth's
-    ``offset_px`` and ``moving`` stay the nominal pose's, ``shake_px`` holds the displacement).
+    ``offset_px`` and ``moving`` stay the nominal pose's, ``shake_px`` holds the displacement). ``flicker_pct``:
+    lights that flicker, the scene's brightness scaled every frame by 1 + an independent Gaussian of this rms (%),
+    before the noise (own generator; truth ``flicker_gain``).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -139,6 +144,8 @@ def simulate_bag(
                          f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
     if not 0 <= vibration_px <= MAX_VIBRATION_PX:
         raise ValueError(f"vibration_px must be 0-{MAX_VIBRATION_PX:g} px, got {vibration_px}")
+    if not 0 <= flicker_pct <= MAX_FLICKER_PCT:
+        raise ValueError(f"flicker_pct must be 0-{MAX_FLICKER_PCT:g} %, got {flicker_pct}")
     if images is not None and not scen.campaign:
         raise ValueError(f"own images make the photo panels of a campaign scenario; {scen.name!r} is none "
                          f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
@@ -152,6 +159,8 @@ def simulate_bag(
     sim_model = NoiseModel(extra=effect_specs)
     paper_model = NoiseModel()
     rng = np.random.default_rng(seed)
+    # their own generator: the scene, plan and noise stay those of the seed without flicker
+    flicker = 1.0 + flicker_pct / 100.0 * np.random.default_rng([seed, 3]).standard_normal(frames)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
     if scen.campaign:
         world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images)
@@ -187,6 +196,8 @@ def simulate_bag(
             else:
                 window, offset = view(world, positions[i], height, width)
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
+            if flicker_pct:
+                clean = np.clip(clean * np.float32(flicker[i]), 0.0, 255.0).astype(np.float32)
             noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
             if frame_hook is not None:
                 noisy = np.clip(frame_hook(i, clean, noisy, true_meta), 0.0, 255.0).astype(np.float32)
@@ -211,6 +222,7 @@ def simulate_bag(
                 "brightness": round(step.brightness, 5),
                 "offset_px": list(offset),
                 **({"shake_px": [round(float(v), 4) for v in shakes[i]]} if vibration_px else {}),
+                **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 "moving": prev_offset is not None and offset != prev_offset,
                 **({"hold": plans[i].hold} if scen.campaign else {}),
                 "mean_dn": round(float(clean.mean()), 3),
@@ -222,6 +234,7 @@ def simulate_bag(
         **({"images": list(images.names), "images_key": images.key} if images is not None else {}),
         **({"moving_objects": moving_objects} if moving_objects else {}),
         **({"vibration_px": vibration_px} if vibration_px else {}),
+        **({"flicker_pct": flicker_pct} if flicker_pct else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "

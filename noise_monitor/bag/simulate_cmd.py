@@ -45,6 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--moving-objects", type=int, default=0, metavar="N",
                         help="campaign scenarios: N objects with a smooth texture crossing the view at 2-8 px per "
                              "frame (people, vehicles passing a parked camera; default 0)")
+    parser.add_argument("--flicker", type=float, default=0.0, metavar="PCT",
+                        help="lights that flicker: the scene's brightness scaled every frame by 1 + PCT %% rms, "
+                             "independently (default 0)")
     parser.add_argument("--vibration", type=float, default=0.0, metavar="PX",
                         help="campaign scenarios: the camera vibrates, its view displaced every frame by PX rms per "
                              "axis, independently (a parked robot with its motors running; default 0)")
@@ -71,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,
                        start_ns=_start_ns(args.start), images=images, moving_objects=args.moving_objects,
-                       vibration_px=args.vibration)
+                       vibration_px=args.vibration, flicker_pct=args.flicker)
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),
                "profile": truth["profile"], "scenario": truth["scenario"], "effects": truth["effects"],

@@ -47,6 +47,9 @@ COARSE_SHIFT_PX = 2.0
 MOTION_RMS_PX = 0.05
 #: ... and only when that spread and the deviations it explains exceed what noise makes by this many standard errors
 MOTION_SIGMAS = 5.0
+#: spread of the frames' global gains (light flicker) beyond which they are undone before the test (and beyond
+#: ``MOTION_SIGMAS`` standard errors)
+FLICKER_MIN = 0.001
 #: frames from which that regression is quadratic in the displacement (linear from 4 frames, none below)
 QUADRATIC_FRAMES = 8
 #: F-test p-value below which a block's frame differences are not pure noise
@@ -309,6 +312,38 @@ def steady_run(x: np.ndarray, b: int, displacement: tuple[np.ndarray, float] | N
     return SteadyRun(x.mean(axis=0) + residual * scale[:, None, None], residual, k - p)
 
 
+def run_gain(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """((k,) offset, (k,) gain, standard error of the gains) of each frame of the run ``x`` (k x H x W) against
+    the run mean, from the b x b blocks' means (light flicker scales the whole scene from frame to frame): per
+    frame a least-squares line of the blocks' means on the mean's, refitted once without the blocks beyond 4
+    robust standard deviations of the first fit (a moving object), the gain's error from the fit's scatter."""
+    k, h, w_ = x.shape[0], (x.shape[1] // b) * b, (x.shape[2] // b) * b
+    means = x[:, :h, :w_].reshape(k, h // b, b, w_ // b, b).mean(axis=(2, 4)).reshape(k, -1)  # (k, N)
+    level = means.mean(axis=0)[None]  # (1, N): the run mean's
+    w = np.ones_like(means)
+    for _ in range(2):
+        s0, s1, s2 = w.sum(axis=1), (w * level).sum(axis=1), (w * level**2).sum(axis=1)
+        t0, t1 = (w * means).sum(axis=1), (w * means * level).sum(axis=1)
+        det = np.maximum(s0 * s2 - s1**2, 1e-300)
+        gain, offset = (s0 * t1 - s1 * t0) / det, (s2 * t0 - s1 * t1) / det
+        resid = np.abs(means - offset[:, None] - gain[:, None] * level)
+        scale = 1.4826 * np.median(resid, axis=1) + 1e-12
+        w = (resid <= 4.0 * scale[:, None]).astype(float)
+    return offset, gain, float(np.sqrt(np.mean(scale**2 * s0 / det)))
+
+
+def steady_light(x: np.ndarray, b: int) -> np.ndarray:
+    """The run ``x`` with each frame's global light change undone ((frame - offset) / gain, :func:`run_gain`)
+    when the gains spread by more than ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors; else ``x``."""
+    if x.shape[0] < 2:
+        return x
+    offset, gain, err = run_gain(x, b)
+    spread = float(np.std(gain))
+    if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
+        return x
+    return (x - offset[:, None, None]) / gain[:, None, None]
+
+
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
                    exclude: np.ndarray | None = None, whiteness: bool = False) -> BlockTemporal:
     """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN).
@@ -321,6 +356,8 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
+    if x.shape[1] >= block and x.shape[2] >= block:
+        x = steady_light(x, block)
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")

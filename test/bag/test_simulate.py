@@ -160,3 +160,17 @@ def test_a_vibrating_campaign_camera_shakes_about_its_nominal_pose(tmp_path) -> 
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, vibration_px=0.2)
     with pytest.raises(ValueError, match="vibration_px"):
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "campaign", frames=4, vibration_px=9.0)
+
+
+def test_flickering_lights_scale_each_frame(tmp_path) -> None:
+    """``--flicker``: every frame's scene scaled by its own gain (recorded as ``flicker_gain``, rms as asked),
+    the scene and its holds those of the bag without it; refused beyond its range."""
+    truth = load_truth(simulate_bag(tmp_path / "f.mcap", "ev76c661", "campaign_heldout", frames=40, seed=3,
+                                    flicker_pct=2.0))
+    gains = np.array([f["flicker_gain"] for f in truth["frames"]])
+    assert truth["flicker_pct"] == 2.0 and gains.std() == pytest.approx(0.02, rel=0.3)
+    plain = load_truth(simulate_bag(tmp_path / "p.mcap", "ev76c661", "campaign_heldout", frames=40, seed=3))
+    mean = np.array([f["mean_dn"] for f in truth["frames"]]) / np.array([f["mean_dn"] for f in plain["frames"]])
+    assert np.allclose(mean, gains, atol=0.003)  # the clean scene scaled (up to clipping)
+    with pytest.raises(ValueError, match="flicker_pct"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, flicker_pct=30.0)
