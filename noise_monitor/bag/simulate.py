@@ -134,21 +134,18 @@ def simulate_bag(
         raise ValueError(f"hold_s must be in [0, 1e6] s, got {hold_s}")
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
-    if moving_objects and not scen.campaign:
-        raise ValueError(f"moving objects cross a campaign scenario's view; {scen.name!r} is none "
-                         f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
+    for asked, what in ((moving_objects, "moving objects cross a campaign scenario's view"),
+                        (vibration_px, "vibration shakes a campaign scenario's camera"),
+                        (images is not None, "own images make the photo panels of a campaign scenario")):
+        if asked and not scen.campaign:
+            raise ValueError(f"{what}; {scen.name!r} is none "
+                             f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
     if not 0 <= moving_objects <= 100:
         raise ValueError(f"moving_objects must be 0-100, got {moving_objects}")
-    if vibration_px and not scen.campaign:
-        raise ValueError(f"vibration shakes a campaign scenario's camera; {scen.name!r} is none "
-                         f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
     if not 0 <= vibration_px <= MAX_VIBRATION_PX:
         raise ValueError(f"vibration_px must be 0-{MAX_VIBRATION_PX:g} px, got {vibration_px}")
     if not 0 <= flicker_pct <= MAX_FLICKER_PCT:
         raise ValueError(f"flicker_pct must be 0-{MAX_FLICKER_PCT:g} %, got {flicker_pct}")
-    if images is not None and not scen.campaign:
-        raise ValueError(f"own images make the photo panels of a campaign scenario; {scen.name!r} is none "
-                         f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
     if scen.name == "ptc":
         from noise_monitor.profiles.ptc_sim import simulate_ptc
 

@@ -255,12 +255,17 @@ def run_displacement(x: np.ndarray, b: int, deviations: np.ndarray | None = None
     return found, float(1.2533 * 1.4826 * np.sqrt(np.mean(mad**2)) / math.sqrt(per_block.shape[1]))
 
 
+def motion_rms(displacement: np.ndarray) -> float:
+    """The rms (px) of the frames' displacements ``displacement`` (k, 2) about their mean."""
+    d = np.asarray(displacement, dtype=np.float64).reshape(-1, 2)
+    d = d - d.mean(axis=0)
+    return math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
+
+
 def moved(displacement: np.ndarray, error: float) -> bool:
     """Whether frames at ``displacement`` (k, 2; px) spread by more than ``MOTION_RMS_PX`` rms and more than
     ``MOTION_SIGMAS`` x ``error`` (the displacements' standard error, px per axis: a spread their noise makes)."""
-    d = np.asarray(displacement, dtype=np.float64).reshape(-1, 2)
-    d = d - d.mean(axis=0)
-    rms = math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
+    rms = motion_rms(displacement)
     return rms > MOTION_RMS_PX and rms > MOTION_SIGMAS * error
 
 
@@ -335,8 +340,6 @@ def run_gain(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, float]:
 def steady_light(x: np.ndarray, b: int) -> np.ndarray:
     """The run ``x`` with each frame's global light change undone ((frame - offset) / gain, :func:`run_gain`)
     when the gains spread by more than ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors; else ``x``."""
-    if x.shape[0] < 2:
-        return x
     offset, gain, err = run_gain(x, b)
     spread = float(np.std(gain))
     if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
@@ -356,11 +359,10 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
-    if x.shape[1] >= block and x.shape[2] >= block:
-        x = steady_light(x, block)
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
+    x = steady_light(x, block)
     n_blocks = (x.shape[1] // block) * (x.shape[2] // block)
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):
@@ -388,6 +390,4 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     gauss = var * np.sqrt(2.0 / (dof * m))
     err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
-    spread = displacement[0] - displacement[0].mean(axis=0)
-    motion = math.sqrt(float(np.mean(np.sum(spread * spread, axis=1))))
-    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion)
+    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion_rms(displacement[0]))

@@ -307,7 +307,8 @@ class Monitor:
             held = tm.frames
             found = self._xi_temporal(tm, sigma)
             if found is not None:
-                (xi_t, err_t), motion = found, tm.motion_px
+                xi_t, err_t = found
+                motion = tm.motion_px
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
