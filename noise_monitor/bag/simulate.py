@@ -21,6 +21,7 @@ from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel, loa
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
 from . import campaign
+from .lights import LIGHT_PER_MAINS, rolling_shutter_gain
 from .messages import camera_info_msg, image_msg, metadata_msg
 from .scenarios import SCENARIOS, Step, get_scenario
 from .scenes import camera_path, make_world, view
@@ -74,6 +75,8 @@ MAX_FPS = 10_000.0
 MAX_VIBRATION_PX = 5.0
 #: largest rms light flicker (%) of a simulated recording
 MAX_FLICKER_PCT = 20.0
+#: a rolling shutter's line time (s) and the mains frequency (Hz) of lamps seen through it, by default
+LINE_TIME_S, MAINS_HZ = 30e-6, 50.0
 
 
 def simulate_bag(
@@ -97,6 +100,9 @@ def simulate_bag(
     moving_objects: int = 0,
     vibration_px: float = 0.0,
     flicker_pct: float = 0.0,
+    banding_pct: float = 0.0,
+    mains_hz: float = MAINS_HZ,
+    line_time_s: float = LINE_TIME_S,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -118,7 +124,11 @@ def simulate_bag(
     independent Gaussian of this rms per axis (:func:`.campaign.vibration`, own generator; the truth's
     ``offset_px`` and ``moving`` stay the nominal pose's, ``shake_px`` holds the displacement). ``flicker_pct``:
     lights that flicker, the scene's brightness scaled every frame by 1 + an independent Gaussian of this rms (%),
-    before the noise (own generator; truth ``flicker_gain``).
+    before the noise (own generator; truth ``flicker_gain``). ``banding_pct``: lamps on ``mains_hz`` mains whose light
+    is modulated by this depth (%), seen through a rolling shutter of ``line_time_s`` per row
+    (:func:`.lights.rolling_shutter_gain`: bands that deepen as the exposure shortens), the frame clock running free
+    of the mains (each frame meets the light at a random phase, own generator; truth ``banding_phase`` and the
+    exposure-averaged ``banding_depth``).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -146,6 +156,12 @@ def simulate_bag(
         raise ValueError(f"vibration_px must be 0-{MAX_VIBRATION_PX:g} px, got {vibration_px}")
     if not 0 <= flicker_pct <= MAX_FLICKER_PCT:
         raise ValueError(f"flicker_pct must be 0-{MAX_FLICKER_PCT:g} %, got {flicker_pct}")
+    if not 0 <= banding_pct <= 100:
+        raise ValueError(f"banding_pct must be 0-100 %, got {banding_pct}")
+    if not 0 < mains_hz <= 1000:
+        raise ValueError(f"mains_hz must be in (0, 1000] Hz, got {mains_hz}")
+    if not 0 < line_time_s <= 1e-3:
+        raise ValueError(f"line_time_s must be in (0, 1e-3] s, got {line_time_s}")
     if scen.name == "ptc":
         from noise_monitor.profiles.ptc_sim import simulate_ptc
 
@@ -158,6 +174,7 @@ def simulate_bag(
     rng = np.random.default_rng(seed)
     # their own generator: the scene, plan and noise stay those of the seed without flicker
     flicker = 1.0 + flicker_pct / 100.0 * np.random.default_rng([seed, 3]).standard_normal(frames)
+    band_phase = np.random.default_rng([seed, 4]).uniform(0.0, 2.0 * np.pi, frames)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
     if scen.campaign:
         world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images)
@@ -195,6 +212,10 @@ def simulate_bag(
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
             if flicker_pct:
                 clean = np.clip(clean * np.float32(flicker[i]), 0.0, 255.0).astype(np.float32)
+            if banding_pct:
+                bands = rolling_shutter_gain(height, true_meta.exposure_time_s, float(band_phase[i]),
+                                             banding_pct / 100.0, mains_hz, line_time_s)
+                clean = np.clip(clean * bands[:, None].astype(np.float32), 0.0, 255.0).astype(np.float32)
             noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
             if frame_hook is not None:
                 noisy = np.clip(frame_hook(i, clean, noisy, true_meta), 0.0, 255.0).astype(np.float32)
@@ -220,6 +241,9 @@ def simulate_bag(
                 "offset_px": list(offset),
                 **({"shake_px": [round(float(v), 4) for v in shakes[i]]} if vibration_px else {}),
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
+                **({"banding_phase": round(float(band_phase[i]), 6),
+                    "banding_depth": round(float(banding_pct / 100.0 * np.sinc(
+                        LIGHT_PER_MAINS * mains_hz * true_meta.exposure_time_s)), 6)} if banding_pct else {}),
                 "moving": prev_offset is not None and offset != prev_offset,
                 **({"hold": plans[i].hold} if scen.campaign else {}),
                 "mean_dn": round(float(clean.mean()), 3),
@@ -232,6 +256,7 @@ def simulate_bag(
         **({"moving_objects": moving_objects} if moving_objects else {}),
         **({"vibration_px": vibration_px} if vibration_px else {}),
         **({"flicker_pct": flicker_pct} if flicker_pct else {}),
+        **({"banding_pct": banding_pct, "mains_hz": mains_hz, "line_time_s": line_time_s} if banding_pct else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "

@@ -41,7 +41,7 @@ from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as t_dist
 
-from ..measure.temporal import HOLD_SHIFT_PX, block_temporal, camera_shift, steady_run
+from ..measure.temporal import HOLD_SHIFT_PX, block_temporal, camera_shift, steady_light, steady_run
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
@@ -418,17 +418,26 @@ class _SegmentAccumulator:
         self.s2_row += row
 
     def _steady(self) -> None:
-        """The frames' energies and per-pixel variances again, with the camera's vibration taken out of every pixel
-        (:func:`..measure.temporal.steady_run`; nothing when the camera did not move); the frames themselves stay
-        for the pure-noise test, which rejects the blocks where the motion shows."""
-        steady = steady_run(np.stack(self.images), self.b)
-        if steady is None:
+        """The frames' sums, energies and per-pixel variances again, with the light's change from frame to frame
+        (flicker, a rolling shutter's bands: :func:`..measure.temporal.steady_light`) and the camera's vibration
+        (:func:`..measure.temporal.steady_run`) taken out of every pixel (nothing when neither shows); the frames
+        themselves stay for the pure-noise test, which rejects the blocks where the motion shows."""
+        x = np.stack(self.images)
+        lit = steady_light(x, self.b)
+        steady = steady_run(lit, self.b)
+        if steady is None and lit is x:
             return
-        self.s2, self.s2_col, self.s2_row = np.zeros_like(self.s2), np.zeros_like(self.s2), np.zeros_like(self.s2)
-        for img in steady.frames:
-            self._add_energies(_blocks(img, self.b) @ self.proj)
-        self.pixel_var = sum((_blocks(r, self.b) @ self.proj) ** 2 for r in steady.residual) / steady.dof
-        self.dof = steady.dof
+        zero = np.zeros_like(self.s2)
+        self.s1, self.s2_pixel = np.zeros_like(self.s1), np.zeros_like(self.s2_pixel)
+        self.s2, self.s2_col, self.s2_row = zero, zero.copy(), zero.copy()
+        for img in lit if steady is None else steady.frames:
+            r = _blocks(img, self.b) @ self.proj
+            self.s1 += r
+            self.s2_pixel += r * r
+            self._add_energies(r)
+        if steady is not None:
+            self.pixel_var = sum((_blocks(r, self.b) @ self.proj) ** 2 for r in steady.residual) / steady.dof
+            self.dof = steady.dof
 
     def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> _Full:
         self._steady()

@@ -317,6 +317,11 @@ def steady_run(x: np.ndarray, b: int, displacement: tuple[np.ndarray, float] | N
     return SteadyRun(x.mean(axis=0) + residual * scale[:, None, None], residual, k - p)
 
 
+#: largest degree of the light's row profile (a rolling shutter's bands, :func:`steady_light`) and the fewest
+#: block rows per degree
+LIGHT_DEGREE, ROWS_PER_DEGREE = 12, 3
+
+
 def run_gain(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, float]:
     """((k,) offset, (k,) gain, standard error of the gains) of each frame of the run ``x`` (k x H x W) against
     the run mean, from the b x b blocks' means (light flicker scales the whole scene from frame to frame): per
@@ -324,45 +329,121 @@ def run_gain(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, float]:
     robust standard deviations of the first fit (a moving object), the gain's error from the fit's scatter."""
     k, h, w_ = x.shape[0], (x.shape[1] // b) * b, (x.shape[2] // b) * b
     means = x[:, :h, :w_].reshape(k, h // b, b, w_ // b, b).mean(axis=(2, 4)).reshape(k, -1)  # (k, N)
-    level = means.mean(axis=0)[None]  # (1, N): the run mean's
-    w = np.ones_like(means)
+    level = means.mean(axis=0)
+    design = np.stack([np.ones_like(level), level], axis=1)
+    coef, cov, scale = _robust_fits(design, means - level)
+    return coef[:, 0], 1.0 + coef[:, 1], float(np.sqrt(np.mean(scale**2 * cov[:, 1, 1])))
+
+
+def row_gains(x: np.ndarray, b: int, view_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """((k,) offset, (k, V, R) gain) of each frame of the run ``x`` (k x H x W, a column of V views of
+    ``view_rows`` rows) against the run mean: a gain per view and row of b x b blocks (R per view) and one offset,
+    fitted robustly (as :func:`run_gain`) to the blocks' means."""
+    k, h, w_ = x.shape[0], x.shape[1], (x.shape[2] // b) * b
+    views, r, c = h // view_rows, view_rows // b, w_ // b
+    xs = x[:, :, :w_].reshape(k, views, view_rows, w_)[:, :, : r * b]
+    means = xs.reshape(k, views, r, b, c, b).mean(axis=(3, 5)).reshape(k, -1)
+    level = means.mean(axis=0)
+    design = np.zeros((level.size, 1 + views * r))
+    design[:, 0] = 1.0
+    design[np.arange(level.size), 1 + np.arange(level.size) // c] = level
+    coef, _, _ = _robust_fits(design, means - level)
+    return coef[:, 0], 1.0 + coef[:, 1:].reshape(k, views, r)
+
+
+def _robust_fits(design: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame least squares of ``y`` (k, N) on ``design`` (N, P), refitted once without the points beyond 4
+    robust standard deviations (the smallest coefficients of those that fit, when the design cannot tell them apart): ((k, P) coefficients, (k, P, P) their covariance per unit residual variance,
+    (k,) the robust residual scale)."""
+    wts = np.ones_like(y)
     for _ in range(2):
-        s0, s1, s2 = w.sum(axis=1), (w * level).sum(axis=1), (w * level**2).sum(axis=1)
-        t0, t1 = (w * means).sum(axis=1), (w * means * level).sum(axis=1)
-        det = np.maximum(s0 * s2 - s1**2, 1e-300)
-        gain, offset = (s0 * t1 - s1 * t0) / det, (s2 * t0 - s1 * t1) / det
-        resid = np.abs(means - offset[:, None] - gain[:, None] * level)
+        normal = np.einsum("np,kn,nq->kpq", design, wts, design)
+        cov = np.linalg.pinv(normal, hermitian=True)
+        coef = np.einsum("kpq,np,kn->kq", cov, design, wts * y)
+        resid = np.abs(y - coef @ design.T)
         scale = 1.4826 * np.median(resid, axis=1) + 1e-12
-        w = (resid <= 4.0 * scale[:, None]).astype(float)
-    return offset, gain, float(np.sqrt(np.mean(scale**2 * s0 / det)))
+        wts = (resid <= 4.0 * scale[:, None]).astype(float)
+    return coef, cov, scale
 
 
-def steady_light(x: np.ndarray, b: int) -> np.ndarray:
-    """The run ``x`` with each frame's global light change undone ((frame - offset) / gain, :func:`run_gain`)
-    when the gains spread by more than ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors; else ``x``."""
-    offset, gain, err = run_gain(x, b)
-    spread = float(np.std(gain))
-    if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
-        return x
-    return (x - offset[:, None, None]) / gain[:, None, None]
+def light_bands(gains: np.ndarray, rows: int, b: int) -> tuple[np.ndarray, int] | None:
+    """((k, V, rows) smooth gain profile, its degree) of the per-row gains ``gains`` (k, V, R) of
+    :func:`row_gains` when they follow the row or differ between views beyond their scatter, else None: per
+    frame and view a Legendre polynomial of the row (to ``LIGHT_DEGREE``, one degree per ``ROWS_PER_DEGREE``
+    rows), its degree the highest whose coefficients exceed the gains' scatter about the fit by
+    ``MOTION_SIGMAS`` standard errors; a white scatter from row to row (temporal row noise) is no band."""
+    k, views, r = gains.shape
+    top = min(LIGHT_DEGREE, r // ROWS_PER_DEGREE)
+    t = 2.0 * (np.arange(rows) + 0.5) / rows - 1.0
+    tb = t[: r * b].reshape(r, b).mean(axis=1)
+    q = np.linalg.qr(np.polynomial.legendre.legvander(tb, top))[0]  # orthonormal over the block rows
+    coef = np.einsum("rd,kvr->kvd", q, gains)
+    dof = max(r - top - 1, 1)
+    scatter = float(np.sum((gains - np.einsum("rd,kvd->kvr", q, coef)) ** 2)) / (k * views * dof)
+    d1 = max(k - 1, 1) * views
+    limit = scatter * (1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d1 + 2.0 / (d1 * dof)))
+    degree = next((d for d in range(top, 0, -1) if np.sum(coef[..., d] ** 2) / d1 > limit), 0)
+    if degree == 0:
+        if views < 2:
+            return None
+        between = coef[..., 0] - coef[..., 0].mean(axis=1, keepdims=True)
+        d0 = max(k - 1, 1) * (views - 1)
+        if np.sum(between**2) / d0 <= scatter * (1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d0 + 2.0 / (d1 * dof))):
+            return None
+    # the profile's coefficients on the Legendre polynomials up to ``degree``, evaluated at every row
+    q_deg, tri_deg = np.linalg.qr(np.polynomial.legendre.legvander(tb, degree))
+    leg = np.linalg.solve(tri_deg, np.einsum("rd,kvr->kvd", q_deg, gains)[..., None])[..., 0]
+    return np.einsum("kvd,rd->kvr", leg, np.polynomial.legendre.legvander(t, degree)), degree
+
+
+def steady_light(x: np.ndarray, b: int, view_rows: int | None = None) -> np.ndarray:
+    """The run ``x`` with each frame's light change against the run mean taken out: bands that follow the row
+    (a rolling shutter under lamps on the mains, :func:`light_bands` per view of ``view_rows`` rows, default the
+    whole image), else a global change (:func:`run_gain`) when the gains spread by more than ``FLICKER_MIN`` and
+    ``MOTION_SIGMAS`` standard errors; else ``x`` itself. The change ``offset + (gain - 1) x`` the run mean is
+    subtracted (the noise stays each frame's own, not scaled by the gain) and each row's deviations from the run
+    mean are scaled to the energy they had without it (the run mean's own noise comes in with the gain)."""
+    k = x.shape[0]
+    rows = x.shape[1] if view_rows is None else view_rows
+    if rows < b or x.shape[1] % rows:
+        raise ValueError(f"view_rows {view_rows} must divide the image height {x.shape[1]} and hold a {b}-pixel block")
+    offset, gains = row_gains(x, b, rows)
+    bands = light_bands(gains, rows, b)
+    if bands is not None:
+        gain = bands[0].reshape(k, x.shape[1])
+    else:
+        offset, flat, err = run_gain(x, b)
+        spread = float(np.std(flat))
+        if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
+            return x
+        gain = np.repeat(flat[:, None], x.shape[1], axis=1)
+    mean = x.mean(axis=0)
+    steady = x - (offset[:, None, None] + (gain[:, :, None] - 1.0) * mean[None])
+    extra = np.sum((gain - gain.mean(axis=0)) ** 2, axis=0) / k  # (H,) the mean's noise added, per unit variance
+    scale = np.sqrt((k - 1) / (k - 1 + extra))[None, :, None]
+    centre = steady.mean(axis=0)
+    return centre[None] + (steady - centre[None]) * scale
 
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
-                   exclude: np.ndarray | None = None, whiteness: bool = False) -> BlockTemporal:
+                   exclude: np.ndarray | None = None, whiteness: bool = False,
+                   view_rows: int | None = None) -> BlockTemporal:
     """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN).
 
     ``exclude``: (N, block * block) pixels left out of the test and the variance (e.g. blinking pixels,
     noise that is not a scene change but would correlate with the brightness regressor). ``whiteness``: the
     pure-noise test also asks what the regressors leave to be white and of equal energy in every frame
     (:func:`_scene_p`: an object moving under the block; about twice the time, so the lab's, not the live
-    monitor's, whose median over patches keeps such blocks from the frame)."""
+    monitor's, whose median over patches keeps such blocks from the frame). ``view_rows``: the frames are a
+    column of views of this many rows each (the live monitor's patches), whose light is fitted apart
+    (:func:`steady_light`)."""
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
-    x = steady_light(x, block)
+    x = steady_light(x, block, view_rows)
     n_blocks = (x.shape[1] // block) * (x.shape[2] // block)
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):

@@ -139,7 +139,7 @@ class TemporalNoise:
             return None
         n_patches = len(self._corners)
         frames = np.stack(self._stack)  # (k, K, s, s)
-        stats = block_temporal(frames.reshape(k, n_patches * size, size), BLOCK)
+        stats = block_temporal(frames.reshape(k, n_patches * size, size), BLOCK, view_rows=size)
         per_patch = (size // BLOCK) ** 2
         acc = stats.accepted.reshape(n_patches, per_patch)
         var = stats.variance_dn2.reshape(n_patches, per_patch)

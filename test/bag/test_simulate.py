@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from noise_monitor.bag import campaign
+from noise_monitor.bag.lights import rolling_shutter_gain
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.scenarios import EPISODE, SCENARIOS, get_scenario
 from noise_monitor.bag.scenes import camera_path, make_world, view
@@ -160,6 +161,34 @@ def test_a_vibrating_campaign_camera_shakes_about_its_nominal_pose(tmp_path) -> 
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, vibration_px=0.2)
     with pytest.raises(ValueError, match="vibration_px"):
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "campaign", frames=4, vibration_px=9.0)
+
+
+def test_mains_lights_band_a_rolling_shutter_image(tmp_path) -> None:
+    """``--banding``: lamps on 50 Hz mains modulated by 30 %, each row exposed 30 us after the previous: every
+    frame's rows scaled by the light averaged over their exposure (``rolling_shutter_gain`` at the frame's random
+    phase), bands as deep as the exposure allows (sinc of 100 Hz x exposure: none at whole periods); the scene and
+    its noise seed those of the bag without them; refused beyond its range."""
+    kw = {"frames": 24, "width": 320, "height": 256, "seed": 5}
+    bag = simulate_bag(tmp_path / "b.mcap", "ev76c661", "campaign_heldout", banding_pct=30.0, **kw)
+    simulate_bag(tmp_path / "p.mcap", "ev76c661", "campaign_heldout", **kw)
+    truth = load_truth(bag)
+    assert truth["banding_pct"] == 30.0 and truth["mains_hz"] == 50.0 and truth["line_time_s"] == 30e-6
+
+    def bins(path):  # 16-row means: the noise averages out, the bands stay
+        return [f.image_dn.reshape(16, -1).mean(axis=1) for f in open_bag(path).frames()]
+
+    rows, rows_plain = bins(bag), bins(tmp_path / "p.mcap")
+    depths = []
+    for f, r, p in zip(truth["frames"], rows, rows_plain):
+        t = f["true_metadata"]["exposure_time_s"]
+        assert f["banding_depth"] == pytest.approx(0.3 * np.sinc(100.0 * t), abs=1e-6)
+        expected = rolling_shutter_gain(256, t, f["banding_phase"], 0.3, 50.0, 30e-6).reshape(16, -1).mean(axis=1)
+        noise = 6.0 * np.sqrt(2.0) * f["sigma_image"] / np.sqrt(16 * 320) / p  # two noisy bin means, 6 sigma
+        assert np.all(np.abs(r / p - expected) <= 0.005 + noise)  # (0.5 %: the clipping of the brightest rows)
+        depths.append(abs(f["banding_depth"]))
+    assert max(depths) > 0.2  # short exposures show deep bands
+    with pytest.raises(ValueError, match="banding_pct"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, banding_pct=120.0)
 
 
 def test_flickering_lights_scale_each_frame(tmp_path) -> None:

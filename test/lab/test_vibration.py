@@ -1,6 +1,7 @@
 """The lab on a vibrating camera's recording (a parked robot with its motors running; `simulate-bag --vibration`):
 the view shakes by a fraction of a pixel every frame about each hold's pose, which is neither a new hold nor
-noise; and under flickering lights (`--flicker`), whose brightness changes are no noise either."""
+noise; and under flickering lights (`--flicker`) or lamps on the mains seen through a rolling shutter
+(`--banding`), whose brightness changes are no noise either."""
 from __future__ import annotations
 
 import pytest
@@ -36,5 +37,17 @@ def test_flickering_light_is_no_noise_and_leaves_the_holds_measured(field_lab) -
     lab = field_lab(flicker_pct=2.0)
     assert lab["measurement"]["cells"] >= 85
     assert lab["rms_error_dn"] < 0.06
+    assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
+    assert not any(c["significant"] for c in lab["candidates"])
+
+
+def test_rolling_shutter_bands_are_no_noise_and_leave_the_holds_measured(field_lab) -> None:
+    """Lamps on the mains modulated by 30 %, seen through a rolling shutter: bands rolling through the frames at
+    short exposures. Before, the pure-noise test rejected the blocks they crossed (55 cells measured); now each
+    frame's gain is fitted as a polynomial of the row and undone, in the test and in the lab's energies: 90
+    cells, net 0.03 DN, nothing claimed or read."""
+    lab = field_lab(banding_pct=30.0)
+    assert lab["measurement"]["cells"] >= 85
+    assert lab["rms_error_dn"] < 0.05
     assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
     assert not any(c["significant"] for c in lab["candidates"])

@@ -1,0 +1,25 @@
+"""Light that changes in time, as a simulated camera sees it.
+
+Lamps on an AC supply oscillate at twice the mains frequency, by a modulation depth from a few percent (an
+incandescent bulb's thermal inertia) to near 100 % (cheap LED drivers). A rolling shutter starts each row's
+exposure one line time after the previous row's, so each row averages the light over a different interval:
+horizontal bands whose depth falls with the exposure (zero at whole light periods) and which roll through the
+image from frame to frame when the frame clock is not locked to the mains.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: a lamp's light oscillates at this many times the mains frequency
+LIGHT_PER_MAINS = 2.0
+
+
+def rolling_shutter_gain(height: int, exposure_s: float, phase: float, depth: float, mains_hz: float,
+                         line_s: float) -> np.ndarray:
+    """(height,) relative brightness of each row of one frame: the light 1 + depth sin(2 pi f t + phase)
+    (f = 2 x ``mains_hz``; ``phase`` the light's at the first row's exposure start) averaged over each row's
+    exposure, which starts ``line_s`` after the previous row's: 1 + depth sinc(f T) sin(2 pi f (t_row + T / 2)
+    + phase)."""
+    f = LIGHT_PER_MAINS * mains_hz
+    mid = np.arange(height) * line_s + 0.5 * exposure_s
+    return 1.0 + depth * np.sinc(f * exposure_s) * np.sin(2.0 * np.pi * f * mid + phase)
