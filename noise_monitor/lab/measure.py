@@ -41,7 +41,7 @@ from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as t_dist
 
-from ..measure.temporal import HOLD_SHIFT_PX, block_temporal, camera_shift, steady_light, steady_run
+from ..measure.temporal import HOLD_SHIFT_PX, LightChange, block_temporal, camera_shift, light_change, steady_run
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
@@ -382,6 +382,7 @@ class _SegmentAccumulator:
         self.slope: Any = None
         self.pixel_var: np.ndarray | None = None  # (N, b*b) per-pixel temporal variance once vibration is removed
         self.dof = 0  # its degrees of freedom (k - 1 without vibration)
+        self.light: LightChange | None = None  # the light's change from frame to frame, once measured
 
     def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
         self.images.append(img.astype(np.float32))
@@ -419,13 +420,14 @@ class _SegmentAccumulator:
 
     def _steady(self) -> None:
         """The frames' sums, energies and per-pixel variances again, with the light's change from frame to frame
-        (flicker, a rolling shutter's bands: :func:`..measure.temporal.steady_light`) and the camera's vibration
+        (flicker, a rolling shutter's bands: :func:`..measure.temporal.light_change`) and the camera's vibration
         (:func:`..measure.temporal.steady_run`) taken out of every pixel (nothing when neither shows); the frames
         themselves stay for the pure-noise test, which rejects the blocks where the motion shows."""
         x = np.stack(self.images)
-        lit = steady_light(x, self.b)
+        self.light = light_change(x, self.b)
+        lit = x if self.light is None else self.light.undo(x)
         steady = steady_run(lit, self.b)
-        if steady is None and lit is x:
+        if steady is None and self.light is None:
             return
         zero = np.zeros_like(self.s2)
         self.s1, self.s2_pixel = np.zeros_like(self.s1), np.zeros_like(self.s2_pixel)
@@ -489,9 +491,11 @@ class _SegmentAccumulator:
         # mean's darkest pixel or on the block's own variance keeps the blocks whose noise came out small
         # and biases short, high-gain holds low by up to 5 %)
         white = values["temporal"] + values["fixed"] if k >= 2 else values["single"]
+        # (a frame's light change, flicker or a rolling shutter's bands, moves the block's level in that frame)
         span = (b - 1) * np.abs(self.slope / k).sum(axis=1)
         reach = CLIP_SIGMAS * np.sqrt(np.maximum(_typical(white, bins, in_range & ~tex), 0.0))
-        keep = in_range & (v - span / 2 - reach >= 0.0) & (v + span / 2 + reach <= 255.0)
+        lowest, highest = (v, v) if self.light is None else self.light.block_levels(v, b, grid[1])
+        keep = in_range & (lowest - span / 2 - reach >= 0.0) & (highest + span / 2 + reach <= 255.0)
         excluded["near_clipping"] = int(np.sum(~keep))
         tex &= keep
         excluded["texture"] = int(np.sum(tex))

@@ -7,11 +7,12 @@ Three steps, no model and no lab dependencies (the live monitor reuses them for 
    sensor-fixed pattern cannot pin it at 0); :func:`static_runs` cuts a sequence into runs of frames that stay
    within ``HOLD_SHIFT_PX`` of the run's first frame (a vibrating camera returns about one pose; a pan or a slow
    drift leaves it).
-2. :func:`block_temporal` on a static run: per B x B block, each frame's deviation from the run's
-   temporal mean is regressed on what scene changes would put there (a per-frame offset, a brightness
+2. :func:`block_temporal` on a static run: first each frame's light change against the run mean (a flicker, a
+   rolling shutter's bands under lamps on the mains: :func:`light_change`) is fitted on the blocks' means and
+   taken out (:meth:`LightChange.undo`: noise that follows the light is weighed without bias); then per B x B block, each frame's deviation from the run's temporal mean is regressed on what scene changes would put there (a per-frame offset, a brightness
    scaling ``mean - <mean>``, and sub-pixel motion: the mean image's x and y gradients). For pure noise
    the explained energy is a small, F-distributed fraction; a block is accepted when its F-test
-   p-value exceeds ``p_value`` (residual motion, flicker or a moving object reject it).
+   p-value exceeds ``p_value`` (residual motion, light changing in part of the view or a moving object reject it).
 3. For accepted blocks, the temporal variance is the per-pixel variance over the run, averaged over the
    block, with its standard error from the spread of the per-pixel variances (never below the Gaussian value
    ``var * sqrt(2 / (dof n))``). When the camera moved within the run (a vibration: the frames' displacements,
@@ -19,8 +20,9 @@ Three steps, no model and no lab dependencies (the live monitor reuses them for 
    polynomial of the displacement (the scene at a sensor pixel is a smooth function of the camera's pose, the
    noise is independent per frame): a fine texture too weak for the test to reject otherwise puts its change
    under the shift into the variance (+1.8-2.7 % of sigma at 0.4 px rms), which the block's gradient regressors
-   remove only to first order. A run of 2 or 3 frames that measurably moved has no static block: too few
-   frames to take the motion out.
+   remove only to first order. A run of 2 or 3 frames that measurably moved, or whose light changed enough to
+   bias its noise by more than ``LIGHT_BIAS``, has no static block: too few frames to take the motion or the
+   light out.
 """
 from __future__ import annotations
 
@@ -50,6 +52,9 @@ MOTION_SIGMAS = 5.0
 #: spread of the frames' global gains (light flicker) beyond which they are undone before the test (and beyond
 #: ``MOTION_SIGMAS`` standard errors)
 FLICKER_MIN = 0.001
+#: a run of fewer than 4 frames (too few to weigh the noise that follows the light) has no static block when the
+#: light's change would bias its noise variance by more than this (:meth:`LightChange.noise_bias`)
+LIGHT_BIAS = 0.005
 #: frames from which that regression is quadratic in the displacement (linear from 4 frames, none below)
 QUADRATIC_FRAMES = 8
 #: F-test p-value below which a block's frame differences are not pure noise
@@ -139,6 +144,7 @@ class BlockTemporal:
     p_value: np.ndarray  # (N,) pure-noise test
     accepted: np.ndarray  # (N,) bool: the block's frame differences fit pure noise
     motion_px: float = 0.0  # the frames' rms displacement about their mean (px, :func:`run_displacement`)
+    light_pct: float = 0.0  # the light's change from frame to frame taken out (:meth:`LightChange.percent`, %)
 
     def sigma_dn(self) -> tuple[float, float]:
         """Temporal sigma over all accepted blocks and its standard error (NaN if none)."""
@@ -317,7 +323,7 @@ def steady_run(x: np.ndarray, b: int, displacement: tuple[np.ndarray, float] | N
     return SteadyRun(x.mean(axis=0) + residual * scale[:, None, None], residual, k - p)
 
 
-#: largest degree of the light's row profile (a rolling shutter's bands, :func:`steady_light`) and the fewest
+#: largest degree of the light's row profile (a rolling shutter's bands, :func:`light_bands`) and the fewest
 #: block rows per degree
 LIGHT_DEGREE, ROWS_PER_DEGREE = 12, 3
 
@@ -327,51 +333,61 @@ def run_gain(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, float]:
     the run mean, from the b x b blocks' means (light flicker scales the whole scene from frame to frame): per
     frame a least-squares line of the blocks' means on the mean's, refitted once without the blocks beyond 4
     robust standard deviations of the first fit (a moving object), the gain's error from the fit's scatter."""
-    k, h, w_ = x.shape[0], (x.shape[1] // b) * b, (x.shape[2] // b) * b
-    means = x[:, :h, :w_].reshape(k, h // b, b, w_ // b, b).mean(axis=(2, 4)).reshape(k, -1)  # (k, N)
-    level = means.mean(axis=0)
-    design = np.stack([np.ones_like(level), level], axis=1)
-    coef, cov, scale = _robust_fits(design, means - level)
-    return coef[:, 0], 1.0 + coef[:, 1], float(np.sqrt(np.mean(scale**2 * cov[:, 1, 1])))
+    means = _block_means(x, b, (x.shape[1] // b) * b)
+    k = means.shape[0]
+    offset, slope, scale, spread = _gain_fits(means.reshape(k, 1, -1))
+    return offset, 1.0 + slope[:, 0], float(np.sqrt(np.mean(scale**2 / spread[:, 0])))
 
 
 def row_gains(x: np.ndarray, b: int, view_rows: int) -> tuple[np.ndarray, np.ndarray]:
     """((k,) offset, (k, V, R) gain) of each frame of the run ``x`` (k x H x W, a column of V views of
     ``view_rows`` rows) against the run mean: a gain per view and row of b x b blocks (R per view) and one offset,
-    fitted robustly (as :func:`run_gain`) to the blocks' means."""
+    fitted to the blocks' means as in :func:`run_gain`."""
+    means = _block_means(x, b, view_rows)
+    offset, slope, _, _ = _gain_fits(means)
+    return offset, 1.0 + slope.reshape(x.shape[0], x.shape[1] // view_rows, view_rows // b)
+
+
+def _block_means(x: np.ndarray, b: int, view_rows: int) -> np.ndarray:
+    """(k, V x R, C) means of the b x b blocks of ``x`` (k x H x W, a column of V views of ``view_rows`` rows), by
+    row of blocks (R per view, C per row; the rows and columns beyond whole blocks cut)."""
     k, h, w_ = x.shape[0], x.shape[1], (x.shape[2] // b) * b
     views, r, c = h // view_rows, view_rows // b, w_ // b
-    xs = x[:, :, :w_].reshape(k, views, view_rows, w_)[:, :, : r * b]
-    means = xs.reshape(k, views, r, b, c, b).mean(axis=(3, 5)).reshape(k, -1)
+    xs = x[:, : views * view_rows, :w_].reshape(k, views, view_rows, w_)[:, :, : r * b]
+    return xs.reshape(k, views, r, b, c, b).mean(axis=(3, 5)).reshape(k, views * r, c)
+
+
+def _gain_fits(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each frame's change against the run mean of block means ``means`` (k, G, n): one offset and a gain per
+    group (deviation from 1) by least squares, refitted once without the blocks beyond 4 robust standard deviations
+    of the first fit (a moving object); closed form (the offset from the groups' Schur complement, 0 when every
+    group is flat). Returns (k,) offsets, (k, G) gains - 1, (k,) the robust residual scale and (k, G) the gains'
+    inverse variance per unit residual variance with the offset free (exact for one group)."""
     level = means.mean(axis=0)
-    design = np.zeros((level.size, 1 + views * r))
-    design[:, 0] = 1.0
-    design[np.arange(level.size), 1 + np.arange(level.size) // c] = level
-    coef, _, _ = _robust_fits(design, means - level)
-    return coef[:, 0], 1.0 + coef[:, 1:].reshape(k, views, r)
-
-
-def _robust_fits(design: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per frame least squares of ``y`` (k, N) on ``design`` (N, P), refitted once without the points beyond 4
-    robust standard deviations (the smallest coefficients of those that fit, when the design cannot tell them apart): ((k, P) coefficients, (k, P, P) their covariance per unit residual variance,
-    (k,) the robust residual scale)."""
+    y = means - level
     wts = np.ones_like(y)
     for _ in range(2):
-        normal = np.einsum("np,kn,nq->kpq", design, wts, design)
-        cov = np.linalg.pinv(normal, hermitian=True)
-        coef = np.einsum("kpq,np,kn->kq", cov, design, wts * y)
-        resid = np.abs(y - coef @ design.T)
-        scale = 1.4826 * np.median(resid, axis=1) + 1e-12
-        wts = (resid <= 4.0 * scale[:, None]).astype(float)
-    return coef, cov, scale
+        s1, s2, sy = (wts * level).sum(axis=2), (wts * level**2).sum(axis=2), (wts * level * y).sum(axis=2)
+        s2 = np.maximum(s2, 1e-300)
+        n = wts.sum(axis=(1, 2))
+        den = n - (s1**2 / s2).sum(axis=1)
+        num = (wts * y).sum(axis=(1, 2)) - (s1 * sy / s2).sum(axis=1)
+        offset = np.where(den > 1e-9 * np.maximum(n, 1.0), num / np.maximum(den, 1e-300), 0.0)
+        slope = (sy - s1 * offset[:, None]) / s2
+        resid = np.abs(y - offset[:, None, None] - slope[:, :, None] * level)
+        scale = 1.4826 * np.median(resid.reshape(y.shape[0], -1), axis=1) + 1e-12
+        spread = s2 - s1**2 / np.maximum(n, 1.0)[:, None]  # the gain's information once the offset is free
+        wts = (resid <= 4.0 * scale[:, None, None]).astype(float)
+    return offset, slope, scale, np.maximum(spread, 1e-300)
 
 
 def light_bands(gains: np.ndarray, rows: int, b: int) -> tuple[np.ndarray, int] | None:
     """((k, V, rows) smooth gain profile, its degree) of the per-row gains ``gains`` (k, V, R) of
     :func:`row_gains` when they follow the row or differ between views beyond their scatter, else None: per
     frame and view a Legendre polynomial of the row (to ``LIGHT_DEGREE``, one degree per ``ROWS_PER_DEGREE``
-    rows), its degree the highest whose coefficients exceed the gains' scatter about the fit by
-    ``MOTION_SIGMAS`` standard errors; a white scatter from row to row (temporal row noise) is no band."""
+    rows), its degree the highest whose coefficients exceed the gains' scatter about the fit (each view's own) by
+    ``MOTION_SIGMAS`` standard errors of chi-square; a white scatter from row to row (temporal row noise) is no
+    band."""
     k, views, r = gains.shape
     top = min(LIGHT_DEGREE, r // ROWS_PER_DEGREE)
     t = 2.0 * (np.arange(rows) + 0.5) / rows - 1.0
@@ -379,16 +395,20 @@ def light_bands(gains: np.ndarray, rows: int, b: int) -> tuple[np.ndarray, int] 
     q = np.linalg.qr(np.polynomial.legendre.legvander(tb, top))[0]  # orthonormal over the block rows
     coef = np.einsum("rd,kvr->kvd", q, gains)
     dof = max(r - top - 1, 1)
-    scatter = float(np.sum((gains - np.einsum("rd,kvd->kvr", q, coef)) ** 2)) / (k * views * dof)
+    # each view's scatter of the gains about the fit (a dark or textured view's gains are the noisier)
+    scatter = np.maximum(np.sum((gains - np.einsum("rd,kvd->kvr", q, coef)) ** 2, axis=(0, 2)) / (k * dof), 1e-300)
+    z2 = coef**2 / scatter[None, :, None]
     d1 = max(k - 1, 1) * views
-    limit = scatter * (1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d1 + 2.0 / (d1 * dof)))
-    degree = next((d for d in range(top, 0, -1) if np.sum(coef[..., d] ** 2) / d1 > limit), 0)
+    limit = 1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d1 + 2.0 / (k * views * dof))
+    degree = next((d for d in range(top, 0, -1) if np.sum(z2[..., d]) / d1 > limit), 0)
     if degree == 0:
         if views < 2:
             return None
-        between = coef[..., 0] - coef[..., 0].mean(axis=1, keepdims=True)
+        weight = 1.0 / scatter
+        common = (coef[..., 0] * weight).sum(axis=1, keepdims=True) / weight.sum()  # the frame's global change
         d0 = max(k - 1, 1) * (views - 1)
-        if np.sum(between**2) / d0 <= scatter * (1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d0 + 2.0 / (d1 * dof))):
+        if np.sum((coef[..., 0] - common) ** 2 * weight) / d0 <= 1.0 + MOTION_SIGMAS * math.sqrt(
+                2.0 / d0 + 2.0 / (k * views * dof)):
             return None
     # the profile's coefficients on the Legendre polynomials up to ``degree``, evaluated at every row
     q_deg, tri_deg = np.linalg.qr(np.polynomial.legendre.legvander(tb, degree))
@@ -396,13 +416,56 @@ def light_bands(gains: np.ndarray, rows: int, b: int) -> tuple[np.ndarray, int] 
     return np.einsum("kvd,rd->kvr", leg, np.polynomial.legendre.legvander(t, degree)), degree
 
 
-def steady_light(x: np.ndarray, b: int, view_rows: int | None = None) -> np.ndarray:
-    """The run ``x`` with each frame's light change against the run mean taken out: bands that follow the row
-    (a rolling shutter under lamps on the mains, :func:`light_bands` per view of ``view_rows`` rows, default the
-    whole image), else a global change (:func:`run_gain`) when the gains spread by more than ``FLICKER_MIN`` and
-    ``MOTION_SIGMAS`` standard errors; else ``x`` itself. The change ``offset + (gain - 1) x`` the run mean is
-    subtracted (the noise stays each frame's own, not scaled by the gain) and each row's deviations from the run
-    mean are scaled to the energy they had without it (the run mean's own noise comes in with the gain)."""
+@dataclass
+class LightChange:
+    """Each frame's light against the run mean (:func:`light_change`): the frame is ``offset + gain x`` the run
+    mean, plus its noise."""
+
+    offset: np.ndarray  # (k,) DN
+    gain: np.ndarray  # (k, H) each frame's relative brightness of every row
+
+    def undo(self, x: np.ndarray) -> np.ndarray:
+        """The run ``x`` with the change subtracted (the noise stays each frame's own, not scaled by the gain), each
+        frame's deviations from the run mean then weighted per row so that their energies estimate the frames'
+        mean noise variance without bias: the run mean's own noise comes in with the gain, and where the noise
+        follows the light (shot noise) it correlates with the frame's own; the weight
+        sqrt((1 + 2 (g - <g>) / (k - 2)) (k - 1) / (k - 1 + sum (g - <g>)^2 / k)) undoes both to first order
+        (k >= 4; fewer frames get the second factor alone)."""
+        k = x.shape[0]
+        mean = x.mean(axis=0)
+        steady = x - (self.offset[:, None, None] + (self.gain[:, :, None] - 1.0) * mean[None])
+        dev = self.gain - self.gain.mean(axis=0)  # (k, H)
+        weight = np.broadcast_to((k - 1) / (k - 1 + np.sum(dev**2, axis=0) / k), dev.shape)
+        if k >= 4:
+            weight = weight * np.maximum(1.0 + 2.0 * dev / (k - 2), 0.0)
+        centre = steady.mean(axis=0)
+        return centre[None] + (steady - centre[None]) * np.sqrt(weight)[:, :, None]
+
+    def noise_bias(self) -> float:
+        """The relative bias of the frames' noise variance that the light's change brings where the noise follows
+        the light, to first order without :meth:`undo`'s weights (mean over the rows): 2 sum (g - <g>)^2 / (k (k - 1))."""
+        k = self.gain.shape[0]
+        return 2.0 * float(np.mean(np.sum((self.gain - self.gain.mean(axis=0)) ** 2, axis=0))) / (k * max(k - 1, 1))
+
+    def percent(self) -> float:
+        """The change's size: rms over the frames and rows of the gain about its run mean (%)."""
+        return 100.0 * float(np.sqrt(np.mean((self.gain - self.gain.mean(axis=0)) ** 2)))
+
+    def block_levels(self, level: np.ndarray, b: int, columns: int) -> tuple[np.ndarray, np.ndarray]:
+        """((N,), (N,)) the lowest and highest level the frames gave each b x b block of run-mean level ``level``
+        (row-major, ``columns`` blocks per row): where a frame's light took it near the clipping limits."""
+        rows = level.size // columns
+        g = self.gain[:, : rows * b].reshape(self.gain.shape[0], rows, b)
+        lo, hi = (np.repeat(f(g, axis=2), columns, axis=1) for f in (np.min, np.max))  # (k, N)
+        return ((self.offset[:, None] + lo * level[None]).min(axis=0),
+                (self.offset[:, None] + hi * level[None]).max(axis=0))
+
+
+def light_change(x: np.ndarray, b: int, view_rows: int | None = None) -> LightChange | None:
+    """Each frame's light change against the mean of the run ``x`` (k x H x W), or None under steady light: bands
+    that follow the row (a rolling shutter under lamps on the mains, :func:`light_bands` per view of ``view_rows``
+    rows, default the whole image), else a global change (:func:`run_gain`) when the gains spread by more than
+    ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors."""
     k = x.shape[0]
     rows = x.shape[1] if view_rows is None else view_rows
     if rows < b or x.shape[1] % rows:
@@ -410,19 +473,12 @@ def steady_light(x: np.ndarray, b: int, view_rows: int | None = None) -> np.ndar
     offset, gains = row_gains(x, b, rows)
     bands = light_bands(gains, rows, b)
     if bands is not None:
-        gain = bands[0].reshape(k, x.shape[1])
-    else:
-        offset, flat, err = run_gain(x, b)
-        spread = float(np.std(flat))
-        if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
-            return x
-        gain = np.repeat(flat[:, None], x.shape[1], axis=1)
-    mean = x.mean(axis=0)
-    steady = x - (offset[:, None, None] + (gain[:, :, None] - 1.0) * mean[None])
-    extra = np.sum((gain - gain.mean(axis=0)) ** 2, axis=0) / k  # (H,) the mean's noise added, per unit variance
-    scale = np.sqrt((k - 1) / (k - 1 + extra))[None, :, None]
-    centre = steady.mean(axis=0)
-    return centre[None] + (steady - centre[None]) * scale
+        return LightChange(offset, bands[0].reshape(k, x.shape[1]))
+    offset, flat, err = run_gain(x, b)
+    spread = float(np.std(flat))
+    if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
+        return None
+    return LightChange(offset, np.repeat(flat[:, None], x.shape[1], axis=1))
 
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
@@ -436,14 +492,16 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     (:func:`_scene_p`: an object moving under the block; about twice the time, so the lab's, not the live
     monitor's, whose median over patches keeps such blocks from the frame). ``view_rows``: the frames are a
     column of views of this many rows each (the live monitor's patches), whose light is fitted apart
-    (:func:`steady_light`)."""
+    (:func:`light_change`)."""
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
-    x = steady_light(x, block, view_rows)
+    light = light_change(x, block, view_rows)
+    if light is not None:
+        x = light.undo(x)
     n_blocks = (x.shape[1] // block) * (x.shape[2] // block)
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):
@@ -459,8 +517,8 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
         p = np.minimum(p, _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
     displacement = run_displacement(x, block, d, use)
     steady = steady_run(x, block, displacement)
-    if k < 4 and moved(*displacement):
-        p = np.zeros_like(p)  # too few frames to take the camera's motion out: no static run
+    if k < 4 and (moved(*displacement) or (light is not None and light.noise_bias() > LIGHT_BIAS)):
+        p = np.zeros_like(p)  # too few frames to take the camera's motion or the light's out: no static run
     if steady is None:
         per_pixel, dof = np.sum(d * d, axis=0) / (k - 1), k - 1  # (N, n), zero where excluded
     else:
@@ -471,4 +529,5 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     gauss = var * np.sqrt(2.0 / (dof * m))
     err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
-    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion_rms(displacement[0]))
+    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion_rms(displacement[0]),
+                         0.0 if light is None else light.percent())

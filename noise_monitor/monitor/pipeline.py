@@ -98,6 +98,7 @@ class FrameResult:
     temporal_weight: float = 0.0  # share of xi_temporal in xi (inverse-variance weights)
     temporal_frames: int = 0  # frames of the current static hold measured
     temporal_motion_px: float | None = None  # the camera's vibration in that hold: rms displacement (px)
+    temporal_light_pct: float | None = None  # the light's change in that hold (flicker, rolling-shutter bands), %
     xi_error: float | None = None  # standard error of this frame's xi (DN): image, or fused with the temporal one
     alarm_evidence: float = 0.0  # the alarm's accumulated evidence (standard errors beyond the threshold)
     view_frames: int = 0  # processed frames of the current view (since the last gain / exposure step)
@@ -132,6 +133,8 @@ class FrameResult:
             out["sigma_temporal"] = self.sigma["temporal"]
             if self.temporal_motion_px is not None:
                 out["temporal_motion_px"] = float(self.temporal_motion_px)
+            if self.temporal_light_pct is not None:
+                out["temporal_light_pct"] = float(self.temporal_light_pct)
         out["temporal_weight"] = self.temporal_weight
         out["temporal_frames"] = float(self.temporal_frames)
         if self.xi_error is not None:
@@ -301,14 +304,14 @@ class Monitor:
             # texture hides the noise in every patch: the image proves only xi >= xi_bound (content adds
             # pixel-scale energy, never removes noise), so "image noisier" is left to the static holds
             bounded, xi_image = True, max(xi_bound, 0.0)
-        xi, xi_t, weight, held, xi_err, motion = xi_image, None, 0.0, 0, cfg.image_xi_error_dn, None
+        xi, xi_t, weight, held, xi_err, motion, light = xi_image, None, 0.0, 0, cfg.image_xi_error_dn, None, None
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         if tm is not None:
             held = tm.frames
             found = self._xi_temporal(tm, sigma)
             if found is not None:
                 xi_t, err_t = found
-                motion = tm.motion_px
+                motion, light = tm.motion_px, tm.light_pct
                 w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
@@ -328,7 +331,7 @@ class Monitor:
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_bounded=bounded, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
-            temporal_motion_px=motion,
+            temporal_motion_px=motion, temporal_light_pct=light,
             xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],

@@ -45,6 +45,7 @@ class TemporalMeasurement:
     accepted: np.ndarray  # (K, (size // BLOCK)^2) the blocks measured, row-major in each patch
     motion_px: float  # the camera's rms displacement about the hold's mean pose (px): its vibration
     meta: CameraMetadata  # the measured frames' mean metadata (what the model is evaluated at)
+    light_pct: float = 0.0  # the light's change from frame to frame taken out (rms over frames and rows, %)
 
 
 def _same_conditions(a: CameraMetadata, b: CameraMetadata, temperature_tol_c: float = TEMPERATURE_TOL_C) -> bool:
@@ -151,7 +152,8 @@ class TemporalNoise:
             sigma = np.sqrt(np.maximum(v, 0.0))
             sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
-                                   float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(self._metas))
+                                   float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(self._metas),
+                                   stats.light_pct)
 
 
 def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:

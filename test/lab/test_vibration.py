@@ -44,10 +44,11 @@ def test_flickering_light_is_no_noise_and_leaves_the_holds_measured(field_lab) -
 def test_rolling_shutter_bands_are_no_noise_and_leave_the_holds_measured(field_lab) -> None:
     """Lamps on the mains modulated by 30 %, seen through a rolling shutter: bands rolling through the frames at
     short exposures. Before, the pure-noise test rejected the blocks they crossed (55 cells measured); now each
-    frame's gain is fitted as a polynomial of the row and undone, in the test and in the lab's energies: 90
-    cells, net 0.03 DN, nothing claimed or read."""
+    frame's gain is fitted as a polynomial of the row and undone, in the test and in the lab's energies, and a
+    block is left out where a frame's light took it near the clipping limits: 84 cells, net 0.03 DN, nothing
+    claimed or read."""
     lab = field_lab(banding_pct=30.0)
-    assert lab["measurement"]["cells"] >= 85
+    assert lab["measurement"]["cells"] >= 80
     assert lab["rms_error_dn"] < 0.05
     assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
     assert not any(c["significant"] for c in lab["candidates"])

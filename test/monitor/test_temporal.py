@@ -68,6 +68,7 @@ def test_static_textured_scene_measures_temporal_noise_to_005_dn_after_10_frames
     assert abs(last.xi_temporal) <= 0.1  # the model is exact for this camera
     assert last.temporal_weight > 0.9
     assert last.numeric()["temporal_motion_px"] < 0.02  # a still camera
+    assert last.numeric()["temporal_light_pct"] == 0.0  # under steady light
 
 
 def test_temperature_drifting_inside_a_hold_is_compared_at_the_frames_mean(estimator):
@@ -125,6 +126,8 @@ def test_flickering_light_is_undone_before_the_frame_differences(estimator):
     last = results[-1]
     assert last.temporal_frames == 12 and last.xi_measurement == "temporal"
     assert abs(last.xi_temporal) <= 0.05
+    relative = gains / gains.mean()
+    assert last.numeric()["temporal_light_pct"] == pytest.approx(100 * relative.std(), rel=0.1)
 
 
 def test_rolling_shutter_bands_are_undone_before_the_frame_differences(estimator):
@@ -139,6 +142,9 @@ def test_rolling_shutter_bands_are_undone_before_the_frame_differences(estimator
     last = results[-1]
     assert last.temporal_frames == 12 and last.xi_measurement == "temporal"
     assert abs(last.xi_temporal) <= 0.05
+    rows = np.concatenate([np.arange(y, y + mon.temporal._size) for y, _ in mon.temporal._corners])
+    relative = np.stack(bands)[:, rows] / np.stack(bands)[:, rows].mean(axis=0)
+    assert last.numeric()["temporal_light_pct"] == pytest.approx(100 * relative.std(axis=0).mean(), rel=0.1)
 
 
 def test_moving_object_in_a_static_scene_is_left_out(estimator):
