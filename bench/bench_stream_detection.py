@@ -16,7 +16,7 @@ errors sit per image.
 
 Usage: .venv/bin/python bench/bench_stream_detection.py [--seeds 1 2 3] [--heldout-seeds 21 22 23]
        [--frames 100] [--width 320 --height 256] [--params config/node.yaml] [--threads 1] [--single-photo]
-       [--vibration PX]
+       [--vibration PX] [--flicker PCT] [--banding PCT [--mains-hz HZ] [--line-us US]]
        [--json out/stream_detection.json]
 Prints figures; asserts nothing.
 """
@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from noise_monitor.bag.simulate_cmd import add_field_arguments, field_keywords
 from noise_monitor.bag.stream_eval import evaluate_stream, summarize
 from noise_monitor.estimator.images import MATPLOTLIB_PHOTOS, PYWAVELETS_PHOTOS, matplotlib_photos, pywavelets_photos
 from noise_monitor.estimator.user_images import ImageSet
@@ -47,8 +48,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1, help="torch threads")
     ap.add_argument("--single-photo", action="store_true",
                     help="also held-out campaigns whose photo panels come from one photograph each")
-    ap.add_argument("--vibration", type=float, default=0.0, metavar="PX",
-                    help="the cameras vibrate by PX rms per axis, independently per frame (simulate-bag --vibration)")
+    add_field_arguments(ap)  # the recording's conditions, as simulate-bag's: --vibration, --flicker, --banding ...
     ap.add_argument("--json")
     args = ap.parse_args()
     per_bag: dict[str, list[dict[str, Any]]] = {"tuned": [], "held-out": []}
@@ -61,7 +61,7 @@ def main() -> None:
     for label, scenario, seed, photo in runs:
         one_photo = ImageSet((photo,), (photos[photo],), 1) if photo else None
         row = evaluate_stream(PROFILE, [seed], one_photo, scenario, args.frames, args.width, args.height,
-                              params=args.params, threads=args.threads, vibration_px=args.vibration)["bags"][0]
+                              params=args.params, threads=args.threads, field=field_keywords(args))["bags"][0]
         per_bag.setdefault(label, []).append(row)
         print(f"{label:8s} seed {seed:3d}: clean xi RMS {np.sqrt(np.mean(np.square(row['clean_xi']))):.3f} DN, "
               f"false alarm episodes {row['false_alarm_episodes']}, detected {row['hits']}/{row['need']} "

@@ -10,6 +10,7 @@ from noise_monitor.estimator.user_images import load_image_set
 
 from .campaign import MIN_PHOTO_SIDE
 from .scenarios import SCENARIOS
+from .simulate_cmd import add_field_arguments, field_keywords
 from .stream_eval import GAIN_OFFSET_DB, TARGET_CLEAN_XI_DN, TARGET_DETECTION, WITHIN, evaluate_stream
 
 CAMPAIGNS = sorted(name for name, s in SCENARIOS.items() if s.campaign)
@@ -31,8 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="what the wrong metadata states beyond the true gain (dB; default -6)")
     p.add_argument("--params", type=Path, default=None, help="node parameters YAML (default: the shipped ones)")
     p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--vibration", type=float, default=0.0, metavar="PX",
-                   help="the campaign camera vibrates by PX rms per axis, independently per frame (default 0)")
+    add_field_arguments(p)
     p.add_argument("--keep-bags", type=Path, default=None, metavar="DIR", help="write the bags here and keep them")
     p.add_argument("--json", type=Path, default=None, help="write the per-bag figures and the summary here")
 
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     images = load_image_set(args.images, args.image_downsample, MIN_PHOTO_SIDE) if args.images else None
     result = evaluate_stream(args.profile, args.seeds, images, args.scenario, args.frames, args.width, args.height,
                              args.fps, args.gain_offset_db, args.params, args.threads, args.keep_bags,
-                             args.vibration)
+                             field_keywords(args))
     for r in result["bags"]:
         print(f"seed {r['seed']}: {r['processed_clean']} / {r['frames']} frames processed clean, {r['processed_offset']} "
               f"with the gain stated {args.gain_offset_db:+g} dB; {r['views']} views; false-alarm episodes "

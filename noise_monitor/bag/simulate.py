@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict
 
 import numpy as np
 from tqdm import tqdm
@@ -27,7 +27,7 @@ from .scenarios import SCENARIOS, Step, get_scenario
 from .scenes import camera_path, make_world, view
 from .writer import STORAGES, BagWriter
 
-__all__ = ["SCENARIOS", "TOPICS", "FrameHook", "simulate_bag", "truth_path", "load_truth"]
+__all__ = ["SCENARIOS", "TOPICS", "FieldConditions", "FrameHook", "simulate_bag", "truth_path", "load_truth"]
 
 #: Contract topic names (under the default ``/camera`` namespace).
 TOPICS = {"image": "image_raw", "camera_info": "camera_info", "metadata": "metadata"}
@@ -77,6 +77,16 @@ MAX_VIBRATION_PX = 5.0
 MAX_FLICKER_PCT = 20.0
 #: a rolling shutter's line time (s) and the mains frequency (Hz) of lamps seen through it, by default
 LINE_TIME_S, MAINS_HZ = 30e-6, 50.0
+
+
+class FieldConditions(TypedDict, total=False):
+    """A recording's field conditions, keywords of :func:`simulate_bag`."""
+
+    vibration_px: float
+    flicker_pct: float
+    banding_pct: float
+    mains_hz: float
+    line_time_s: float
 
 
 def simulate_bag(

@@ -11,7 +11,7 @@ from noise_monitor.physics import load_plugin_file
 
 from .campaign import MIN_PHOTO_SIDE
 from .scenarios import SCENARIOS
-from .simulate import LINE_TIME_S, MAINS_HZ, START_NS, load_truth, simulate_bag, truth_path
+from .simulate import LINE_TIME_S, MAINS_HZ, START_NS, FieldConditions, load_truth, simulate_bag, truth_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -45,6 +45,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--moving-objects", type=int, default=0, metavar="N",
                         help="campaign scenarios: N objects with a smooth texture crossing the view at 2-8 px per "
                              "frame (people, vehicles passing a parked camera; default 0)")
+    add_field_arguments(parser)
+
+
+def add_field_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of the recording's field conditions (``simulate_bag`` keywords, :func:`field_keywords`)."""
+    parser.add_argument("--vibration", type=float, default=0.0, metavar="PX",
+                        help="campaign scenarios: the camera vibrates, its view displaced every frame by PX rms per "
+                             "axis, independently (a parked robot with its motors running; default 0)")
     parser.add_argument("--flicker", type=float, default=0.0, metavar="PCT",
                         help="lights that flicker: the scene's brightness scaled every frame by 1 + PCT %% rms, "
                              "independently (default 0)")
@@ -52,12 +60,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lamps on the mains whose light is modulated by PCT %% (0-100), seen through a rolling "
                              "shutter: horizontal bands, deeper at short exposures, rolling from frame to frame "
                              "(default 0)")
-    parser.add_argument("--mains-hz", type=float, default=MAINS_HZ, help=f"mains frequency of --banding (default {MAINS_HZ:g})")
+    parser.add_argument("--mains-hz", type=float, default=MAINS_HZ,
+                        help=f"mains frequency of --banding (default {MAINS_HZ:g})")
     parser.add_argument("--line-us", type=float, default=LINE_TIME_S * 1e6,
                         help=f"rolling shutter line time of --banding in microseconds (default {LINE_TIME_S * 1e6:g})")
-    parser.add_argument("--vibration", type=float, default=0.0, metavar="PX",
-                        help="campaign scenarios: the camera vibrates, its view displaced every frame by PX rms per "
-                             "axis, independently (a parked robot with its motors running; default 0)")
+
+
+def field_keywords(args: argparse.Namespace) -> FieldConditions:
+    """The ``simulate_bag`` keywords of :func:`add_field_arguments`' options."""
+    return {"vibration_px": args.vibration, "flicker_pct": args.flicker, "banding_pct": args.banding,
+            "mains_hz": args.mains_hz, "line_time_s": args.line_us * 1e-6}
 
 
 def _start_ns(text: str | None) -> int:
@@ -81,8 +93,7 @@ def run(args: argparse.Namespace) -> int:
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,
                        start_ns=_start_ns(args.start), images=images, moving_objects=args.moving_objects,
-                       vibration_px=args.vibration, flicker_pct=args.flicker,
-                       banding_pct=args.banding, mains_hz=args.mains_hz, line_time_s=args.line_us * 1e-6)
+                       **field_keywords(args))
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),
                "profile": truth["profile"], "scenario": truth["scenario"], "effects": truth["effects"],

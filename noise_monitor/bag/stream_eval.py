@@ -33,7 +33,7 @@ from noise_monitor.physics import CameraProfile
 from .reader import BagReader
 from .replay import replay
 from .results import FrameTable, alarm_episodes
-from .simulate import load_truth, simulate_bag
+from .simulate import FieldConditions, load_truth, simulate_bag
 from .writer import BagWriter
 
 GAIN_OFFSET_DB = -6.0
@@ -143,9 +143,11 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def evaluate_stream(profile: str | Path | CameraProfile, seeds: Sequence[int], images: ImageSet | None = None,
                     scenario: str = "campaign_heldout", frames: int = 100, width: int = 320, height: int = 256,
                     fps: float = 10.0, gain_offset_db: float = GAIN_OFFSET_DB, params: str | Path | None = None,
-                    threads: int = 1, workdir: Path | None = None, vibration_px: float = 0.0) -> dict[str, Any]:
-    """One campaign bag per seed (its photo panels from ``images`` when given; its camera vibrating by
-    ``vibration_px`` rms per axis), each replayed as recorded and with the gain stated ``gain_offset_db`` off:
+                    threads: int = 1, workdir: Path | None = None,
+                    field: FieldConditions | None = None) -> dict[str, Any]:
+    """One campaign bag per seed (its photo panels from ``images`` when given; recorded under the ``field``
+    conditions, ``simulate_bag`` keywords such as ``vibration_px``, ``flicker_pct``, ``banding_pct``), each
+    replayed as recorded and with the gain stated ``gain_offset_db`` off:
     {"bags": per-bag figures with their seed, "summary": together}. The bags are written to ``workdir`` (kept)
     or a temporary folder."""
     if not seeds:
@@ -158,7 +160,7 @@ def evaluate_stream(profile: str | Path | CameraProfile, seeds: Sequence[int], i
         folder.mkdir(parents=True, exist_ok=True)
         for seed in seeds:
             bag = simulate_bag(folder / f"{scenario}_{seed}.mcap", profile, scenario, frames=frames, width=width,
-                               height=height, fps=fps, seed=seed, images=images, vibration_px=vibration_px)
+                               height=height, fps=fps, seed=seed, images=images, **(field or {}))
             offset = stated_gain_copy(bag, folder / f"{scenario}_{seed}_gain{gain_offset_db:+g}dB.mcap", gain_offset_db)
             rows.append({"seed": seed, **measure_bag(bag, offset, profile, params, threads)})
     return {"bags": rows, "summary": summarize(rows)}

@@ -376,8 +376,8 @@ def _gain_fits(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
         slope = (sy - s1 * offset[:, None]) / s2
         resid = np.abs(y - offset[:, None, None] - slope[:, :, None] * level)
         scale = 1.4826 * np.median(resid.reshape(y.shape[0], -1), axis=1) + 1e-12
-        spread = s2 - s1**2 / np.maximum(n, 1.0)[:, None]  # the gain's information once the offset is free
         wts = (resid <= 4.0 * scale[:, None, None]).astype(float)
+    spread = s2 - s1**2 / np.maximum(n, 1.0)[:, None]  # the last fit's: the gain's information, the offset free
     return offset, slope, scale, np.maximum(spread, 1e-300)
 
 

@@ -38,16 +38,19 @@ def test_stated_gain_copy_changes_the_gain_only(tmp_path) -> None:
 
 
 def test_evaluate_stream_on_own_scene_meets_and_fails_the_targets(tmp_path, capsys) -> None:
-    """A smooth scene of the user's: clean xi within the target, no false alarm, every frame due an alarm
-    (gain stated 6 dB low) detected; with the node's alarm threshold raised out of reach the same campaign
-    detects nothing and the command says the targets are not met."""
+    """A smooth scene of the user's, lit by lamps on the mains seen through a rolling shutter (30 % bands): clean
+    xi within the target, no false alarm, every frame due an alarm (gain stated 6 dB low) detected; with the
+    node's alarm threshold raised out of reach the same campaign detects nothing and the command says the
+    targets are not met."""
     scenes = tmp_path / "scenes"
     scenes.mkdir()
     y, x = np.mgrid[0:480, 0:640]
     cv2.imwrite(str(scenes / "wall.png"), (128 + 50 * np.sin(x / 60.0) * np.cos(y / 80.0) + 20 * (x // 160 % 2)).astype(np.uint8))
     args = ["evaluate-stream", "--images", str(scenes), "--seeds", "3", "--frames", "30", "--width", "160",
-            "--height", "128"]
-    assert cli_main(args + ["--json", str(tmp_path / "ok.json")]) == 0
+            "--height", "128", "--banding", "30"]
+    assert cli_main(args + ["--json", str(tmp_path / "ok.json"), "--keep-bags", str(tmp_path / "bags")]) == 0
+    truth = json.loads(next((tmp_path / "bags").glob("*.truth.json")).read_text())
+    assert truth["banding_pct"] == 30.0 and max(abs(f["banding_depth"]) for f in truth["frames"]) > 0.1
     r = json.loads((tmp_path / "ok.json").read_text())
     bag, s = r["bags"][0], r["summary"]
     assert bag["seed"] == 3 and bag["processed_clean"] == bag["frames"] == 30
