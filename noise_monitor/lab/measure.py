@@ -13,8 +13,9 @@ three orthogonal parts:
 White noise of variance s2 puts ``d * s2`` into a part of dimension d; per-column (per-row) offsets of
 variance c2 put ``B (B - 2) c2`` into the column (row) part. Solving these relations per block gives
 unbiased per-pixel variances. Within a hold the spread of the residuals over frames gives the temporal
-noise, in blocks whose frame differences fit pure noise (no residual motion or flicker). Blocks are
-chosen flat and unclipped on the hold mean. The fixed-pattern, column and row components are cross
+noise, once the light's change from frame to frame (a flicker, a rolling shutter's bands) and the camera's
+vibration are taken out, in blocks whose frame differences fit pure noise (no residual motion, no light changing
+in part of the view). Blocks are chosen flat and unclipped on the hold mean and in every frame's light. The fixed-pattern, column and row components are cross
 energies of a block's hold-mean residual with the same sensor block seen from other camera poses
 (:func:`_cross_views`): the scene moves, the fixed pattern does not; with one pose only they are the
 hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so. Outlier

@@ -3,9 +3,10 @@
 While the camera holds still (within a pixel of the hold's first frame by global shift,
 same gain and exposure, temperature within a tolerance), the patches chosen on the first frame of the
 hold are cut from every frame at the same sensor position. Frame differences cancel the scene, so
-their statistics measure the temporal noise without reading texture as noise; each 8x8 block must pass
-the pure-noise test of :func:`noise_monitor.measure.block_temporal` (a moving object, residual motion or
-flicker rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, hot pixels) is the same in
+their statistics measure the temporal noise without reading texture as noise; the light's change (a flicker,
+a rolling shutter's bands, fitted per patch) is taken out first and each 8x8 block must pass the pure-noise
+test of :func:`noise_monitor.measure.block_temporal` (a moving object, residual motion or light changing in part
+of the patch rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, hot pixels) is the same in
 every frame and so absent from this measurement: it is compared with the model's temporal effects only.
 The measurement pools the hold's frames, so it is compared with the model at the frames' mean metadata
 (a temperature drifting inside the hold changes the dark-current noise from frame to frame).
