@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .analyze import analyze, component_change_text, write_json
-from .measure import scene_in_views_text
+from .measure import field_conditions_text, scene_in_views_text
 from .shape import fixed_shape_text
 
 
@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     for what, why in m["not_measured"].items():
         print(f"  not measured ({what}): {why}")
     print(f"  {fixed_shape_text(m['fixed_pattern_shape'])}")
+    print(f"  field conditions: {field_conditions_text(m['field_conditions'])}")
     if m["scene_in_partner_views"]:
         print(f"  {scene_in_views_text(m['scene_in_partner_views'])}")
     top = summary["candidates"][:5]

@@ -42,7 +42,17 @@ from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import t as t_dist
 
-from ..measure.temporal import HOLD_SHIFT_PX, LightChange, block_temporal, camera_shift, light_change, steady_run
+from ..measure.temporal import (
+    HOLD_SHIFT_PX,
+    LightChange,
+    block_temporal,
+    camera_shift,
+    displacement_basis,
+    light_change,
+    motion_rms,
+    run_displacement,
+    steady_run,
+)
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
@@ -172,6 +182,10 @@ class SegmentMeasurement:
     #: four views at distinct poses (:func:`.shape.fourth_moments`; 0 where the block has no three partners)
     fixed_fourth: np.ndarray | None = None
     fixed_square: np.ndarray | None = None
+    #: what was taken out of the hold's frames before its temporal noise: the light's change from frame to frame
+    #: (:meth:`..measure.temporal.LightChange.percent`, %) and the camera's vibration (rms displacement, px)
+    light_pct: float = 0.0
+    motion_px: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -219,6 +233,14 @@ class Measurements:
     #: cross-view components whose errors took the partner views' spread (the scene showed in their views)
     scene_in_views: list[str] = field(default_factory=list)
 
+    def field_conditions(self) -> dict[str, Any]:
+        """What the holds' temporal measurement took out: how many holds (of those with frame differences) saw the
+        light change from frame to frame or the camera vibrate, and the largest of each."""
+        holds = [s for s in self.segments if s.n_frames >= 2]
+        lit, shaken = [s.light_pct for s in holds if s.light_pct > 0], [s.motion_px for s in holds if s.motion_px > 0]
+        return {"holds": len(holds), "light_changing": len(lit), "light_pct_max": round(max(lit, default=0.0), 3),
+                "vibrating": len(shaken), "motion_px_max": round(max(shaken, default=0.0), 3)}
+
     def summary(self) -> dict[str, Any]:
         shape = (self.fixed_shape.summary() if self.fixed_shape else
                  {"not_measured": "no hold seen from three other, mutually distinct camera poses"})
@@ -229,6 +251,7 @@ class Measurements:
             "frames_skipped": dict(self.skipped),
             "not_measured": dict(self.not_measured),
             "scene_in_partner_views": list(self.scene_in_views),
+            "field_conditions": self.field_conditions(),
             "segments": len(self.segments),
             "cells": len(self.cells),
             "image_shape": list(self.shape),
@@ -384,6 +407,7 @@ class _SegmentAccumulator:
         self.pixel_var: np.ndarray | None = None  # (N, b*b) per-pixel temporal variance once vibration is removed
         self.dof = 0  # its degrees of freedom (k - 1 without vibration)
         self.light: LightChange | None = None  # the light's change from frame to frame, once measured
+        self.motion_px = 0.0  # the camera's vibration taken out (rms displacement, px), once measured
 
     def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
         self.images.append(img.astype(np.float32))
@@ -427,7 +451,12 @@ class _SegmentAccumulator:
         x = np.stack(self.images)
         self.light = light_change(x, self.b)
         lit = x if self.light is None else self.light.undo(x)
-        steady = steady_run(lit, self.b)
+        displacement = run_displacement(lit, self.b)
+        motion = displacement_basis(*displacement)
+        if self.light is not None and motion is not None:  # the light again, less what the camera's motion explains
+            self.light = light_change(x, self.b, motion=motion)
+            lit = x if self.light is None else self.light.undo(x)
+        steady = steady_run(lit, self.b, displacement)
         if steady is None and self.light is None:
             return
         zero = np.zeros_like(self.s2)
@@ -441,6 +470,7 @@ class _SegmentAccumulator:
         if steady is not None:
             self.pixel_var = sum((_blocks(r, self.b) @ self.proj) ** 2 for r in steady.residual) / steady.dof
             self.dof = steady.dof
+            self.motion_px = motion_rms(displacement[0])
 
     def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> _Full:
         self._steady()
@@ -519,7 +549,8 @@ class _SegmentAccumulator:
         position = np.stack([(iy + 0.5) * b / h, (ix + 0.5) * b / w], axis=1)
         return _Full(self.index, _mean_meta(self.metas), self.stamp_ns, list(self.frames), self.dof, self.pose,
                      v, region, values, robust, span, is_out, centred,
-                     keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes)
+                     keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes,
+                     light_pct=0.0 if self.light is None else self.light.percent(), motion_px=self.motion_px)
 
 
 @dataclass
@@ -554,6 +585,8 @@ class _Full:
     partner_values: dict[str, np.ndarray] | None = None  # component -> (N, P)
     fourth: np.ndarray | None = None  # (N,) see SegmentMeasurement.fixed_fourth
     square: np.ndarray | None = None  # (N,)
+    light_pct: float = 0.0  # the light's change taken out of the hold's frames (%)
+    motion_px: float = 0.0  # the camera's vibration taken out (rms displacement, px)
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -588,6 +621,8 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         temporal_spikes_expected=spikes_expected,
         fixed_fourth=None if f.fourth is None else f.fourth[keep],
         fixed_square=None if f.square is None else f.square[keep],
+        light_pct=f.light_pct,
+        motion_px=f.motion_px,
     )
 
 
@@ -703,6 +738,18 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
             views[comp] = partner_views(per_partner[sel[comp]], seg.partner_weight[sel[comp]] > 0)
         out.append(Cell(seg.index, int(k), float(seg.intensity_dn[idx].mean()), idx, vals, errs, views))
     return out
+
+
+def field_conditions_text(conditions: dict[str, Any]) -> str:
+    """One line for people from ``Measurements.summary()['field_conditions']``."""
+    if not conditions["holds"]:
+        return "no hold with frame differences"
+    light = (f"the light changed from frame to frame in {conditions['light_changing']} of {conditions['holds']} holds "
+             f"(flicker or a rolling shutter's bands; up to {conditions['light_pct_max']:.1f} % rms)"
+             if conditions["light_changing"] else f"steady light in all {conditions['holds']} holds")
+    shake = (f"the camera vibrated in {conditions['vibrating']} (up to {conditions['motion_px_max']:.2f} px rms)"
+             if conditions["vibrating"] else "no vibration")
+    return f"{light}, {shake}; taken out before the temporal noise"
 
 
 def scene_in_views_text(components: list[str]) -> str:

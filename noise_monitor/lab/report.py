@@ -19,7 +19,7 @@ from ..physics import NoiseModel  # noqa: E402
 from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve, signed_sigma  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
-from .measure import BLOCK, scene_in_views_text  # noqa: E402
+from .measure import BLOCK, field_conditions_text, scene_in_views_text  # noqa: E402
 from .shape import fixed_shape_text  # noqa: E402
 
 CONDITION_LABELS = {
@@ -276,6 +276,9 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     if "fixed_pattern_shape" in summary["measurement"]:
         text = fixed_shape_text(summary["measurement"]["fixed_pattern_shape"])
         parts.append(f"<p>{html.escape(text[:1].upper() + text[1:])}.</p>")
+    if "field_conditions" in summary["measurement"]:
+        text = field_conditions_text(summary["measurement"]["field_conditions"])
+        parts.append(f"<p>Field conditions: {html.escape(text)}.</p>")
     if "rms_error_after_dn" in summary:
         added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "

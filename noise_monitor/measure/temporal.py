@@ -381,14 +381,26 @@ def _gain_fits(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     return offset, slope, scale, np.maximum(spread, 1e-300)
 
 
-def light_bands(gains: np.ndarray, rows: int, b: int) -> tuple[np.ndarray, int] | None:
+def _without_motion(series: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
+    """``series`` (k, ...) over the frames less what the frames' displacement explains of its deviations from its
+    mean (``motion``: :func:`displacement_basis`, None: the camera did not move)."""
+    if motion is None:
+        return series
+    dev = series - series.mean(axis=0)
+    return series - np.tensordot(motion, np.tensordot(motion, dev, axes=(0, 0)), axes=(1, 0))
+
+
+def light_bands(gains: np.ndarray, rows: int, b: int, motion: np.ndarray | None = None) -> tuple[np.ndarray, int] | None:
     """((k, V, rows) smooth gain profile, its degree) of the per-row gains ``gains`` (k, V, R) of
-    :func:`row_gains` when they follow the row or differ between views beyond their scatter, else None: per
+    :func:`row_gains` when they follow the row beyond their scatter, else None: per
     frame and view a Legendre polynomial of the row (to ``LIGHT_DEGREE``, one degree per ``ROWS_PER_DEGREE``
     rows), its degree the highest whose coefficients exceed the gains' scatter about the fit (each view's own) by
     ``MOTION_SIGMAS`` standard errors of chi-square; a white scatter from row to row (temporal row noise) is no
-    band."""
+    band. ``motion``: the frames' displacement basis when the camera moved (what it explains is the scene moving
+    under the blocks, left out)."""
+    gains = _without_motion(gains, motion)
     k, views, r = gains.shape
+    free = max(k - (1 if motion is None else motion.shape[1]), 1)  # the frames' degrees of freedom about the mean
     top = min(LIGHT_DEGREE, r // ROWS_PER_DEGREE)
     t = 2.0 * (np.arange(rows) + 0.5) / rows - 1.0
     tb = t[: r * b].reshape(r, b).mean(axis=1)
@@ -396,20 +408,13 @@ def light_bands(gains: np.ndarray, rows: int, b: int) -> tuple[np.ndarray, int] 
     coef = np.einsum("rd,kvr->kvd", q, gains)
     dof = max(r - top - 1, 1)
     # each view's scatter of the gains about the fit (a dark or textured view's gains are the noisier)
-    scatter = np.maximum(np.sum((gains - np.einsum("rd,kvd->kvr", q, coef)) ** 2, axis=(0, 2)) / (k * dof), 1e-300)
+    scatter = np.maximum(np.sum((gains - np.einsum("rd,kvd->kvr", q, coef)) ** 2, axis=(0, 2)) / (free * dof), 1e-300)
     z2 = coef**2 / scatter[None, :, None]
-    d1 = max(k - 1, 1) * views
-    limit = 1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d1 + 2.0 / (k * views * dof))
+    d1 = free * views
+    limit = 1.0 + MOTION_SIGMAS * math.sqrt(2.0 / d1 + 2.0 / (d1 * dof))
     degree = next((d for d in range(top, 0, -1) if np.sum(z2[..., d]) / d1 > limit), 0)
     if degree == 0:
-        if views < 2:
-            return None
-        weight = 1.0 / scatter
-        common = (coef[..., 0] * weight).sum(axis=1, keepdims=True) / weight.sum()  # the frame's global change
-        d0 = max(k - 1, 1) * (views - 1)
-        if np.sum((coef[..., 0] - common) ** 2 * weight) / d0 <= 1.0 + MOTION_SIGMAS * math.sqrt(
-                2.0 / d0 + 2.0 / (k * views * dof)):
-            return None
+        return None
     # the profile's coefficients on the Legendre polynomials up to ``degree``, evaluated at every row
     q_deg, tri_deg = np.linalg.qr(np.polynomial.legendre.legvander(tb, degree))
     leg = np.linalg.solve(tri_deg, np.einsum("rd,kvr->kvd", q_deg, gains)[..., None])[..., 0]
@@ -461,21 +466,25 @@ class LightChange:
                 (self.offset[:, None] + hi * level[None]).max(axis=0))
 
 
-def light_change(x: np.ndarray, b: int, view_rows: int | None = None) -> LightChange | None:
+def light_change(x: np.ndarray, b: int, view_rows: int | None = None,
+                 motion: np.ndarray | None = None) -> LightChange | None:
     """Each frame's light change against the mean of the run ``x`` (k x H x W), or None under steady light: bands
     that follow the row (a rolling shutter under lamps on the mains, :func:`light_bands` per view of ``view_rows``
     rows, default the whole image), else a global change (:func:`run_gain`) when the gains spread by more than
-    ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors."""
+    ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors. ``motion``: the frames' displacement basis
+    (:func:`displacement_basis`) when the camera moved: the scene moving under the blocks changes their means too,
+    and the light is what the displacement does not explain."""
     k = x.shape[0]
     rows = x.shape[1] if view_rows is None else view_rows
     if rows < b or x.shape[1] % rows:
         raise ValueError(f"view_rows {view_rows} must divide the image height {x.shape[1]} and hold a {b}-pixel block")
     offset, gains = row_gains(x, b, rows)
-    bands = light_bands(gains, rows, b)
+    bands = light_bands(gains, rows, b, motion)
     if bands is not None:
-        return LightChange(offset, bands[0].reshape(k, x.shape[1]))
+        return LightChange(_without_motion(offset, motion), bands[0].reshape(k, x.shape[1]))
     offset, flat, err = run_gain(x, b)
-    spread = float(np.std(flat))
+    offset, flat = _without_motion(offset, motion), _without_motion(flat, motion)
+    spread = float(np.std(flat)) * (1.0 if motion is None else math.sqrt((k - 1) / max(k - motion.shape[1], 1)))
     if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
         return None
     return LightChange(offset, np.repeat(flat[:, None], x.shape[1], axis=1))
@@ -499,14 +508,21 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
-    light = light_change(x, block, view_rows)
+    raw = x
+    light = light_change(raw, block, view_rows)
     if light is not None:
-        x = light.undo(x)
+        x = light.undo(raw)
     n_blocks = (x.shape[1] // block) * (x.shape[2] // block)
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):
         raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
     mb, d, q, coef = _regression(x, block, use)
+    displacement = run_displacement(x, block, d, use)
+    motion = displacement_basis(*displacement)
+    if light is not None and motion is not None:  # the light again, less what the camera's motion explains
+        light = light_change(raw, block, view_rows, motion)
+        x = raw if light is None else light.undo(raw)
+        mb, d, q, coef = _regression(x, block, use)
     explained = np.sum(coef**2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
     m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
@@ -515,7 +531,6 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     p = f_dist.sf(ratio, d1, d2)
     if whiteness:
         p = np.minimum(p, _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
-    displacement = run_displacement(x, block, d, use)
     steady = steady_run(x, block, displacement)
     if k < 4 and (moved(*displacement) or (light is not None and light.noise_bias() > LIGHT_BIAS)):
         p = np.zeros_like(p)  # too few frames to take the camera's motion or the light's out: no static run

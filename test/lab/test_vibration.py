@@ -17,6 +17,8 @@ def test_a_vibrating_camera_is_measured_in_its_holds_and_not_read_as_noise(field
     for that has no static block: 94 frames measured, net 0.00 DN, nothing claimed or read."""
     lab = field_lab(vibration_px=0.3)
     assert lab["measurement"]["frames_used"] >= 90
+    field = lab["measurement"]["field_conditions"]  # reported: the shakes' 2-D rms is 0.42 px
+    assert field["vibrating"] >= field["holds"] // 2 and 0.25 < field["motion_px_max"] < 1.0
     assert lab["rms_error_dn"] < 0.05
     assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
     assert not any(c["significant"] for c in lab["candidates"])
@@ -36,6 +38,8 @@ def test_flickering_light_is_no_noise_and_leaves_the_holds_measured(field_lab) -
     (31 cells measured); now each frame's gain is undone first: 95 cells, net 0.04 DN, nothing claimed or read."""
     lab = field_lab(flicker_pct=2.0)
     assert lab["measurement"]["cells"] >= 85
+    field = lab["measurement"]["field_conditions"]
+    assert field["light_changing"] >= field["holds"] - 1 and 1.5 < field["light_pct_max"] < 5.0 and not field["vibrating"]
     assert lab["rms_error_dn"] < 0.06
     assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
     assert not any(c["significant"] for c in lab["candidates"])
@@ -49,6 +53,8 @@ def test_rolling_shutter_bands_are_no_noise_and_leave_the_holds_measured(field_l
     claimed or read."""
     lab = field_lab(banding_pct=30.0)
     assert lab["measurement"]["cells"] >= 80
+    field = lab["measurement"]["field_conditions"]  # bands of up to 30 % x sinc(100 Hz x exposure)
+    assert field["light_changing"] >= field["holds"] // 2 and 10.0 < field["light_pct_max"] < 22.0
     assert lab["rms_error_dn"] < 0.05
     assert not lab["unexplained"]["residual_significant"], lab["unexplained"]["reading"]
     assert not any(c["significant"] for c in lab["candidates"])
