@@ -234,9 +234,10 @@ class Measurements:
     scene_in_views: list[str] = field(default_factory=list)
 
     def field_conditions(self) -> dict[str, Any]:
-        """What the holds' temporal measurement took out: how many holds (of those with frame differences) saw the
-        light change from frame to frame or the camera vibrate, and the largest of each."""
-        holds = [s for s in self.segments if s.n_frames >= 2]
+        """What the holds' temporal measurement took out: how many holds (of those measured from frame differences)
+        saw the light change from frame to frame or the camera vibrate, and the largest of each. A hold of 2-3
+        frames that moved has no static block (too few frames to tell its light from its motion) and is not counted."""
+        holds = [s for s in self.segments if s.n_frames >= 2 and s.intensity_dn.size]
         lit, shaken = [s.light_pct for s in holds if s.light_pct > 0], [s.motion_px for s in holds if s.motion_px > 0]
         return {"holds": len(holds), "light_changing": len(lit), "light_pct_max": round(max(lit, default=0.0), 3),
                 "vibrating": len(shaken), "motion_px_max": round(max(shaken, default=0.0), 3)}
@@ -743,10 +744,10 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
 def field_conditions_text(conditions: dict[str, Any]) -> str:
     """One line for people from ``Measurements.summary()['field_conditions']``."""
     if not conditions["holds"]:
-        return "no hold with frame differences"
-    light = (f"the light changed from frame to frame in {conditions['light_changing']} of {conditions['holds']} holds "
+        return "no hold measured from frame differences"
+    light = (f"the light changed from frame to frame in {conditions['light_changing']} of {conditions['holds']} holds measured "
              f"(flicker or a rolling shutter's bands; up to {conditions['light_pct_max']:.1f} % rms)"
-             if conditions["light_changing"] else f"steady light in all {conditions['holds']} holds")
+             if conditions["light_changing"] else f"steady light in all {conditions['holds']} holds measured")
     shake = (f"the camera vibrated in {conditions['vibrating']} (up to {conditions['motion_px_max']:.2f} px rms)"
              if conditions["vibrating"] else "no vibration")
     return f"{light}, {shake}; taken out before the temporal noise"
