@@ -14,6 +14,12 @@ import numpy as np
 LIGHT_PER_MAINS = 2.0
 
 
+def banding_depth(depth: float, exposure_s: float, mains_hz: float) -> float:
+    """The bands' depth once a row's exposure of ``exposure_s`` averages a light modulated by ``depth`` at twice
+    ``mains_hz``: depth x sinc(f T) (signed; 0 at whole light periods)."""
+    return float(depth * np.sinc(LIGHT_PER_MAINS * mains_hz * exposure_s))
+
+
 def rolling_shutter_gain(height: int, exposure_s: float, phase: float, depth: float, mains_hz: float,
                          line_s: float) -> np.ndarray:
     """(height,) relative brightness of each row of one frame: the light 1 + depth sin(2 pi f t + phase)
@@ -22,4 +28,4 @@ def rolling_shutter_gain(height: int, exposure_s: float, phase: float, depth: fl
     + phase)."""
     f = LIGHT_PER_MAINS * mains_hz
     mid = np.arange(height) * line_s + 0.5 * exposure_s
-    return 1.0 + depth * np.sinc(f * exposure_s) * np.sin(2.0 * np.pi * f * mid + phase)
+    return 1.0 + banding_depth(depth, exposure_s, mains_hz) * np.sin(2.0 * np.pi * f * mid + phase)

@@ -21,7 +21,7 @@ from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel, loa
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
 from . import campaign
-from .lights import LIGHT_PER_MAINS, rolling_shutter_gain
+from .lights import banding_depth, rolling_shutter_gain
 from .messages import camera_info_msg, image_msg, metadata_msg
 from .scenarios import SCENARIOS, Step, get_scenario
 from .scenes import camera_path, make_world, view
@@ -252,8 +252,8 @@ def simulate_bag(
                 **({"shake_px": [round(float(v), 4) for v in shakes[i]]} if vibration_px else {}),
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
-                    "banding_depth": round(float(banding_pct / 100.0 * np.sinc(
-                        LIGHT_PER_MAINS * mains_hz * true_meta.exposure_time_s)), 6)} if banding_pct else {}),
+                    "banding_depth": round(banding_depth(banding_pct / 100.0, true_meta.exposure_time_s, mains_hz), 6)}
+                   if banding_pct else {}),
                 "moving": prev_offset is not None and offset != prev_offset,
                 **({"hold": plans[i].hold} if scen.campaign else {}),
                 "mean_dn": round(float(clean.mean()), 3),

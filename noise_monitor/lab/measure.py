@@ -47,10 +47,8 @@ from ..measure.temporal import (
     LightChange,
     block_temporal,
     camera_shift,
-    displacement_basis,
-    light_change,
+    light_and_motion,
     motion_rms,
-    run_displacement,
     steady_run,
 )
 from ..monitor.config import MonitorConfig
@@ -446,17 +444,10 @@ class _SegmentAccumulator:
 
     def _steady(self) -> None:
         """The frames' sums, energies and per-pixel variances again, with the light's change from frame to frame
-        (flicker, a rolling shutter's bands: :func:`..measure.temporal.light_change`) and the camera's vibration
+        (flicker, a rolling shutter's bands: :func:`..measure.temporal.light_and_motion`) and the camera's vibration
         (:func:`..measure.temporal.steady_run`) taken out of every pixel (nothing when neither shows); the frames
         themselves stay for the pure-noise test, which rejects the blocks where the motion shows."""
-        x = np.stack(self.images)
-        self.light = light_change(x, self.b)
-        lit = x if self.light is None else self.light.undo(x)
-        displacement = run_displacement(lit, self.b)
-        motion = displacement_basis(*displacement)
-        if self.light is not None and motion is not None:  # the light again, less what the camera's motion explains
-            self.light = light_change(x, self.b, motion=motion)
-            lit = x if self.light is None else self.light.undo(x)
+        self.light, lit, displacement = light_and_motion(np.stack(self.images), self.b)
         steady = steady_run(lit, self.b, displacement)
         if steady is None and self.light is None:
             return

@@ -328,23 +328,11 @@ def steady_run(x: np.ndarray, b: int, displacement: tuple[np.ndarray, float] | N
 LIGHT_DEGREE, ROWS_PER_DEGREE = 12, 3
 
 
-def run_gain(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """((k,) offset, (k,) gain, standard error of the gains) of each frame of the run ``x`` (k x H x W) against
-    the run mean, from the b x b blocks' means (light flicker scales the whole scene from frame to frame): per
-    frame a least-squares line of the blocks' means on the mean's, refitted once without the blocks beyond 4
-    robust standard deviations of the first fit (a moving object), the gain's error from the fit's scatter."""
-    means = _block_means(x, b, (x.shape[1] // b) * b)
-    k = means.shape[0]
-    offset, slope, scale, spread = _gain_fits(means.reshape(k, 1, -1))
-    return offset, 1.0 + slope[:, 0], float(np.sqrt(np.mean(scale**2 / spread[:, 0])))
-
-
-def row_gains(x: np.ndarray, b: int, view_rows: int) -> tuple[np.ndarray, np.ndarray]:
+def row_gains(x: np.ndarray, b: int, view_rows: int, means: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((k,) offset, (k, V, R) gain) of each frame of the run ``x`` (k x H x W, a column of V views of
     ``view_rows`` rows) against the run mean: a gain per view and row of b x b blocks (R per view) and one offset,
-    fitted to the blocks' means as in :func:`run_gain`."""
-    means = _block_means(x, b, view_rows)
-    offset, slope, _, _ = _gain_fits(means)
+    fitted to the blocks' means (:func:`_gain_fits`; ``means``: those of :func:`_block_means` when at hand)."""
+    offset, slope, _, _ = _gain_fits(_block_means(x, b, view_rows) if means is None else means)
     return offset, 1.0 + slope.reshape(x.shape[0], x.shape[1] // view_rows, view_rows // b)
 
 
@@ -439,22 +427,27 @@ class LightChange:
         k = x.shape[0]
         mean = x.mean(axis=0)
         steady = x - (self.offset[:, None, None] + (self.gain[:, :, None] - 1.0) * mean[None])
-        dev = self.gain - self.gain.mean(axis=0)  # (k, H)
+        dev = self.deviation
         weight = np.broadcast_to((k - 1) / (k - 1 + np.sum(dev**2, axis=0) / k), dev.shape)
         if k >= 4:
             weight = weight * np.maximum(1.0 + 2.0 * dev / (k - 2), 0.0)
         centre = steady.mean(axis=0)
         return centre[None] + (steady - centre[None]) * np.sqrt(weight)[:, :, None]
 
+    @property
+    def deviation(self) -> np.ndarray:
+        """(k, H) each frame's gain per row less the run's mean gain of that row."""
+        return self.gain - self.gain.mean(axis=0)
+
     def noise_bias(self) -> float:
         """The relative bias of the frames' noise variance that the light's change brings where the noise follows
         the light, to first order without :meth:`undo`'s weights (mean over the rows): 2 sum (g - <g>)^2 / (k (k - 1))."""
         k = self.gain.shape[0]
-        return 2.0 * float(np.mean(np.sum((self.gain - self.gain.mean(axis=0)) ** 2, axis=0))) / (k * max(k - 1, 1))
+        return 2.0 * float(np.mean(np.sum(self.deviation**2, axis=0))) / (k * max(k - 1, 1))
 
     def percent(self) -> float:
         """The change's size: rms over the frames and rows of the gain about its run mean (%)."""
-        return 100.0 * float(np.sqrt(np.mean((self.gain - self.gain.mean(axis=0)) ** 2)))
+        return 100.0 * float(np.sqrt(np.mean(self.deviation**2)))
 
     def block_levels(self, level: np.ndarray, b: int, columns: int) -> tuple[np.ndarray, np.ndarray]:
         """((N,), (N,)) the lowest and highest level the frames gave each b x b block of run-mean level ``level``
@@ -470,24 +463,44 @@ def light_change(x: np.ndarray, b: int, view_rows: int | None = None,
                  motion: np.ndarray | None = None) -> LightChange | None:
     """Each frame's light change against the mean of the run ``x`` (k x H x W), or None under steady light: bands
     that follow the row (a rolling shutter under lamps on the mains, :func:`light_bands` per view of ``view_rows``
-    rows, default the whole image), else a global change (:func:`run_gain`) when the gains spread by more than
-    ``FLICKER_MIN`` and ``MOTION_SIGMAS`` standard errors. ``motion``: the frames' displacement basis
+    rows, default the whole image), else a global change (one offset and gain per frame for the whole image, its
+    standard error from the fit's scatter) when the gains spread by more than ``FLICKER_MIN`` and ``MOTION_SIGMAS``
+    standard errors. Both are fitted to the b x b blocks' means (:func:`_gain_fits`). ``motion``: the frames' displacement basis
     (:func:`displacement_basis`) when the camera moved: the scene moving under the blocks changes their means too,
     and the light is what the displacement does not explain."""
     k = x.shape[0]
     rows = x.shape[1] if view_rows is None else view_rows
     if rows < b or x.shape[1] % rows:
         raise ValueError(f"view_rows {view_rows} must divide the image height {x.shape[1]} and hold a {b}-pixel block")
-    offset, gains = row_gains(x, b, rows)
+    means = _block_means(x, b, rows)
+    offset, gains = row_gains(x, b, rows, means)
     bands = light_bands(gains, rows, b, motion)
     if bands is not None:
         return LightChange(_without_motion(offset, motion), bands[0].reshape(k, x.shape[1]))
-    offset, flat, err = run_gain(x, b)
-    offset, flat = _without_motion(offset, motion), _without_motion(flat, motion)
+    offset, slope, scale, information = _gain_fits(means.reshape(k, 1, -1))
+    err = float(np.sqrt(np.mean(scale**2 / information[:, 0])))
+    offset, flat = _without_motion(offset, motion), _without_motion(1.0 + slope[:, 0], motion)
     spread = float(np.std(flat)) * (1.0 if motion is None else math.sqrt((k - 1) / max(k - motion.shape[1], 1)))
     if spread <= FLICKER_MIN or spread <= MOTION_SIGMAS * err:
         return None
     return LightChange(offset, np.repeat(flat[:, None], x.shape[1], axis=1))
+
+
+def light_and_motion(x: np.ndarray, b: int, view_rows: int | None = None, use: np.ndarray | None = None
+                     ) -> tuple[LightChange | None, np.ndarray, tuple[np.ndarray, float]]:
+    """(the light's change (:func:`light_change`), the run ``x`` with it taken out, the frames' displacement and
+    its error (:func:`run_displacement` on those frames, over the (N, b*b) pixels ``use``)): when the camera moved,
+    the light is fitted again from what the displacement does not explain (the scene moving under the blocks
+    changes their means too)."""
+    light = light_change(x, b, view_rows)
+    steady = x if light is None else light.undo(x)
+    deviations = None if use is None else (blocks_of(steady, b) - blocks_of(steady.mean(axis=0), b)[None]) * use[None]
+    displacement = run_displacement(steady, b, deviations, use)
+    motion = displacement_basis(*displacement)
+    if light is not None and motion is not None:
+        light = light_change(x, b, view_rows, motion)
+        steady = x if light is None else light.undo(x)
+    return light, steady, displacement
 
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
@@ -501,28 +514,19 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     (:func:`_scene_p`: an object moving under the block; about twice the time, so the lab's, not the live
     monitor's, whose median over patches keeps such blocks from the frame). ``view_rows``: the frames are a
     column of views of this many rows each (the live monitor's patches), whose light is fitted apart
-    (:func:`light_change`)."""
+    (:func:`light_and_motion`)."""
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
     k = x.shape[0]
     if x.shape[1] < block or x.shape[2] < block:
         raise ValueError(f"frames of {x.shape[2]}x{x.shape[1]} are smaller than one {block}x{block} block")
-    raw = x
-    light = light_change(raw, block, view_rows)
-    if light is not None:
-        x = light.undo(raw)
     n_blocks = (x.shape[1] // block) * (x.shape[2] // block)
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):
         raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
+    light, x, displacement = light_and_motion(x, block, view_rows, use)
     mb, d, q, coef = _regression(x, block, use)
-    displacement = run_displacement(x, block, d, use)
-    motion = displacement_basis(*displacement)
-    if light is not None and motion is not None:  # the light again, less what the camera's motion explains
-        light = light_change(raw, block, view_rows, motion)
-        x = raw if light is None else light.undo(raw)
-        mb, d, q, coef = _regression(x, block, use)
     explained = np.sum(coef**2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
     m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
