@@ -447,7 +447,7 @@ class _SegmentAccumulator:
         (flicker, a rolling shutter's bands: :func:`..measure.temporal.light_and_motion`) and the camera's vibration
         (:func:`..measure.temporal.steady_run`) taken out of every pixel (nothing when neither shows); the frames
         themselves stay for the pure-noise test, which rejects the blocks where the motion shows."""
-        self.light, lit, displacement = light_and_motion(np.stack(self.images), self.b)
+        self.light, lit, displacement, _ = light_and_motion(np.stack(self.images), self.b)
         steady = steady_run(lit, self.b, displacement)
         if steady is None and self.light is None:
             return

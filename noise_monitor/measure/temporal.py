@@ -208,18 +208,24 @@ def white_lag_monte_carlo(b: int, k: int = 64) -> tuple[float, float]:
     return float(rho.mean()), float(rho.std() * math.sqrt(k - 1))
 
 
-def _regression(x: np.ndarray, b: int, use: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _deviations(x: np.ndarray, b: int, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(block pixels of the run mean (N, n), the frames' deviations from it (k, N, n), 0 outside ``use``)."""
+    mb = blocks_of(x.mean(axis=0), b)
+    return mb, (blocks_of(x, b) - mb[None]) * use[None]
+
+
+def _regression(x: np.ndarray, b: int, use: np.ndarray, deviations: tuple[np.ndarray, np.ndarray] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(block pixels of the hold mean (N, n), the frames' deviations from it (k, N, n), the scene-change
     regressors' orthonormal basis (N, n, 4), the deviations' coefficients on it (k, N, 4)) of ``x`` (k x H x W)
     in b x b blocks, pixels outside ``use`` (N, n) left out: an offset, a brightness scaling and sub-pixel motion
-    along the mean image's gradients."""
+    along the mean image's gradients. ``deviations``: :func:`_deviations` of ``x`` when at hand."""
     mean = x.mean(axis=0)
     gy, gx = np.gradient(mean)
-    mb = blocks_of(mean, b)
+    mb, d = _deviations(x, b, use) if deviations is None else deviations
     design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks_of(gx, b),
                        blocks_of(gy, b)], axis=2) * use[:, :, None]
     q, _ = np.linalg.qr(design)
-    d = (blocks_of(x, b) - mb[None]) * use[None]
     return mb, d, q, np.einsum("knp,npr->knr", d, q)
 
 
@@ -487,20 +493,22 @@ def light_change(x: np.ndarray, b: int, view_rows: int | None = None,
 
 
 def light_and_motion(x: np.ndarray, b: int, view_rows: int | None = None, use: np.ndarray | None = None
-                     ) -> tuple[LightChange | None, np.ndarray, tuple[np.ndarray, float]]:
+                     ) -> tuple[LightChange | None, np.ndarray, tuple[np.ndarray, float],
+                                tuple[np.ndarray, np.ndarray] | None]:
     """(the light's change (:func:`light_change`), the run ``x`` with it taken out, the frames' displacement and
-    its error (:func:`run_displacement` on those frames, over the (N, b*b) pixels ``use``)): when the camera moved,
-    the light is fitted again from what the displacement does not explain (the scene moving under the blocks
-    changes their means too)."""
+    its error (:func:`run_displacement` on those frames, over the (N, b*b) pixels ``use``), with ``use`` their
+    :func:`_deviations`): when the camera moved, the light is fitted again from what the displacement does not
+    explain (the scene moving under the blocks changes their means too)."""
     light = light_change(x, b, view_rows)
     steady = x if light is None else light.undo(x)
-    deviations = None if use is None else (blocks_of(steady, b) - blocks_of(steady.mean(axis=0), b)[None]) * use[None]
-    displacement = run_displacement(steady, b, deviations, use)
+    blocks = None if use is None else _deviations(steady, b, use)
+    displacement = run_displacement(steady, b, None if blocks is None else blocks[1], use)
     motion = displacement_basis(*displacement)
     if light is not None and motion is not None:
         light = light_change(x, b, view_rows, motion)
         steady = x if light is None else light.undo(x)
-    return light, steady, displacement
+        blocks = None if use is None else _deviations(steady, b, use)
+    return light, steady, displacement, blocks
 
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
@@ -525,8 +533,8 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):
         raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
-    light, x, displacement = light_and_motion(x, block, view_rows, use)
-    mb, d, q, coef = _regression(x, block, use)
+    light, x, displacement, blocks = light_and_motion(x, block, view_rows, use)
+    mb, d, q, coef = _regression(x, block, use, blocks)
     explained = np.sum(coef**2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
     m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
