@@ -104,7 +104,7 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
                     "with dark pairs, dark pairs at 3 more temperatures (>= 60 frames; 200 recommended)",
              lambda u: Step(moving=False)),
     Scenario("live_drift", "a live driver: temperature 35 -> 39 degC, auto-exposure +-20 % and auto-gain +-1 dB "
-             "oscillating (with simulate-bag --hold-s 0: new metadata every frame)",
+             "oscillating (with simulate-bag --hold 0: new metadata every frame)",
              lambda u: Step(sensor_temperature_c=_lerp(35.0, 39.0, u),
                             exposure_time_s=BASE["exposure_time_s"] * (1.0 + 0.2 * math.sin(8 * math.pi * u)),
                             gain_db=BASE["gain_db"] + math.sin(3 * math.pi * u))),

@@ -9,7 +9,9 @@ model's sigma for the stated metadata and the resulting true xi = sigma_model - 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Protocol, TypedDict
 
@@ -75,6 +77,8 @@ MAX_FPS = 10_000.0
 MAX_VIBRATION_PX = 5.0
 #: largest rms light flicker (%) of a simulated recording
 MAX_FLICKER_PCT = 20.0
+#: largest rms auto-exposure wander (%) of a simulated recording, and its correlation from frame to frame
+MAX_AUTO_EXPOSURE_PCT, AUTO_EXPOSURE_CORRELATION = 30.0, 0.8
 #: a rolling shutter's line time (s) and the mains frequency (Hz) of lamps seen through it, by default
 LINE_TIME_S, MAINS_HZ = 30e-6, 50.0
 
@@ -87,6 +91,7 @@ class FieldConditions(TypedDict, total=False):
     banding_pct: float
     mains_hz: float
     line_time_s: float
+    auto_exposure_pct: float
 
 
 def simulate_bag(
@@ -113,6 +118,7 @@ def simulate_bag(
     banding_pct: float = 0.0,
     mains_hz: float = MAINS_HZ,
     line_time_s: float = LINE_TIME_S,
+    auto_exposure_pct: float = 0.0,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -138,7 +144,9 @@ def simulate_bag(
     is modulated by this depth (%), seen through a rolling shutter of ``line_time_s`` per row
     (:func:`.lights.rolling_shutter_gain`: bands that deepen as the exposure shortens), the frame clock running free
     of the mains (each frame meets the light at a random phase, own generator; truth ``banding_phase`` and the
-    exposure-averaged ``banding_depth``).
+    exposure-averaged ``banding_depth``). ``auto_exposure_pct``: a live driver's auto-exposure hunting under steady
+    light, every frame's exposure (and with it the image's brightness) off the plan's by a smooth wander of this rms
+    (%) (:func:`auto_exposure_wander`, own generator; the metadata report it; truth ``exposure_factor``).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -172,6 +180,8 @@ def simulate_bag(
         raise ValueError(f"mains_hz must be in (0, 1000] Hz, got {mains_hz}")
     if not 0 < line_time_s <= 1e-3:
         raise ValueError(f"line_time_s must be in (0, 1e-3] s, got {line_time_s}")
+    if not 0 <= auto_exposure_pct <= MAX_AUTO_EXPOSURE_PCT:
+        raise ValueError(f"auto_exposure_pct must be 0-{MAX_AUTO_EXPOSURE_PCT:g} %, got {auto_exposure_pct}")
     if scen.name == "ptc":
         from noise_monitor.profiles.ptc_sim import simulate_ptc
 
@@ -185,6 +195,7 @@ def simulate_bag(
     # their own generator: the scene, plan and noise stay those of the seed without flicker
     flicker = 1.0 + flicker_pct / 100.0 * np.random.default_rng([seed, 3]).standard_normal(frames)
     band_phase = np.random.default_rng([seed, 4]).uniform(0.0, 2.0 * np.pi, frames)
+    hunt = auto_exposure_wander(np.random.default_rng([seed, 5]), frames, auto_exposure_pct)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
     if scen.campaign:
         world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images)
@@ -200,6 +211,8 @@ def simulate_bag(
         held = _held(us, frames, fps, hold_s)
         steps = [_merge(scen.step(float(u)), scen.step(float(h))) for u, h in zip(us, held)]
         positions = np.stack([camera_path(np.array(u), s.moving) for u, s in zip(us, steps)])
+    if auto_exposure_pct:
+        steps = [replace(s, exposure_time_s=s.exposure_time_s * float(f)) for s, f in zip(steps, hunt)]
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
     hw = hardware_id or prof.name
@@ -222,6 +235,8 @@ def simulate_bag(
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
             if flicker_pct:
                 clean = np.clip(clean * np.float32(flicker[i]), 0.0, 255.0).astype(np.float32)
+            if auto_exposure_pct:
+                clean = np.clip(clean * np.float32(hunt[i]), 0.0, 255.0).astype(np.float32)
             if banding_pct:
                 bands = rolling_shutter_gain(height, true_meta.exposure_time_s, float(band_phase[i]),
                                              banding_pct / 100.0, mains_hz, line_time_s)
@@ -251,6 +266,7 @@ def simulate_bag(
                 "offset_px": list(offset),
                 **({"shake_px": [round(float(v), 4) for v in shakes[i]]} if vibration_px else {}),
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
+                **({"exposure_factor": round(float(hunt[i]), 6)} if auto_exposure_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
                     "banding_depth": round(banding_depth(banding_pct / 100.0, true_meta.exposure_time_s, mains_hz), 6)}
                    if banding_pct else {}),
@@ -266,6 +282,7 @@ def simulate_bag(
         **({"moving_objects": moving_objects} if moving_objects else {}),
         **({"vibration_px": vibration_px} if vibration_px else {}),
         **({"flicker_pct": flicker_pct} if flicker_pct else {}),
+        **({"auto_exposure_pct": auto_exposure_pct} if auto_exposure_pct else {}),
         **({"banding_pct": banding_pct, "mains_hz": mains_hz, "line_time_s": line_time_s} if banding_pct else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
@@ -277,6 +294,18 @@ def simulate_bag(
     }
     truth_path(out).write_text(json.dumps(truth, indent=1))
     return out
+
+
+def auto_exposure_wander(rng: np.random.Generator, frames: int, rms_pct: float) -> np.ndarray:
+    """(frames,) exposure factors of an auto-exposure hunting about its set point: exp of a stationary AR(1)
+    series of ``rms_pct`` % rms, correlated ``AUTO_EXPOSURE_CORRELATION`` from frame to frame; ones for 0."""
+    z = rng.standard_normal(frames)
+    a = np.empty(frames)
+    a[0] = z[0]
+    rho = AUTO_EXPOSURE_CORRELATION
+    for i in range(1, frames):
+        a[i] = rho * a[i - 1] + math.sqrt(1.0 - rho**2) * z[i]
+    return np.exp(rms_pct / 100.0 * a)
 
 
 def _held(us: np.ndarray, frames: int, fps: float, hold_s: float) -> np.ndarray:

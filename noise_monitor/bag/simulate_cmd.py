@@ -64,12 +64,16 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"mains frequency of --banding (default {MAINS_HZ:g})")
     parser.add_argument("--line-us", type=float, default=LINE_TIME_S * 1e6,
                         help=f"rolling shutter line time of --banding in microseconds (default {LINE_TIME_S * 1e6:g})")
+    parser.add_argument("--auto-exposure", type=float, default=0.0, metavar="PCT",
+                        help="a live driver's auto-exposure hunting under steady light: every frame's exposure, and "
+                             "the image's brightness with it, wanders about the scenario's by PCT %% rms (correlated "
+                             "from frame to frame; reported in the metadata; default 0)")
 
 
 def field_keywords(args: argparse.Namespace) -> FieldConditions:
     """The ``simulate_bag`` keywords of :func:`add_field_arguments`' options."""
     return {"vibration_px": args.vibration, "flicker_pct": args.flicker, "banding_pct": args.banding,
-            "mains_hz": args.mains_hz, "line_time_s": args.line_us * 1e-6}
+            "mains_hz": args.mains_hz, "line_time_s": args.line_us * 1e-6, "auto_exposure_pct": args.auto_exposure}
 
 
 def _start_ns(text: str | None) -> int:

@@ -7,6 +7,7 @@ exposure: a new view) restarts the filter and the alarm's evidence, so each view
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -308,7 +309,7 @@ class Monitor:
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         if tm is not None:
             held = tm.frames
-            found = self._xi_temporal(tm, sigma)
+            found = self._xi_temporal(tm, sigma, meta)
             if found is not None:
                 xi_t, err_t = found
                 motion, light = tm.motion_px, tm.light_pct
@@ -376,23 +377,35 @@ class Monitor:
         self.view_frames = 1 if step else self.view_frames + 1
         return step
 
-    def _xi_temporal(self, tm: TemporalMeasurement, sigma: dict[str, float]) -> tuple[float, float] | None:
-        """(xi of the static hold's temporal measurement, its standard error), None without accepted blocks.
+    def _temporal_model(self, patches: np.ndarray, accepted: np.ndarray, meta: CameraMetadata) -> np.ndarray:
+        """(K,) the model's temporal noise over the ``accepted`` blocks of ``patches`` (K, s, s; smoothed first)
+        at ``meta``."""
+        smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in patches])
+        blocks = blocks_of(smooth, TEMPORAL_BLOCK)  # (patches, blocks, pixels)
+        per_block = predict_patches(self.temporal_model, blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK), meta,
+                                    self.config.model_mode)["total"].reshape(blocks.shape[:2])
+        return np.sqrt(np.sum(accepted * per_block**2, axis=1) / accepted.sum(axis=1))
+
+    def _xi_temporal(self, tm: TemporalMeasurement, sigma: dict[str, float],
+                     meta: CameraMetadata) -> tuple[float, float] | None:
+        """(xi of the static hold's temporal measurement for the frame of ``meta``, its standard error), None
+        without accepted blocks.
 
         The model is evaluated on the hold's temporal mean (the scene without its temporal noise) at the
         hold frames' mean metadata (the measurement pools those frames), on the blocks measured: where only
         some pass the pure-noise test (a vibrating camera keeps the flat ones) their intensities are not the
-        patch's."""
+        patch's. When the frames' gain or exposure differ (a drifting auto-exposure), the camera's departure from
+        the model is taken to scale with the noise: the pooled xi is scaled to this frame, by its own model on its
+        own patches over the pooled model."""
         ok = np.isfinite(tm.sigma_dn)
         if not ok.any():
             return None
-        smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in tm.mean_patches[ok]])
-        blocks = blocks_of(smooth, TEMPORAL_BLOCK)  # (patches, blocks, pixels)
-        per_block = predict_patches(self.temporal_model, blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK), tm.meta,
-                                    self.config.model_mode)["total"].reshape(blocks.shape[:2])
         acc = tm.accepted[ok]
-        model_t = np.sqrt(np.sum(acc * per_block**2, axis=1) / acc.sum(axis=1))
+        model_t = self._temporal_model(tm.mean_patches[ok], acc, tm.meta)
         d = model_t - tm.sigma_dn[ok]
+        if tm.latest_patches is not None and not (math.isclose(meta.gain_db, tm.meta.gain_db, abs_tol=1e-9) and
+                                                  math.isclose(meta.exposure_time_s, tm.meta.exposure_time_s)):
+            d = d * self._temporal_model(tm.latest_patches[ok], acc, meta) / np.maximum(model_t, 1e-9)
         n = int(ok.sum())
         spread = float(np.std(d)) if n > 1 else 0.0
         err = 1.2533 * max(float(np.sqrt(np.mean(tm.err_dn[ok] ** 2))), spread) / np.sqrt(n)  # of a median

@@ -10,12 +10,21 @@ of the patch rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, h
 every frame and so absent from this measurement: it is compared with the model's temporal effects only.
 The measurement pools the hold's frames, so it is compared with the model at the frames' mean metadata
 (a temperature drifting inside the hold changes the dark-current noise from frame to frame).
+
+A live driver's auto-exposure and auto-gain move a little from frame to frame even when the camera looks at a
+still scene. The frames of a still camera stay one scene seen through another gain: each frame is the hold's
+mean scaled about the black level (exposure and gain scale photo and dark signal alike), which is the light change
+taken out before the differences; only the noise changes with the frame. So the hold follows such drift (each frame
+within ``DRIFT_GAIN_DB`` / ``DRIFT_EXPOSURE_REL`` of the previous one) and the frames measured together are the
+latest whose gains span at most ``DRIFT_GAIN_DB`` and exposures a ratio of at most ``1 + DRIFT_EXPOSURE_REL``
+(temperatures ``TEMPERATURE_TOL_C``): across such a window the model at the mean metadata is the frames' mean noise
+variance to within 0.7 % (its read noise goes with the square of the gain).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -27,8 +36,10 @@ from noise_monitor.physics import CameraMetadata
 
 #: edge (px) of the downsampled frame the global motion is estimated on
 MOTION_SIZE_PX = 256
-#: metadata drift tolerated inside one hold
+#: metadata drift tolerated inside one hold of constant gain and exposure (``StillCamera(drift=False)``)
 GAIN_TOL_DB, EXPOSURE_TOL_REL, TEMPERATURE_TOL_C = 0.05, 0.01, 3.0
+#: the spread of gain (dB) and exposure (relative) of the frames measured together while auto-exposure drifts
+DRIFT_GAIN_DB, DRIFT_EXPOSURE_REL = 1.0, 0.25
 BLOCK = 8
 
 
@@ -47,24 +58,40 @@ class TemporalMeasurement:
     motion_px: float  # the camera's rms displacement about the hold's mean pose (px): its vibration
     meta: CameraMetadata  # the measured frames' mean metadata (what the model is evaluated at)
     light_pct: float = 0.0  # the light's change from frame to frame taken out (rms over frames and rows, %)
+    latest_patches: np.ndarray | None = None  # (K, size, size) the newest frame's patches
 
 
-def _same_conditions(a: CameraMetadata, b: CameraMetadata, temperature_tol_c: float = TEMPERATURE_TOL_C) -> bool:
+def _same_conditions(a: CameraMetadata, b: CameraMetadata, temperature_tol_c: float = TEMPERATURE_TOL_C,
+                     gain_tol_db: float = GAIN_TOL_DB, exposure_tol_rel: float = EXPOSURE_TOL_REL) -> bool:
+    """Whether ``b`` is the camera of ``a`` with gain, exposure and temperature within the tolerances."""
     return (a.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
             == b.replace(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=0.0)
-            and abs(a.gain_db - b.gain_db) <= GAIN_TOL_DB
-            and abs(a.exposure_time_s - b.exposure_time_s) <= EXPOSURE_TOL_REL * a.exposure_time_s
+            and abs(a.gain_db - b.gain_db) <= gain_tol_db
+            and max(a.exposure_time_s, b.exposure_time_s) <= (1.0 + exposure_tol_rel) * min(a.exposure_time_s,
+                                                                                            b.exposure_time_s)
             and abs(a.sensor_temperature_c - b.sensor_temperature_c) <= temperature_tol_c)
+
+
+def _within_drift(metas: Sequence[CameraMetadata]) -> bool:
+    """Whether frames of these metadata may be measured together while the gain and exposure drift."""
+    gains, exposures, temperatures = ([getattr(m, f) for m in metas]
+                                      for f in ("gain_db", "exposure_time_s", "sensor_temperature_c"))
+    return (max(gains) - min(gains) <= DRIFT_GAIN_DB
+            and max(exposures) <= (1.0 + DRIFT_EXPOSURE_REL) * min(exposures)
+            and max(temperatures) - min(temperatures) <= TEMPERATURE_TOL_C)
 
 
 class StillCamera:
     """Whether each frame continues a static hold: the conditions of the hold's first frame (within the
     tolerances above; the temperature's within ``temperature_tol_c``) and a global shift from the hold's first
-    frame within ``HOLD_SHIFT_PX`` (a vibrating camera stays about its pose; a pan or a drift leaves it)."""
+    frame within ``HOLD_SHIFT_PX`` (a vibrating camera stays about its pose; a pan or a drift leaves it).
+    ``drift``: the gain and exposure may drift through the hold, each frame's within ``DRIFT_GAIN_DB`` /
+    ``DRIFT_EXPOSURE_REL`` of the previous frame's (a live driver's auto-exposure)."""
 
-    def __init__(self, temperature_tol_c: float = TEMPERATURE_TOL_C) -> None:
+    def __init__(self, temperature_tol_c: float = TEMPERATURE_TOL_C, drift: bool = False) -> None:
         self.temperature_tol_c = temperature_tol_c
-        self.hold_meta: CameraMetadata | None = None  # the current hold's first frame's metadata
+        self.drift = drift
+        self.hold_meta: CameraMetadata | None = None  # the current hold's first frame's metadata (drift: the latest)
         self._ref: np.ndarray | None = None  # the hold's first frame, downsampled
         self._latest: np.ndarray | None = None
         self._scale = 1.0
@@ -86,12 +113,15 @@ class StillCamera:
         """Whether this frame continues the current hold; one that does not starts the next hold."""
         self._latest = small = self._motion_image(image)
         still = False
+        tolerances = (DRIFT_GAIN_DB, DRIFT_EXPOSURE_REL) if self.drift else (GAIN_TOL_DB, EXPOSURE_TOL_REL)
         if self._ref is not None and self._ref.shape == small.shape and self.hold_meta is not None \
-                and _same_conditions(self.hold_meta, meta, self.temperature_tol_c):
+                and _same_conditions(self.hold_meta, meta, self.temperature_tol_c, *tolerances):
             dx, dy, _ = global_shift(self._ref, small)
             still = math.hypot(dx, dy) * self._scale <= HOLD_SHIFT_PX
         if not still:
             self.restart(meta)
+        elif self.drift:
+            self.hold_meta = meta
         return still
 
 
@@ -104,7 +134,7 @@ class TemporalNoise:
         self._metas: deque[CameraMetadata] = deque(maxlen=max_frames)
         self._corners: list[tuple[int, int]] = []
         self._size = 0
-        self._still = StillCamera()
+        self._still = StillCamera(drift=True)
         self.holds = 0  # static holds started (resets)
 
     def reset(self) -> None:
@@ -136,6 +166,9 @@ class TemporalNoise:
             return None
         self._stack.append(np.stack([image[y:y + size, x:x + size] for y, x in self._corners]).astype(np.float32))
         self._metas.append(meta)
+        while not _within_drift(self._metas):  # auto-exposure drifted: the oldest frames leave the window
+            self._stack.popleft()
+            self._metas.popleft()
         k = len(self._stack)
         if k < max(2, self.min_frames):
             return None
@@ -154,7 +187,7 @@ class TemporalNoise:
             sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
                                    float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(self._metas),
-                                   stats.light_pct)
+                                   stats.light_pct, frames[-1])
 
 
 def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:

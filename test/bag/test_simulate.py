@@ -203,3 +203,25 @@ def test_flickering_lights_scale_each_frame(tmp_path) -> None:
     assert np.allclose(mean, gains, atol=0.003)  # the clean scene scaled (up to clipping)
     with pytest.raises(ValueError, match="flicker_pct"):
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, flicker_pct=30.0)
+
+
+def test_auto_exposure_hunts_every_frame_and_the_metadata_report_it(tmp_path) -> None:
+    """``--auto-exposure``: a live driver's exposure wanders about the plan's every frame (rms as asked, correlated
+    from frame to frame), the scene's brightness following it under steady light, the metadata reporting the true
+    exposure; the holds, poses and gains those of the bag without it; refused beyond its range."""
+    kw = {"frames": 60, "seed": 3}
+    bag = simulate_bag(tmp_path / "a.mcap", "ev76c661", "campaign_heldout", auto_exposure_pct=5.0, **kw)
+    truth, plain = load_truth(bag), load_truth(simulate_bag(tmp_path / "p.mcap", "ev76c661", "campaign_heldout", **kw))
+    factor = np.array([f["exposure_factor"] for f in truth["frames"]])
+    assert truth["auto_exposure_pct"] == 5.0 and np.log(factor).std() == pytest.approx(0.05, rel=0.4)
+    assert np.corrcoef(factor[1:], factor[:-1])[0, 1] > 0.5
+    exposure = [f["true_metadata"]["exposure_time_s"] / p["true_metadata"]["exposure_time_s"]
+                for f, p in zip(truth["frames"], plain["frames"])]
+    assert np.allclose(exposure, factor, rtol=1e-5)
+    stated = [f.metadata.exposure_time_s for f in open_bag(bag).frames("ev76c661")]
+    assert np.allclose(stated, [f["true_metadata"]["exposure_time_s"] for f in truth["frames"]], rtol=1e-6)
+    mean = np.array([f["mean_dn"] for f in truth["frames"]]) / np.array([f["mean_dn"] for f in plain["frames"]])
+    assert np.allclose(mean, factor, atol=0.01)  # the clean scene scaled (up to clipping)
+    assert [f["hold"] for f in truth["frames"]] == [f["hold"] for f in plain["frames"]]
+    with pytest.raises(ValueError, match="auto_exposure_pct"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, auto_exposure_pct=50.0)

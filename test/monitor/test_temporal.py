@@ -86,6 +86,50 @@ def test_temperature_drifting_inside_a_hold_is_compared_at_the_frames_mean(estim
     assert abs(last.xi_temporal) <= 0.1
 
 
+def auto_exposure(exposures_s: np.ndarray, gains_db: np.ndarray, follow_light: bool):
+    """Clean frames and metadata of a still camera whose driver moves exposure and gain every frame: the scene's DN
+    follow them (steady light, the auto-exposure hunting) or stay (it compensates a changing light)."""
+    metas = [PROFILE.metadata(gain_db=float(g), exposure_time_s=float(t), sensor_temperature_c=40.0)
+             for t, g in zip(exposures_s, gains_db)]
+    scale = exposures_s / META.exposure_time_s * 10.0 ** ((gains_db - META.gain_db) / 20.0)
+    clean = photo()
+    return [clean * np.float32(s) if follow_light else clean for s in scale], metas
+
+
+@pytest.mark.parametrize("follow_light", [True, False])
+def test_auto_exposure_drifting_in_a_still_scene_keeps_the_temporal_measurement(estimator, follow_light):
+    """A parked robot's live driver moves the exposure by up to 8 % and the gain by 0.3 dB from frame to frame.
+    Before, any change beyond 1 % / 0.05 dB ended the hold: no temporal measurement at all on such a camera. The
+    frames are one scene through another gain (the light change taken out first), each with its own noise, and the
+    model is compared at their mean metadata."""
+    i = np.arange(14)
+    exposures = 0.02 * (1.0 + 0.08 * np.sin(2 * np.pi * i / 9))
+    gains = 12.0 + 0.3 * np.cos(2 * np.pi * i / 7)
+    cleans, metas = auto_exposure(exposures, gains, follow_light)
+    mon, results, noise = run(estimator, cleans, NoiseModel(), seed=5, metas=metas)
+    assert all(r.xi_measurement == "temporal" for r in results[4:])
+    last = results[-1]
+    assert last.temporal_frames == 14
+    assert abs(last.sigma["temporal"] - hold_truth(mon, noise)) <= 0.05
+    assert abs(last.xi_temporal) <= 0.05  # the model is exact for this camera
+    light = last.numeric()["temporal_light_pct"]
+    assert (light > 3.0) if follow_light else (light == 0.0)
+
+
+def test_auto_exposure_ramping_measures_the_latest_frames_within_the_drift_limits(estimator):
+    """An exposure rising 4 % per frame over 24 frames (a scene darkening): the hold goes on, and the frames
+    measured together are the latest whose exposures span at most 25 % (six frames)."""
+    exposures = 0.01 * 1.04 ** np.arange(24)
+    cleans, metas = auto_exposure(exposures, np.full(24, 12.0), follow_light=False)
+    mon, results, noise = run(estimator, cleans, NoiseModel(), seed=6, metas=metas)
+    assert all(r.xi_measurement == "temporal" for r in results[4:])
+    k = results[-1].temporal_frames
+    assert k == 6 and exposures[-1] <= 1.25 * exposures[-k] < exposures[-1] * 1.04
+    assert mon.temporal.holds == 1
+    assert abs(results[-1].sigma["temporal"] - hold_truth(mon, noise[-k:])) <= 0.05
+    assert max(abs(r.xi_temporal) for r in results[4:]) <= 0.05
+
+
 def test_moving_camera_has_no_temporal_measurement(estimator):
     clean = photo()
     cleans = [shifted(clean, 0.7 * i, 0.4 * i) for i in range(8)]
