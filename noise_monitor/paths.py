@@ -22,14 +22,16 @@ def share_dir() -> Path:
 
 
 def camera_profile_path(name_or_path: str | Path) -> Path:
-    """Resolve a profile given as a path or as a bundled name like 'icx285'."""
+    """Resolve a profile given as a file or as a bundled name like 'icx285' (a bare name: a path that names no
+    existing file is an error, never a bundled profile of the same stem)."""
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") and p.exists():
+    if p.is_file():
         return p
-    candidate = share_dir() / "config" / "cameras" / f"{p.stem.lower()}.yaml"
-    if candidate.exists():
-        return candidate
-    raise FileNotFoundError(
-        f"camera profile {name_or_path!r} not found (neither a file nor a bundled profile in "
-        f"{share_dir() / 'config' / 'cameras'})"
-    )
+    bundled = share_dir() / "config" / "cameras"
+    if p.name == str(name_or_path) and not p.suffix:
+        candidate = bundled / f"{p.name.lower()}.yaml"
+        if candidate.exists():
+            return candidate
+        raise FileNotFoundError(f"camera profile {name_or_path!r} not found (neither a file nor a bundled profile: "
+                                f"{', '.join(sorted(c.stem for c in bundled.glob('*.yaml')))})")
+    raise FileNotFoundError(f"camera profile file {name_or_path!r} not found")

@@ -226,6 +226,20 @@ def test_bad_camera_profiles_are_exit_2_with_one_line(tmp_path, small_bag, capsy
     assert needle in one_error_line(capsys.readouterr().err, "replay")
 
 
+def test_a_profile_path_that_names_no_file_is_no_bundled_profile(tmp_path, small_bag, capsys):
+    """A mistyped profile path is an error, never the bundled profile of its stem (before: ``/no/dir/generic.yaml``
+    ran as ``generic``); a profile file is read whatever its suffix; a bare name is a bundled profile."""
+    for typo in ("/no/such/dir/generic.yaml", "typo_dir/ICX285.yml"):
+        assert main(["replay", str(small_bag), "--profile", typo, "--out", str(tmp_path / "o")]) == 2
+        assert f"camera profile file '{typo}' not found" in one_error_line(capsys.readouterr().err, "replay")
+    assert main(["replay", str(small_bag), "--profile", "nosuchcam", "--out", str(tmp_path / "o")]) == 2
+    assert "icx285" in one_error_line(capsys.readouterr().err, "replay")  # the bundled names are listed
+    saved = tmp_path / "cam.json"
+    saved.write_text(PROFILE.to_yaml())
+    assert load_profile(saved).name == PROFILE.name
+    assert load_profile("ICX285").name == PROFILE.name
+
+
 def test_sqlite3_row_with_null_data_is_a_named_skip_and_a_play_error(tmp_path, capsys):
     bag = simulate_bag(tmp_path / "sq", "icx285", "static", frames=3, width=64, height=64, hold_s=0.0,
                        storage="sqlite3")

@@ -33,7 +33,7 @@ from msg_adapters.outputs import (
     rosbags_image,
     rosbags_messages,
 )
-from noise_monitor.monitor import Frame, FrameResult, MonitorConfig
+from noise_monitor.monitor import Frame, FrameResult, GapCounter, MonitorConfig
 from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
@@ -230,6 +230,7 @@ def run_replay(
         next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
+        gaps = GapCounter(expected_rate_hz=float(rt.params["expected_rate_hz"]))  # frames the recording lacks
 
         def report(t: int) -> None:
             assert periods is not None
@@ -253,6 +254,8 @@ def run_replay(
                 if not next_report - diag_period_ns <= bf.stamp_ns < next_report:  # the stamps jumped: a new grid
                     next_report = bf.stamp_ns + diag_period_ns
             pacer.wait(bf.log_time_ns)
+            implausible = gaps.implausible
+            monitor.count_lost(gaps.observe(bf.stamp_ns), gaps.implausible - implausible)  # as the node counts them
             res = rt.process(bf)
             _record(table, bf, res)
             periods.add(res)
@@ -288,6 +291,8 @@ def run_replay(
         "frames_total": len(table),
         "frames_processed": processed,
         "frames_skipped": len(table) - processed,
+        # images missing from the recording (lost before it), inferred from header-stamp gaps as the node does
+        "frames_lost": int(monitor.counters["frames_lost"]),
         "skip_reasons": skip_reasons(table),
         "skipped": skipped_frames(table)[:MAX_LISTED_SKIPS],  # all of them are in the CSV
         "alarms": episodes,

@@ -53,6 +53,8 @@ def print_summary(s: dict[str, Any]) -> None:
           f"{s['frames_skipped']} skipped; estimator {s['estimator']}")
     for reason, n in s["skip_reasons"].items():
         print(f"  skipped {n:4d} x {reason}")
+    if s.get("frames_lost"):
+        print(f"  lost    {s['frames_lost']:4d} frames before the recording (gaps in the image stamps)")
     print(f"\n  {'source':12s} {'mean':>6s} {'p5':>6s} {'p95':>6s}   [DN]")
     for key, label in (("sigma_pn", "PN"), ("sigma_dcsn", "DCSN"), ("sigma_rn", "RN"), ("sigma_total", "total"),
                        ("sigma_model", "model"), ("sigma_image", "image"), ("xi", "xi")):

@@ -87,6 +87,18 @@ class StagedOutputs:
             self._tmp = None
 
 
+def _umask() -> int:
+    """The process's umask, read without setting it (``os.umask`` would change it for other threads meanwhile);
+    022 where /proc does not tell."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except OSError:
+        pass
+    return 0o022
+
+
 def write_text_atomic(path: str | Path, text: str) -> None:
     """Write a text file via a new file in its folder and ``os.replace`` (a symlink at ``path`` is
     replaced, not followed; an interrupted write leaves the old file)."""
@@ -94,6 +106,7 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp's file is private (0600); the result gets a plain file's mode
         with os.fdopen(fd, "w") as fh:
             fh.write(text)
         os.replace(tmp, p)

@@ -20,6 +20,7 @@ Frames whose stated gain would fall below 0 dB are skipped by the monitor as inv
 """
 from __future__ import annotations
 
+import math
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -135,8 +136,9 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "offset_xi_error_rms": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
         "views_with_need": sum(len(set(r["view_of_need"])) for r in rows),
     }
+    # no frame due an alarm: detection untested, the targets not met
     out["meets_targets"] = bool(out["clean_xi_rms"] <= TARGET_CLEAN_XI_DN and out["false_alarm_episodes"] == 0
-                                and (not need or out["detection"] >= TARGET_DETECTION))
+                                and need > 0 and out["detection"] >= TARGET_DETECTION)
     return out
 
 
@@ -152,8 +154,11 @@ def evaluate_stream(profile: str | Path | CameraProfile, seeds: Sequence[int], i
     or a temporary folder."""
     if not seeds:
         raise ValueError("evaluate-stream needs at least one seed")
-    if gain_offset_db == 0:
-        raise ValueError("--gain-offset-db must not be 0: the offset replay is what the alarms are checked on")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"--seeds must differ (one campaign per seed), got {' '.join(map(str, seeds))}")
+    if not math.isfinite(gain_offset_db) or gain_offset_db == 0:
+        raise ValueError(f"--gain-offset-db must be a finite number other than 0 (the offset replay is what the "
+                         f"alarms are checked on), got {gain_offset_db}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(workdir) if workdir is not None else Path(tmp)

@@ -161,6 +161,10 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
     if singles:
         skipped["single frame of its conditions (no pair for the difference image)"] = singles
     sets = [s for s in sets if s.size >= 2]
+    if not sets:
+        raise CharacterizeError(f"{path}: no two consecutive frames share gain, exposure and temperature: a "
+                                "photon-transfer recording holds each set of conditions for at least two frames "
+                                "(`simulate-bag --scenario ptc` shows one)")
     for s in sets:
         s.compute()
     return Recording(sets, depth, shape, count, skipped, static)

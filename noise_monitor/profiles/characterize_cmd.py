@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
             f" +- {v['stderr']:.2g}" if v["stderr"] is not None else "")
         print(f"  {key:24s} {val} {v['unit']}")
     for temp, v in f["dark_current_e_per_s"].items():
-        print(f"  dark current at {temp} degC: {v['value']:.4g} +- {v['stderr'] or 0:.2g} e-/s")
+        spread = f" +- {v['stderr']:.2g}" if v["stderr"] is not None else " (standard error unknown)"
+        print(f"  dark current at {temp} degC: {v['value']:.4g}{spread} e-/s")
     for n in result["notes"]:
         print(f"  note: {n}")
     if rows:

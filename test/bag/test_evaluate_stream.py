@@ -9,7 +9,7 @@ import torch
 
 from noise_monitor.bag.reader import BagReader
 from noise_monitor.bag.simulate import simulate_bag
-from noise_monitor.bag.stream_eval import stated_gain_copy
+from noise_monitor.bag.stream_eval import stated_gain_copy, summarize
 from noise_monitor.cli import main as cli_main
 
 torch.set_num_threads(1)
@@ -63,5 +63,16 @@ def test_evaluate_stream_on_own_scene_meets_and_fails_the_targets(tmp_path, caps
     s = json.loads((tmp_path / "deaf.json").read_text())["summary"]
     assert s["need"] >= 5 and s["detection"] == 0.0 and not s["meets_targets"]
     assert "does NOT meet" in capsys.readouterr().out
-    assert cli_main(["evaluate-stream", "--seeds", "1", "--gain-offset-db", "0"]) == 2
-    assert "must not be 0" in capsys.readouterr().err
+    for bad in ("0", "nan", "inf"):  # before: nan / inf ran and "met" the targets with an xi error of nan
+        assert cli_main(["evaluate-stream", "--seeds", "1", "--gain-offset-db", bad]) == 2
+        assert "a finite number other than 0" in capsys.readouterr().err
+    assert cli_main(["evaluate-stream", "--seeds", "1", "1"]) == 2  # before: an error naming a temporary file
+    assert "--seeds must differ" in capsys.readouterr().err
+
+
+def test_targets_are_not_met_when_no_frame_was_due_an_alarm() -> None:
+    """Detection untested (no frame with a true |xi| >= 1 DN, e.g. every offset frame skipped) is no pass."""
+    row = {"clean_xi": [0.01, -0.02], "clean_xi_filtered": [0.0, 0.0], "offset_xi_error": [], "need": 0, "hits": 0,
+           "alarmed_at_frame": 0, "frames": 2, "false_alarm_episodes": 0, "view_of_need": []}
+    assert not summarize([row])["meets_targets"]
+    assert summarize([{**row, "need": 1, "hits": 1, "view_of_need": [0]}])["meets_targets"]

@@ -17,6 +17,7 @@ from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import truth_check
 from noise_monitor.bag.simulate import load_truth, simulate_bag
+from noise_monitor.bag.staging import write_text_atomic
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
@@ -164,6 +165,14 @@ def test_csv_png_and_json_files(replayed):
     assert json.loads((out / "summary.json").read_text())["frames_total"] == 20
 
 
+def test_json_written_atomically_has_a_plain_files_mode(tmp_path):
+    """``replay --json`` goes through a temporary file and a rename, yet gets the mode of any file the user writes
+    (before: mkstemp's private 0600)."""
+    write_text_atomic(tmp_path / "s.json", "{}")
+    (tmp_path / "plain.txt").write_text("")
+    assert (tmp_path / "s.json").stat().st_mode & 0o777 == (tmp_path / "plain.txt").stat().st_mode & 0o777
+
+
 def _bag_with_problems(path: Path, size: int) -> None:
     """6 frames: no metadata yet, ok, non-numeric metadata, bad encoding, stale metadata after a 5 s gap, ok."""
     prof = load_profile("icx285")
@@ -200,6 +209,26 @@ def test_every_frame_accounted_with_reasons_and_stale_gap(tmp_path, estimator):
     assert [r.level for _, r in diag] == [WARN, 0, WARN, WARN, WARN, STALE, STALE, STALE, WARN, 0]
     assert [r.values["period_frames"] for _, r in diag] == ["1", "1", "1", "1", "0", "0", "0", "0", "1", "1"]
     assert diag[0][1].values["skipped: metadata missing"] == "1" and "no image for 3.0 s" in diag[5][1].message
+
+
+def test_frames_missing_from_the_recording_are_counted_as_the_node_counts_them(tmp_path, estimator):
+    """A 5 Hz recording with frames 12-14 lost before it (a busy recorder): the replay counts them from the stamp
+    gap as the node does, in the summary and on /diagnostics (before: 0 everywhere; a gap beyond a second is a
+    paused stream, reported STALE, not losses)."""
+    prof = load_profile("icx285")
+    meta = prof.metadata(gain_db=12.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
+    size = 2 * estimator.patch_size
+    rng = np.random.default_rng(1)
+    bag = tmp_path / "gap.mcap"
+    with BagWriter(bag) as w:
+        for i in [*range(12), *range(15, 25)]:
+            t = 1_000_000_000 + i * 200_000_000
+            w.write("/camera/metadata", metadata_msg(meta, t, "test"), t)
+            w.write("/camera/image_raw", image_msg(np.clip(rng.normal(120, 3, (size, size)), 0, 255).astype(np.uint8), t), t)
+    s = replay(bag, None, tmp_path / "o", estimator=estimator, config=CONFIG, progress=False, plot=False)
+    assert s["frames_total"] == 22 and s["frames_lost"] == 3
+    diag = [reports_from_msg(m)[0] for _, _, m in decoded(tmp_path / "o" / "replay.mcap", [DIAGNOSTICS_TOPIC])]
+    assert diag[-1].values["frames_lost"] == "3" and sum(int(r.values["period_lost"]) for r in diag) == 3
 
 
 def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):

@@ -123,6 +123,7 @@ def _flat(rng, level: float, shape=(48, 64)) -> np.ndarray:
     ("no_darks", "no dark frames"),
     ("saturated", "without saturated pixels"),
     ("size", "must keep its image size"),
+    ("no_pairs", "no two consecutive frames share"),  # before: 'max() arg is an empty sequence'
 ])
 def test_unusable_recordings_exit_2_with_the_reason(tmp_path, capsys, case, message):
     rng = np.random.default_rng(0)
@@ -135,6 +136,8 @@ def test_unusable_recordings_exit_2_with_the_reason(tmp_path, capsys, case, mess
             frames += [(_flat(rng, 60.0), t), (_flat(rng, 60.0), t)]
     if case == "size":
         frames.append((_flat(rng, 60.0, (40, 64)), 0.09))
+    if case == "no_pairs":  # new conditions every frame (a live driver's recording)
+        frames = [(img, 0.01 + 0.001 * i) for i, (img, _) in enumerate(frames)]
     bag = _write(tmp_path / f"{case}.mcap", frames)
     assert main(["characterize", str(bag), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
