@@ -3,8 +3,9 @@
 The recording: flat fields (a uniform light source, constant irradiance) over a series of exposure
 times, a dark set (lens cap on) at the exposures, optionally dark sets at more sensor temperatures.
 Consecutive frames with equal gain, exposure, temperature and level form a *set* (at least a pair).
-Per (gain, temperature) the sets whose mean lies within ``dark_tolerance`` of the lowest set are dark,
-the others flat. Everything is computed on the node's 8-bit scale and reported in electrons, with K
+Per (gain, temperature), at exposures with a flat field and a dark set the lower is dark, and the sets within
+``dark_tolerance`` of the line those darks draw over the exposure are dark (a warm sensor's dark signal grows by
+tens of DN over a long exposure); temperatures without flat fields hold dark sets only (:func:`_classify`). Everything is computed on the node's 8-bit scale and reported in electrons, with K
 also in the camera's native DN:
 
 - temporal variance of a set: the variance of the difference image of each pair / 2 (pairs averaged);
@@ -185,16 +186,44 @@ def _value(v: float | None, se: float | None, unit: str) -> dict[str, Any]:
     return {"value": v, "stderr": None if se is None or not math.isfinite(se) else se, "unit": unit}
 
 
+def _classify(groups: dict[tuple[float, float | None], list[FrameSet]], tolerance_dn: float) -> None:
+    """Mark each set dark or flat. Where a (gain, temperature) has two sets or more at one exposure (a flat field
+    and its dark set), the lowest there is dark and the darks' mean is a line in the exposure (the dark signal grows
+    with it: by tens of DN over a long exposure of a warm sensor): a set is dark within ``tolerance_dn`` of that line.
+    A (gain, temperature) without such pairs holds dark sets only when another one has them (the recording's
+    further temperatures, lens cap on); otherwise its sets within ``tolerance_dn`` of its lowest are dark."""
+    lines: dict[tuple[float, float | None], tuple[float, float]] = {}
+    for key, members in groups.items():
+        by_exposure: dict[float, list[FrameSet]] = {}
+        for s in members:
+            by_exposure.setdefault(s.exposure_time_s, []).append(s)
+        lows = [min(sets, key=lambda s: s.mean) for sets in by_exposure.values() if len(sets) >= 2]
+        if len(lows) >= 2 and len({s.exposure_time_s for s in lows}) >= 2:
+            slope, intercept = np.polyfit([s.exposure_time_s for s in lows], [s.mean for s in lows], 1)
+            lines[key] = (float(slope), float(intercept))
+        elif lows:
+            lines[key] = (0.0, lows[0].mean)
+    for key, members in groups.items():
+        if key in lines:
+            slope, intercept = lines[key]
+            for s in members:
+                s.kind = "dark" if s.mean <= intercept + slope * s.exposure_time_s + tolerance_dn else "flat"
+        elif lines:
+            for s in members:
+                s.kind = "dark"
+        else:
+            floor = min(s.mean for s in members)
+            for s in members:
+                s.kind = "dark" if s.mean <= floor + tolerance_dn else "flat"
+
+
 def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict[str, Any]:
     """The EMVA figures of a recording (each with its standard error) and the points behind the plots."""
     notes: list[str] = []
     groups: dict[tuple[float, float | None], list[FrameSet]] = {}
     for s in rec.sets:
         groups.setdefault((s.gain_db, s.temperature_c), []).append(s)
-    for members in groups.values():
-        floor = min(s.mean for s in members)
-        for s in members:
-            s.kind = "dark" if s.mean <= floor + dark_tolerance * 255.0 else "flat"
+    _classify(groups, dark_tolerance * 255.0)
     flats_by_group = {g: [s for s in m if s.kind == "flat"] for g, m in groups.items()}
     base = max(groups, key=lambda g: (len(flats_by_group[g]), -g[0]))
     gain0, temp0 = base

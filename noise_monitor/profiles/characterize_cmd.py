@@ -23,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensor-type", choices=("ccd", "cmos"), help="for the profile when the metadata lacks it")
     parser.add_argument("--pixel-size-um", type=float, help="for the profile when the metadata lacks it")
     parser.add_argument("--dark-tolerance", type=float, default=DARK_TOLERANCE,
-                        help=f"sets within this fraction of the range above the darkest set are dark "
+                        help=f"sets within this fraction of the range above the dark level (the line of the lower "
+                             f"sets at the exposures recorded twice, else the darkest set) are dark "
                              f"(default {DARK_TOLERANCE})")
     parser.add_argument("--image-topic", help="override the auto-detected image topic")
     parser.add_argument("--metadata-topic", help="override the auto-detected metadata topic")

@@ -3,6 +3,7 @@ truth recovered within 3 %, the report, the profile for the node, and recordings
 from __future__ import annotations
 
 import json
+from itertools import groupby
 from pathlib import Path
 
 import numpy as np
@@ -142,6 +143,28 @@ def test_unusable_recordings_exit_2_with_the_reason(tmp_path, capsys, case, mess
     assert main(["characterize", str(bag), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_a_warm_sensors_dark_sets_are_told_from_its_flat_fields(tmp_path):
+    """The bundled ev76c661 (dark current ~2,100 e-/s at 30 degC): its long dark exposures rise tens of DN above the
+    shortest, beyond any fixed tolerance. Before, 29 of its 42 dark sets at 30 degC and all at 40-60 degC were taken
+    for flat fields: the doubling temperature and PRNU "not determined" (dark sets at four temperatures recorded). The
+    darks are the lower set at each exposure and the line they draw."""
+    bag = tmp_path / "ptc.mcap"
+    assert main(["simulate-bag", str(bag), "--profile", "ev76c661", "--scenario", "ptc", "--frames", "200",
+                 "--width", "64", "--height", "64", "--seed", "3"]) == 0
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "o"), "--json", str(tmp_path / "c.json")]) == 0
+    res, truth = json.loads((tmp_path / "c.json").read_text()), load_truth(bag)
+    sets = [key for key, _ in groupby((f["kind"], f["exposure_time_s"]) for f in truth["frames"]
+                                      if f["sensor_temperature_c"] == 30.0)]  # the recorded sets at 30 degC
+    assert (res["conditions"]["flat_sets"], res["conditions"]["dark_sets"]) == (
+        sum(k == "flat" for k, _ in sets), sum(k == "dark" for k, _ in sets))
+    fig, emva = res["figures"], truth["emva"]
+    for temp, value in emva["dark_current_e_per_s"].items():
+        assert fig["dark_current_e_per_s"][temp]["value"] == pytest.approx(value, rel=0.03)
+    assert fig["doubling_temperature_k"]["value"] == pytest.approx(emva["doubling_temperature_k"], rel=0.03)
+    assert fig["system_gain_dn_per_e"]["value"] == pytest.approx(emva["system_gain_dn_per_e"], rel=0.01)
+    assert fig["prnu_pct"]["value"] is not None
 
 
 def test_recording_with_one_temperature_states_what_it_cannot_determine(tmp_path, capsys):
