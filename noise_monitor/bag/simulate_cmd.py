@@ -30,7 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=256, help="image height in pixels (default 256)")
     parser.add_argument("--fps", type=float, default=5.0, help="frame rate of the stamps (Hz)")
     parser.add_argument("--hold", type=float, default=1.0, metavar="SECONDS",
-                        help="metadata (gain, exposure, temperature) update period; 0 = every frame")
+                        help="metadata (gain, exposure, temperature) update period; 0 = every frame (the campaign "
+                             "and ptc scenarios follow their own plans)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (scene, noise); same seed, same bag")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     parser.add_argument("--namespace", default="/camera", help="topic namespace (default /camera)")

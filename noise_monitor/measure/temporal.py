@@ -366,7 +366,8 @@ def _gain_fits(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
         n = wts.sum(axis=(1, 2))
         den = n - (s1**2 / s2).sum(axis=1)
         num = (wts * y).sum(axis=(1, 2)) - (s1 * sy / s2).sum(axis=1)
-        offset = np.where(den > 1e-9 * np.maximum(n, 1.0), num / np.maximum(den, 1e-300), 0.0)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a flat view: no offset to fit (0)
+            offset = np.where(den > 1e-9 * np.maximum(n, 1.0), num / np.maximum(den, 1e-300), 0.0)
         slope = (sy - s1 * offset[:, None]) / s2
         resid = np.abs(y - offset[:, None, None] - slope[:, :, None] * level)
         scale = 1.4826 * np.median(resid.reshape(y.shape[0], -1), axis=1) + 1e-12

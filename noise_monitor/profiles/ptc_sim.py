@@ -98,8 +98,10 @@ def black_level_dn(model: NoiseModel, prof: CameraProfile, bits: int) -> float:
 
 def simulate_ptc(out: str | Path, profile: str | Path | CameraProfile, effects: Iterable[str] = (),
                  frames: int = 120, width: int = 160, height: int = 128, seed: int = 0, storage: str = "mcap",
-                 fps: float = 5.0, namespace: str = "/camera") -> Path:
-    """Write the photon-transfer recording (see module doc) and its truth sidecar; returns the bag path."""
+                 fps: float = 5.0, namespace: str = "/camera", hardware_id: str | None = None,
+                 start_ns: int | None = None) -> Path:
+    """Write the photon-transfer recording (see module doc) and its truth sidecar; returns the bag path.
+    ``hardware_id``: the camera's id in the metadata (default the profile's name); ``start_ns``: the first stamp."""
     from noise_monitor.bag.messages import camera_info_msg, image_msg, metadata_msg
     from noise_monitor.bag.simulate import START_NS, TOPICS, truth_path
     from noise_monitor.bag.writer import BagWriter
@@ -118,7 +120,7 @@ def simulate_ptc(out: str | Path, profile: str | Path | CameraProfile, effects: 
     adders = [e for e in model.noise_effects if e.distribution != "quantization"]  # the ADC quantises below
     with BagWriter(out, storage=storage) as writer:
         for i, step in enumerate(steps):
-            stamp = START_NS + int(round(i * 1e9 / fps))
+            stamp = (START_NS if start_ns is None else start_ns) + int(round(i * 1e9 / fps))
             meta = prof.metadata(gain_db=GAIN_DB, exposure_time_s=step.exposure_time_s,
                                  sensor_temperature_c=step.sensor_temperature_c)
             cond = model.conditions(meta)
@@ -129,7 +131,7 @@ def simulate_ptc(out: str | Path, profile: str | Path | CameraProfile, effects: 
             codes = np.rint(np.clip(noisy, 0.0, 255.0) * np.float32(adc / 255.0))
             img = codes.astype(np.uint8 if bits <= 8 else np.uint16)
             writer.write(topic["camera_info"], camera_info_msg(height, width, stamp), stamp)
-            writer.write(topic["metadata"], metadata_msg(meta, stamp, prof.name), stamp)
+            writer.write(topic["metadata"], metadata_msg(meta, stamp, hardware_id or prof.name), stamp)
             writer.write(topic["image"], image_msg(img, stamp), stamp)
     truth = {
         "bag": out.name, "profile": prof.name, "scenario": "ptc", "effects": [str(e) for e in model.effects],

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
 from noise_monitor.bag import campaign
 from noise_monitor.bag.lights import rolling_shutter_gain
@@ -12,6 +13,7 @@ from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.scenarios import EPISODE, SCENARIOS, get_scenario
 from noise_monitor.bag.scenes import camera_path, make_world, view
 from noise_monitor.bag.simulate import load_truth, simulate_bag, truth_path
+from noise_monitor.bag.writer import typestore
 from noise_monitor.cli import main
 
 
@@ -225,3 +227,17 @@ def test_auto_exposure_hunts_every_frame_and_the_metadata_report_it(tmp_path) ->
     assert [f["hold"] for f in truth["frames"]] == [f["hold"] for f in plain["frames"]]
     with pytest.raises(ValueError, match="auto_exposure_pct"):
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, auto_exposure_pct=50.0)
+
+
+def test_the_ptc_recording_takes_the_camera_id_and_start_and_refuses_field_conditions(tmp_path) -> None:
+    """Before: ``--hardware-id``, ``--start`` and the field options were silently ignored by the ptc scenario."""
+    bag = simulate_bag(tmp_path / "p.mcap", "generic", "ptc", frames=60, width=32, height=32, hardware_id="robot9/front",
+                       start_ns=1_777_000_000_000_000_000)
+    assert next(iter(open_bag(bag).frames("generic"))).stamp_ns == 1_777_000_000_000_000_000
+    with AnyReader([bag], default_typestore=typestore()) as r:
+        conn = [c for c in r.connections if c.topic == "/camera/metadata"]
+        _, _, raw = next(r.messages(connections=conn))
+        assert r.deserialize(raw, conn[0].msgtype).status[0].hardware_id == "robot9/front"
+    for kw in ({"flicker_pct": 2.0}, {"banding_pct": 30.0}, {"auto_exposure_pct": 5.0}):
+        with pytest.raises(ValueError, match="photon-transfer recording"):
+            simulate_bag(tmp_path / "x.mcap", "generic", "ptc", frames=60, width=32, height=32, **kw)
