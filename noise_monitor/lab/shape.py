@@ -78,9 +78,10 @@ def fixed_shape_text(shape: dict[str, Any]) -> str:
     """One line for people from :meth:`FixedShape.summary` (or its ``not_measured`` entry)."""
     if "not_measured" in shape:
         return f"fixed pattern shape not measured: {shape['not_measured']}"
-    if shape["square_z"] < SHAPE_SQUARE_Z:
-        verdict = "no fixed pattern beyond the measurement's noise"
-    elif shape["sparse"]:
+    if shape["square_z"] < SHAPE_SQUARE_Z:  # no pattern: its kurtosis, a ratio over ~0, says nothing
+        return (f"fixed pattern shape: no fixed pattern beyond the measurement's noise over {shape['segments']} holds "
+                f"seen from four poses (its second moment {shape['square_z']:.1f} standard errors above 0)")
+    if shape["sparse"]:
         verdict = "sparse: a few pixels far off (a Gaussian pattern, e.g. PRNU, has 3)"
     else:
         verdict = "consistent with a Gaussian pattern (3)"

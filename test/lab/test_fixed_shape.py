@@ -15,7 +15,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
-from noise_monitor.lab.shape import fixed_shape, fourth_moments
+from noise_monitor.lab.shape import fixed_shape, fixed_shape_text, fourth_moments
 
 torch.set_num_threads(1)
 
@@ -107,3 +107,10 @@ def test_a_contradicted_fit_is_not_claimed_beyond_the_plugin(outside: ModuleType
     cands = {c["effect"]: c for c in s["candidates"]}
     assert [c["effect"] for c in s["candidates"] if c["significant"]] == ["telegraph_pixels"]
     assert cands["prnu"]["contradicted"] and cands["prnu"]["beyond"] is None
+
+
+def test_no_pattern_prints_no_kurtosis() -> None:
+    """Without a fixed pattern the kurtosis is a ratio over ~0 (a 30-frame bag printed -2638.9 +- 313553.2)."""
+    text = fixed_shape_text({"kurtosis": -2638.9, "kurtosis_err": 313553.2, "excess_z": -0.1, "square_z": 0.4,
+                             "segments": 5, "blocks": 100, "sparse": False})
+    assert "kurtosis" not in text and "no fixed pattern beyond the measurement's noise" in text
