@@ -6,10 +6,11 @@ Phase 2 (30 Hz camera): a publisher process sends frames + metadata at 30 Hz -> 
 /diagnostics (period summary) rate, frames dropped by the node (busy worker), latency p50/p95.
 
 Usage: .venv/bin/python bench/bench_node.py [--frames 40] [--seconds 15] [--rate 30] [--shm-segment-mb 16]
-                                           [--drift] [--patch-size 64|128] [--json out.json]
+                                           [--drift] [--scene smooth|photo] [--patch-size 64|128] [--json out.json]
 ``--drift``: new metadata every frame, as a live driver reports it: the temperature rises by 0.013 degC
 per frame, auto-exposure moves the exposure +-20 % and auto-gain the gain +-1 dB (the physics tables are
-then interpolated, never recomputed per metadata set).
+then interpolated, never recomputed per metadata set). ``--scene photo``: a still textured scene, on which the
+temporal measurement runs every frame (also while the metadata drift); the default smooth scene never holds.
 Prints figures; asserts nothing. Fast DDS's default shared-memory segment (512 KiB) is smaller than a
 1280x1024 image, so such samples go over UDP fragments that a best-effort (sensor-data) subscription
 loses under CPU load; ``--shm-segment-mb`` writes a Fast DDS profile with a larger segment and uses it
@@ -32,13 +33,22 @@ DYNAMIC = {"gain_db": 18.0, "exposure_time_s": 0.01, "sensor_temperature_c": 40.
 IMAGE_TOPIC, META_TOPIC = "/bench_camera/image_raw", "/bench_camera/metadata"
 
 
-def make_frames(n: int, seed: int = 0) -> list[np.ndarray]:
-    """n noisy mono8 frames of a smooth synthetic scene (the simulator's joint mode)."""
+def make_frames(n: int, seed: int = 0, scene: str = "smooth") -> list[np.ndarray]:
+    """n noisy mono8 frames of a scene (the simulator's joint mode): ``smooth`` (sinusoids: phase correlation cannot
+    tell the camera still, so the node never enters a static hold) or ``photo`` (scikit-image's astronaut: a still,
+    textured scene, the temporal measurement runs every frame)."""
     from noise_monitor.physics import NoiseModel, load_profile
 
     rng = np.random.default_rng(seed)
-    y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
-    clean = 120 + 60 * np.sin(2 * np.pi * x / WIDTH * 3) * np.cos(2 * np.pi * y / HEIGHT * 2) + 20 * x / WIDTH
+    if scene == "photo":
+        import cv2
+        from skimage import data
+
+        gray = cv2.cvtColor(data.astronaut(), cv2.COLOR_RGB2GRAY)
+        clean = 20.0 + 0.8 * cv2.resize(gray, (WIDTH, HEIGHT), interpolation=cv2.INTER_CUBIC).astype(np.float32)
+    else:
+        y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
+        clean = 120 + 60 * np.sin(2 * np.pi * x / WIDTH * 3) * np.cos(2 * np.pi * y / HEIGHT * 2) + 20 * x / WIDTH
     meta = load_profile(PROFILE).metadata(**DYNAMIC)
     model = NoiseModel()
     return [np.clip(np.rint(model.simulate(clean, meta, rng)[0]), 0, 255).astype(np.uint8) for _ in range(n)]
@@ -67,14 +77,14 @@ def messages(img: np.ndarray, stamp_ns: int, values: dict[str, float] = DYNAMIC)
 
 
 def publisher_process(rate_hz: float, seconds: float, ready: mp.Event, go: mp.Event, sent: mp.Value,
-                      drift: bool = False) -> None:
+                      drift: bool = False, scene: str = "smooth") -> None:
     """A separate process playing a camera at rate_hz (own GIL, like a real driver)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Image
 
-    frames = make_frames(6, seed=1)
+    frames = make_frames(6, seed=1, scene=scene)
     rclpy.init()
     node = rclpy.create_node("bench_camera")
     pub_img = node.create_publisher(Image, IMAGE_TOPIC, qos_profile_sensor_data)
@@ -133,6 +143,8 @@ def main() -> None:
     ap.add_argument("--shm-segment-mb", type=int, default=None,
                     help="Fast DDS shared-memory segment size (0 = Fast DDS default); default: run both 0 and 16")
     ap.add_argument("--drift", action="store_true", help="new metadata every frame (temperature, exposure, gain)")
+    ap.add_argument("--scene", choices=("smooth", "photo"), default="smooth",
+                    help="smooth: no static hold is seen; photo: a still textured scene, the temporal measurement runs")
     ap.add_argument("--json", help="write the figures to this JSON file")
     args = ap.parse_args()
     if args.shm_segment_mb is None:
@@ -156,6 +168,7 @@ def compare_transports(args: argparse.Namespace) -> None:
                 cmd += ["--weights", args.weights]
             if args.drift:
                 cmd.append("--drift")
+            cmd += ["--scene", args.scene]
             if args.patch_size is not None:
                 cmd += ["--patch-size", str(args.patch_size)]
             print(f"--- transport: {'Fast DDS default' if mb == 0 else f'shared memory, {mb} MiB segments'}", flush=True)
@@ -227,7 +240,7 @@ def run_once(args: argparse.Namespace) -> None:
         return False
 
     spin_until(lambda: pub_img.get_subscription_count() > 0, 10.0)
-    frames = make_frames(6)
+    frames = make_frames(6, scene=args.scene)
     # --- phase 1: lockstep ---
     lat, t_start = [], time.perf_counter()
     for i in range(args.frames + 3):
@@ -247,7 +260,8 @@ def run_once(args: argparse.Namespace) -> None:
     received.clear()
     spawn = mp.get_context("spawn")
     ready, go, sent = spawn.Event(), spawn.Event(), spawn.Value("i", 0)
-    proc = spawn.Process(target=publisher_process, args=(args.rate, args.seconds, ready, go, sent, args.drift))
+    proc = spawn.Process(target=publisher_process, args=(args.rate, args.seconds, ready, go, sent, args.drift,
+                                                                args.scene))
     proc.start()
     ready.wait(60)
     spin_until(lambda: False, 2.0)  # discovery
@@ -274,6 +288,7 @@ def run_once(args: argparse.Namespace) -> None:
         "frames_evaluated": len(received), "frames_dropped": node.monitor.counters["frames_dropped"] - c0["frames_dropped"],
         "live_latency_ms_p50": round(pct(live_lat, 50), 1), "live_latency_ms_p95": round(pct(live_lat, 95), 1),
         "metadata": "new every frame (drift)" if args.drift else "fixed",
+        "scene": args.scene,
         "cpu_cores": os.cpu_count(), "shm_segment_mb": args.shm_segment_mb or "Fast DDS default",
     }
     width = max(map(len, figures))

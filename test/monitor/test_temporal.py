@@ -13,6 +13,7 @@ from skimage import data
 from noise_monitor.bag.lights import rolling_shutter_gain
 from noise_monitor.estimator import load
 from noise_monitor.monitor import Frame, Monitor, MonitorConfig
+from noise_monitor.monitor.temporal import FULL_WINDOW_STRIDE
 from noise_monitor.physics import NoiseModel, load_profile
 
 PROFILE = load_profile("ev76c661")
@@ -128,6 +129,21 @@ def test_auto_exposure_ramping_measures_the_latest_frames_within_the_drift_limit
     assert mon.temporal.holds == 1
     assert abs(results[-1].sigma["temporal"] - hold_truth(mon, noise[-k:])) <= 0.05
     assert max(abs(r.xi_temporal) for r in results[4:]) <= 0.05
+
+
+def test_a_long_still_hold_is_measured_every_few_frames_once_its_window_is_full(estimator):
+    """Beyond ``temporal_frames`` (16) frames the window slides and is measured every ``FULL_WINDOW_STRIDE`` frames,
+    the last measurement standing between (on a still textured 1280x1024 scene the measurement took half of each
+    frame's time: the node fell below 30 frames/s)."""
+    stride = FULL_WINDOW_STRIDE
+    mon, results, _ = run(estimator, [photo()] * (15 + 2 * stride), NoiseModel(), seed=7)
+    assert all(r.xi_measurement == "temporal" for r in results[4:])
+    assert [r.temporal_frames for r in results[3:15]] == list(range(4, 16))  # growing: every frame
+    sigma = [r.sigma["temporal"] for r in results[14:]]
+    runs = [sigma[i:i + stride] for i in range(0, len(sigma), stride)]  # measured, then standing stride - 1 frames
+    assert all(len(set(r)) == 1 for r in runs) and runs[0][0] != runs[1][0] != runs[2][0]
+    assert [r.temporal_frames for r in results[14 + stride::stride]] == [16, 16]
+    assert all(abs(r.xi_temporal) <= 0.05 for r in results[14:])
 
 
 def test_moving_camera_has_no_temporal_measurement(estimator):
