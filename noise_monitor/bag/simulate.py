@@ -185,12 +185,12 @@ def simulate_bag(
     if scen.name == "ptc":
         from noise_monitor.profiles.ptc_sim import simulate_ptc
 
-        asked = [name for name, value in (("flicker", flicker_pct), ("banding", banding_pct),
-                                          ("auto-exposure", auto_exposure_pct), ("a frame hook", frame_hook))
-                 if value]
-        if asked:  # a photon-transfer recording is flat fields under a constant light source, by its definition
+        refused = [name for name, value in (("flicker", flicker_pct), ("banding", banding_pct),
+                                            ("auto-exposure", auto_exposure_pct), ("a frame hook", frame_hook))
+                   if value]
+        if refused:  # a photon-transfer recording is flat fields under a constant light source, by its definition
             raise ValueError(f"the ptc scenario is a photon-transfer recording (a constant light source, its own "
-                             f"exposure plan): {', '.join(asked)} not applicable")
+                             f"exposure plan): {', '.join(refused)} not applicable")
         return simulate_ptc(out, prof, effects, frames=frames, width=width, height=height, seed=seed,
                             storage=storage, fps=fps, namespace=namespace, hardware_id=hardware_id, start_ns=start_ns)
     effect_specs = [*(f"{k}:" + ",".join(f"{p}={v}" for p, v in vals.items()) if vals else k

@@ -22,8 +22,8 @@ variance to within 0.7 % (its read noise goes with the square of the gain).
 """
 from __future__ import annotations
 
-import math
 import dataclasses
+import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
