@@ -84,3 +84,18 @@ def test_plugin_effect_is_found(bags: Path, tmp_path: Path) -> None:
     assert best["params"]["sigma_pct"] == pytest.approx(2.0, rel=0.15)
     assert "flicker" in best["reading"]
     assert summary["rms_error_after_dn"] <= 0.3 * summary["rms_error_before_dn"]
+
+
+def test_an_image_noise_episode_is_no_dark_current_that_falls_with_temperature(tmp_path: Path) -> None:
+    """30 frames of the field scenario (an episode of +N(0, 5 DN) image noise) under 100 % mains bands: three holds.
+    Before, a dark-current law falling by 28 % per K (x 1769 at 25 degC) fitted the episode's holds and was claimed;
+    a thermal dark current rises with the temperature (the law's extra rate is bounded at -0.06/K): nothing is
+    claimed, and the residual reads as white temporal noise constant in DN (it arises after the gain)."""
+    bag = simulate_bag(tmp_path / "f.mcap", "ev76c661", "field", frames=30, seed=0, banding_pct=100.0, mains_hz=60.0,
+                       line_time_s=10e-6)
+    summary = analyze(bag, "ev76c661", estimator=None)
+    assert not [c["effect"] for c in summary["candidates"] if c["significant"]]
+    law = next(c for c in summary["candidates"] if c["effect"] == "dark_current_law")
+    assert law["params"]["rate_per_k"] >= -0.06
+    reading = summary["unexplained"]["reading"]
+    assert summary["unexplained"]["residual_significant"] and "constant in DN" in reading, reading

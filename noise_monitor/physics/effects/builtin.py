@@ -185,7 +185,10 @@ class DarkCurrentLaw(Effect):
     distribution = Distribution.MODIFIER
     params = (
         Param("scale", "1", 1.0, (0.0, 1e4), description="dark current / band-gap law at 25 degC"),
-        Param("rate_per_k", "1/K", 0.0, (-0.5, 0.5), description="extra exponential rate of the dark current with T"),
+        # from -0.06/K: a thermal dark current always rises with T, and the band-gap law's own rate is ~0.06-0.08/K at
+        # 20-60 degC (doubling temperatures up to ~45 K stay reachable); below, a fit could make the dark current fall
+        # with T and pass an episode of image noise off as dark current (a 30-frame field bag: scale 1769, -0.28/K)
+        Param("rate_per_k", "1/K", 0.0, (-0.06, 0.5), description="extra exponential rate of the dark current with T"),
     )
     description = "Dark current deviating from the band-gap law (a different level or doubling temperature)."
     signature = (
