@@ -267,6 +267,9 @@ def test_sqlite3_row_with_null_data_is_a_named_skip_and_a_play_error(tmp_path, c
     (["simulate-bag", "{tmp}/x.mcap", "--profile", "icx285", "--scenario", "static", "--fps", "inf"],
      "simulate-bag", "fps must be in"),
     (["replay", "{bag}", "--bit-depth", "99", "--out", "{tmp}/o"], "replay", "bit_depth must be in 0..16"),
+    # before: numpy's 'expected non-negative integer', naming no option
+    (["simulate-bag", "{tmp}/x.mcap", "--profile", "icx285", "--scenario", "static", "--seed", "-1"],
+     "simulate-bag", "seed must be a non-negative integer, got -1"),
 ])
 def test_bad_arguments_are_exit_2_with_one_line(tmp_path, small_bag, capsys, argv, command, needle):
     argv = [a.format(bag=small_bag, tmp=tmp_path) for a in argv]
@@ -282,6 +285,13 @@ def test_node_and_replay_parameters_have_one_validation(bad):
     with pytest.raises(ValueError, match=f"parameter {next(iter(bad))}") as err:
         resolve_parameters(bad)
     assert len(str(err.value)) < 1000
+
+
+def test_a_patch_size_the_estimator_refuses_is_refused_by_the_configuration():
+    """Before, patch_size 8-15 passed the configuration and failed at the first frame in the estimator."""
+    with pytest.raises(ValueError, match="patch_size must be 0 .estimator's. or >= 16"):
+        MonitorConfig(patch_size=8)
+    assert MonitorConfig(patch_size=16).patch_size == 16
 
 
 def test_memory_error_has_a_reason(monkeypatch, capsys):

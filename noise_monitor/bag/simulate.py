@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from collections.abc import Iterable
 from dataclasses import replace
 from pathlib import Path
@@ -151,6 +152,8 @@ def simulate_bag(
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
     scen = get_scenario(scenario)
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     if not 1 <= frames <= MAX_FRAMES:
         raise ValueError(f"frames must be in [1, {MAX_FRAMES}], got {frames}")
     for name, side in (("width", width), ("height", height)):

@@ -30,13 +30,13 @@ from typing import Any
 import numpy as np
 
 from ..physics import CameraMetadata, NoiseModel
+from ..physics.constants import MIN_PATCH
 from . import onnx_weights
 from .features import N_SCALARS, N_SHAPE_TREND, N_SPECTRAL, compact_inputs
 from .physics_prior import EXTRA, SOURCES, PhysicsPrior, group_by_meta
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")
-MIN_PATCH = 16
 #: A patch is measurable when the predicted error of its sigma_image is at most this (DN) and at most
 #: ``MEASURABLE_RELATIVE_ERROR`` of it (a reading of almost no noise under texture has a small error in DN
 #: but is no measurement). Chosen on crops of the training photographs and procedural images at 64 px

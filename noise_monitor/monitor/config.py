@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from noise_monitor.physics.constants import MODES
+from noise_monitor.physics.constants import MIN_PATCH, MODES
 
 from .. import safe_yaml
 from ..text import clip
@@ -88,7 +88,8 @@ class MonitorConfig:
                 object.__setattr__(self, f.name, float(value))
         checks = [
             (self.patches_per_frame >= 1, "patches_per_frame must be >= 1"),
-            (self.patch_size == 0 or self.patch_size >= 8, "patch_size must be 0 (estimator's) or >= 8"),
+            (self.patch_size == 0 or self.patch_size >= MIN_PATCH,
+             f"patch_size must be 0 (estimator's) or >= {MIN_PATCH} (the estimator's smallest patch)"),
             (0 <= self.min_patch_mean_dn < self.max_patch_mean_dn <= 255, "need 0 <= min_patch_mean_dn < max_patch_mean_dn <= 255"),
             (0 <= self.max_clipped_fraction <= 1, "max_clipped_fraction must be in [0, 1]"),
             (0 < self.max_flat_fraction <= 1, "max_flat_fraction must be in (0, 1]"),

@@ -9,3 +9,5 @@ PAPER_EFFECTS = ("pn", "dcsn", "rn")
 MODES = ("joint", "sequential")
 #: Box filter (pixels) estimating a patch's clean intensity map for model predictions.
 SMOOTH_KERNEL = 5
+#: Smallest patch edge (pixels) the estimator and the node's patch_size take (two 8x8 blocks per side).
+MIN_PATCH = 16
