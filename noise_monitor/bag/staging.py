@@ -53,8 +53,10 @@ class StagedOutputs:
                 raise BagError(f"output folder {self.folder} is the input bag folder {inp}; choose another one")
             refuse_overwriting_inputs([self.folder / n for n in self.names], input_files(inp))
         self._tmp: Path | None = None
+        self._created = False
 
     def __enter__(self) -> StagedOutputs:
+        self._created = not self.folder.exists()
         self.folder.mkdir(parents=True, exist_ok=True)
         self._tmp = Path(tempfile.mkdtemp(prefix=".staging-", dir=self.folder))
         return self
@@ -85,6 +87,8 @@ class StagedOutputs:
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
             self._tmp = None
+        if self._created and not any(self.folder.iterdir()):  # a failed run leaves no empty folder it made
+            self.folder.rmdir()
 
 
 def _umask() -> int:

@@ -287,3 +287,12 @@ def test_frame_table_columns_episodes_and_csv(tmp_path):
     assert rows[3]["skip_reason"] == "metadata missing" and rows[3]["xi"] == "" and rows[3]["gain_db"] == "6"
     assert rows[3]["xi_measurement"] == "" and (rows[4]["xi_measurement"], rows[5]["xi_measurement"]) == ("image", "temporal")
     assert rows[-1]["alarm"] == "1" and float(rows[-1]["xi"]) == -2.0 and rows[4100]["sigma_model_prnu"] == "0.5"
+
+
+def test_a_failed_replay_leaves_no_empty_output_folder(tmp_path, capsys):
+    """A bag that cannot be read: exit 2, and the output folder the run would have made is not left behind empty."""
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 100)
+    assert main(["replay", str(bad), "--profile", "icx285", "--out", str(tmp_path / "new" / "out")]) == 2
+    assert "bad.mcap" in capsys.readouterr().err
+    assert not (tmp_path / "new" / "out").exists()
