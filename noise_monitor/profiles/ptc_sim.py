@@ -169,13 +169,15 @@ def emva_truth(model: NoiseModel, prof: CameraProfile, bits: int, offset: float,
     cond_long = model.conditions(meta.replace(exposure_time_s=t_long))
     dsnu = math.sqrt(float(fx["dsnu"].variance_dn2(0.0, cond_long))) / k8 if "dsnu" in fx else 0.0
     prnu = float(fx["prnu"].sigma_pct) if "prnu" in fx else 0.0
+    flat = next(s for s in steps if s.kind == "flat" and s.sensor_temperature_c == BASE_TEMPERATURE_C)
+    dark_per_signal = dark_rate(BASE_TEMPERATURE_C) * k8 / (flat.signal_dn / flat.exposure_time_s)
     return {
         "system_gain_dn8_per_e": k8,
         "system_gain_dn_per_e": to_native(k8, bits),
         "read_noise_e": math.sqrt(read_var) / k8,
         "temporal_dark_noise_e": math.sqrt(dark_var) / k8,
         "temporal_dark_noise_exposure_s": meta.exposure_time_s,
-        "saturation_capacity_e": _saturation_truth(k8, dark_var, prnu, offset, lsb) / k8,
+        "saturation_capacity_e": _saturation_truth(k8, read_var, prnu, offset, lsb, dark_per_signal) / k8,
         "dark_current_e_per_s": dict(zip((f"{t:g}" for t in temps), rates)),
         "doubling_temperature_k": math.log(2.0) / slope if slope else None,
         "dsnu_e": dsnu, "dsnu_exposure_s": t_long,
@@ -184,18 +186,23 @@ def emva_truth(model: NoiseModel, prof: CameraProfile, bits: int, offset: float,
     }
 
 
-def _saturation_truth(k8: float, dark_var: float, prnu_pct: float, offset: float, lsb: float) -> float:
+def _saturation_truth(k8: float, read_var: float, prnu_pct: float, offset: float, lsb: float,
+                      dark_per_signal: float) -> float:
     """Dark-subtracted mean (8-bit DN) at the maximum of the pixel-averaged temporal variance.
 
-    Per pixel the output is clip(offset + v (1 + p z) + noise, 0, 255) with z ~ N(0, 1) the PRNU pattern
-    and Gaussian temporal noise of variance k8 * signal + dark + LSB^2/12 (Poisson is Gaussian there).
+    Per pixel the output is clip(offset + d + v (1 + p z) + noise, 0, 255) with z ~ N(0, 1) the PRNU pattern,
+    d = ``dark_per_signal`` x v the mean dark signal of the same exposure (the flat fields' signal and the dark
+    signal both grow with it) and Gaussian temporal noise of variance k8 (signal + d) + read + LSB^2/12 (Poisson is
+    Gaussian there); the EMVA saturation is the mean there less the dark set's, offset + d.
     """
     z, wz = roots_hermitenorm(41)
     wz = wz / wz.sum()
-    v = np.linspace(0.6 * 255.0, 1.1 * 255.0, 4001)[:, None]
+    v = np.linspace(0.3 * 255.0, 1.1 * 255.0, 8001)[:, None]
+    dark = dark_per_signal * v
     sig = v * (1.0 + prnu_pct / 100.0 * z[None, :])
-    s = np.sqrt(k8 * sig + dark_var + lsb**2 / 12.0)
-    m1, m2, _ = clipped_normal_moments(offset + sig, s, 0.0, 255.0)
+    s = np.sqrt(k8 * (sig + dark) + read_var + lsb**2 / 12.0)
+    m1, m2, _ = clipped_normal_moments(offset + dark + sig, s, 0.0, 255.0)
     var = ((m2 - m1**2) * wz).sum(axis=1)
     mean = (m1 * wz).sum(axis=1)
-    return float(mean[int(np.argmax(var))] - offset)
+    i = int(np.argmax(var))
+    return float(mean[i] - offset - dark[i, 0])

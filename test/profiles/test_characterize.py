@@ -165,6 +165,8 @@ def test_a_warm_sensors_dark_sets_are_told_from_its_flat_fields(tmp_path):
     assert fig["doubling_temperature_k"]["value"] == pytest.approx(emva["doubling_temperature_k"], rel=0.03)
     assert fig["system_gain_dn_per_e"]["value"] == pytest.approx(emva["system_gain_dn_per_e"], rel=0.01)
     assert fig["prnu_pct"]["value"] is not None
+    # the truth's saturation less the dark signal of its exposure (before, the sidecar left it in: 4,118 e-, 13 % high)
+    assert fig["saturation_capacity_e"]["value"] == pytest.approx(emva["saturation_capacity_e"], rel=0.03)
 
 
 def test_recording_with_one_temperature_states_what_it_cannot_determine(tmp_path, capsys):
