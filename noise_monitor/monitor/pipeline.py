@@ -29,14 +29,11 @@ from .model_patches import predict_patches
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
 from .temporal import BLOCK as TEMPORAL_BLOCK
-from .temporal import TemporalMeasurement, TemporalNoise
+from .temporal import VIEW_STEP_EXPOSURE_REL, VIEW_STEP_GAIN_DB, TemporalMeasurement, TemporalNoise
 
 #: MonitorConfig fields that may change while the monitor runs (thresholds, alarm and filter settings).
 RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "alarm_evidence", "clear_min_frames",
                     "filter_alpha", "alarm_level")
-#: A new view starts when the gain moves by more than this (dB) or the exposure by more than this fraction
-#: from one processed frame to the next (an auto-exposure step; slow drifts stay one view).
-VIEW_STEP_GAIN_DB, VIEW_STEP_EXPOSURE_REL = 0.5, 0.05
 #: Floor of a frame's xi standard error (DN): the model's own approximation of the simulated or real sensor
 #: (the temporal measurement's statistical error alone can be a few hundredths of a DN).
 XI_ERROR_FLOOR_DN = 0.05

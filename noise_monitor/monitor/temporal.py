@@ -15,10 +15,10 @@ A live driver's auto-exposure and auto-gain move a little from frame to frame ev
 still scene. The frames of a still camera stay one scene seen through another gain: each frame is the hold's
 mean scaled about the black level (exposure and gain scale photo and dark signal alike), which is the light change
 taken out before the differences; only the noise changes with the frame. So the hold follows such drift (each frame
-within ``DRIFT_GAIN_DB`` / ``DRIFT_EXPOSURE_REL`` of the previous one) and the frames measured together are the
-latest whose gains span at most ``DRIFT_GAIN_DB`` and exposures a ratio of at most ``1 + DRIFT_EXPOSURE_REL``
-(temperatures ``TEMPERATURE_TOL_C``): across such a window the model at the mean metadata is the frames' mean noise
-variance to within 0.7 % (its read noise goes with the square of the gain).
+within ``VIEW_STEP_GAIN_DB`` / ``VIEW_STEP_EXPOSURE_REL`` of the previous one: a larger step is a new view) and the
+frames measured together are the latest whose gains span at most ``DRIFT_GAIN_DB`` and exposures a ratio of at most
+``1 + DRIFT_EXPOSURE_REL`` (temperatures ``TEMPERATURE_TOL_C``): across such a window the model at the mean metadata
+is the frames' mean noise variance to within 0.7 % (its read noise goes with the square of the gain).
 """
 from __future__ import annotations
 
@@ -41,6 +41,10 @@ MOTION_SIZE_PX = 256
 GAIN_TOL_DB, EXPOSURE_TOL_REL, TEMPERATURE_TOL_C = 0.05, 0.01, 3.0
 #: the spread of gain (dB) and exposure (relative) of the frames measured together while auto-exposure drifts
 DRIFT_GAIN_DB, DRIFT_EXPOSURE_REL = 1.0, 0.25
+#: A new view starts when the gain moves by more than this (dB) or the exposure by more than this fraction
+#: from one processed frame to the next (an auto-exposure step; slow drifts stay one view): the alarm's filter and
+#: evidence restart, and so does the hold (frames of the previous view would lag the measurement behind the step)
+VIEW_STEP_GAIN_DB, VIEW_STEP_EXPOSURE_REL = 0.5, 0.05
 BLOCK = 8
 #: once the window holds ``max_frames`` frames (a long still hold), it is measured every this many frames and the
 #: last measurement stands between (adding one frame to 16 changes it little; on a still, textured 1280x1024 scene the
@@ -90,8 +94,9 @@ class StillCamera:
     """Whether each frame continues a static hold: the conditions of the hold's first frame (within the
     tolerances above; the temperature's within ``temperature_tol_c``) and a global shift from the hold's first
     frame within ``HOLD_SHIFT_PX`` (a vibrating camera stays about its pose; a pan or a drift leaves it).
-    ``drift``: the gain and exposure may drift through the hold, each frame's within ``DRIFT_GAIN_DB`` /
-    ``DRIFT_EXPOSURE_REL`` of the previous frame's (a live driver's auto-exposure)."""
+    ``drift``: the gain and exposure may drift through the hold, each frame's within ``VIEW_STEP_GAIN_DB`` /
+    ``VIEW_STEP_EXPOSURE_REL`` of the previous frame's (a live driver's auto-exposure hunting; a larger step is a new
+    view)."""
 
     def __init__(self, temperature_tol_c: float = TEMPERATURE_TOL_C, drift: bool = False) -> None:
         self.temperature_tol_c = temperature_tol_c
@@ -118,7 +123,7 @@ class StillCamera:
         """Whether this frame continues the current hold; one that does not starts the next hold."""
         self._latest = small = self._motion_image(image)
         still = False
-        tolerances = (DRIFT_GAIN_DB, DRIFT_EXPOSURE_REL) if self.drift else (GAIN_TOL_DB, EXPOSURE_TOL_REL)
+        tolerances = (VIEW_STEP_GAIN_DB, VIEW_STEP_EXPOSURE_REL) if self.drift else (GAIN_TOL_DB, EXPOSURE_TOL_REL)
         if self._ref is not None and self._ref.shape == small.shape and self.hold_meta is not None \
                 and _same_conditions(self.hold_meta, meta, self.temperature_tol_c, *tolerances):
             dx, dy, _ = global_shift(self._ref, small)
