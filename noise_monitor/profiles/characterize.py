@@ -348,8 +348,12 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         if m.sum() >= 3:
             p = np.polyfit(t_flat[m], x[m], 1)
             dev = 100.0 * (x[m] - np.polyval(p, t_flat[m])) / np.polyval(p, t_flat[m])
-            worst = float(dev[np.argmax(np.abs(dev))])
-            le = _value(worst, float(np.std(dev, ddof=1) / math.sqrt(m.sum())), "%")
+            j = int(np.argmax(np.abs(dev)))
+            # the worst point's own error: its flat and dark means' temporal noise over the pixels and frames (the
+            # dark set taken as long as its flat), relative to the line there (largest at the lowest signal)
+            sets = [s for s, keep in zip(flats, m) if keep]
+            se_dn = math.sqrt((sets[j].temporal_var + ref[m][j, 1]) / (sets[j].size * npix))
+            le = _value(float(dev[j]), 100.0 * se_dn / float(np.polyval(p, t_flat[m][j])), "%")
             lin.update(fit=p.tolist(), range_mask=m.tolist(), deviation_pct=dev.tolist())
     figures = {
         "system_gain_dn_per_e": _value(k8 * adc / 255.0, k8_se * adc / 255.0, f"DN/e- ({rec.bit_depth} bit)"),

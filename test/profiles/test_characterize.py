@@ -167,6 +167,10 @@ def test_a_warm_sensors_dark_sets_are_told_from_its_flat_fields(tmp_path):
     assert fig["prnu_pct"]["value"] is not None
     # the truth's saturation less the dark signal of its exposure (before, the sidecar left it in: 4,118 e-, 13 % high)
     assert fig["saturation_capacity_e"]["value"] == pytest.approx(emva["saturation_capacity_e"], rel=0.03)
+    # the linearity error is its worst point's deviation, with that point's own error (before: the error of the
+    # points' mean deviation, ~10x smaller, which read a linear simulation's 0.2 % as 16 standard errors)
+    lin, dev = fig["linearity_error_pct"], np.array(res["points"]["linearity"]["deviation_pct"])
+    assert lin["stderr"] > 3.0 * dev.std(ddof=1) / np.sqrt(dev.size) and abs(lin["value"]) < 4.0 * lin["stderr"]
 
 
 def test_recording_with_one_temperature_states_what_it_cannot_determine(tmp_path, capsys):
