@@ -15,6 +15,7 @@ runs, paced to bag time with ``rate``.
 from __future__ import annotations
 
 import json
+import math
 import time
 from contextlib import ExitStack, nullcontext
 from pathlib import Path
@@ -38,6 +39,7 @@ from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
 from noise_monitor.physics import CameraProfile
+from noise_monitor.physics.metadata import STATIC_FIELDS
 from noise_monitor.text import clip
 
 from .errors import BagError
@@ -133,6 +135,21 @@ def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:
         return [{k: e[k] for k in ("start_ns", "end_ns", "corrupted", "xi_sign")} for e in eps]
     except (ValueError, KeyError, TypeError):
         return None
+
+
+def _note_overrides(prof: CameraProfile, raw: dict[str, Any], seen: dict[str, dict[str, Any]]) -> None:
+    """Record in ``seen`` (first occurrence) each camera constant a frame's metadata message sets other than the
+    profile: the message's values win over the profile's, as in the node."""
+    for key in STATIC_FIELDS:
+        if key in seen or key not in raw or prof.values.get(key) is None:
+            continue
+        mine, theirs = prof.values[key], raw[key]
+        try:
+            same = math.isclose(float(mine), float(theirs), rel_tol=1e-9)
+        except (TypeError, ValueError):
+            same = str(mine).strip().lower() == str(theirs).strip().lower()
+        if not same:
+            seen[key] = {"profile": mine, "bag": theirs}
 
 
 def replay(bag: str | Path, profile: str | Path | CameraProfile | None = None, out_dir: str | Path | None = None,
@@ -231,6 +248,7 @@ def run_replay(
         last_log = 0
         capped_gaps = 0
         gaps = GapCounter(expected_rate_hz=float(rt.params["expected_rate_hz"]))  # frames the recording lacks
+        constants: dict[str, dict[str, Any]] = {}  # camera constants the bag's metadata set over the profile's
 
         def report(t: int) -> None:
             assert periods is not None
@@ -254,6 +272,8 @@ def run_replay(
                 if not next_report - diag_period_ns <= bf.stamp_ns < next_report:  # the stamps jumped: a new grid
                     next_report = bf.stamp_ns + diag_period_ns
             pacer.wait(bf.log_time_ns)
+            if prof is not None:
+                _note_overrides(prof, bf.raw_metadata, constants)
             implausible = gaps.implausible
             monitor.count_lost(gaps.observe(bf.stamp_ns), gaps.implausible - implausible)  # as the node counts them
             res = rt.process(bf)
@@ -304,6 +324,7 @@ def run_replay(
         "realtime_factor": round(bag_duration / wall, 3) if wall > 0 and bag_duration > 0 else None,
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
         "idle_gaps_capped": capped_gaps,
+        "metadata_overrides": constants,
     }
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)

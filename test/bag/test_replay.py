@@ -296,3 +296,15 @@ def test_a_failed_replay_leaves_no_empty_output_folder(tmp_path, capsys):
     assert main(["replay", str(bad), "--profile", "icx285", "--out", str(tmp_path / "new" / "out")]) == 2
     assert "bad.mcap" in capsys.readouterr().err
     assert not (tmp_path / "new" / "out").exists()
+
+
+def test_camera_constants_of_the_bag_that_win_over_the_profile_are_named(tmp_path, estimator):
+    """A bag whose metadata carry every field (as the simulator writes them) replayed with another camera's profile:
+    the message's constants win, as in the node, and the summary names them (before: it named the profile only)."""
+    bag = simulate_bag(tmp_path / "icx.mcap", "icx285", "static", frames=4, width=128, height=128, seed=2)
+    other = replay(bag, "ev76c661", tmp_path / "o1", estimator=estimator, config=CONFIG, progress=False, plot=False)
+    icx, ev = load_profile("icx285").values, load_profile("ev76c661").values
+    assert other["metadata_overrides"]["full_well_e"] == {"profile": ev["full_well_e"], "bag": icx["full_well_e"]}
+    assert other["metadata_overrides"]["sensor_type"]["bag"] == "ccd"
+    same = replay(bag, "icx285", tmp_path / "o2", estimator=estimator, config=CONFIG, progress=False, plot=False)
+    assert same["metadata_overrides"] == {}
