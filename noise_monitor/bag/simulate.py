@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Protocol, TypedDict
 
 import numpy as np
+from scipy.signal import lfilter
 from tqdm import tqdm
 
 from noise_monitor.estimator.user_images import ImageSet
@@ -242,10 +243,8 @@ def simulate_bag(
             else:
                 window, offset = view(world, positions[i], height, width)
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
-            if flicker_pct:
-                clean = np.clip(clean * np.float32(flicker[i]), 0.0, 255.0).astype(np.float32)
-            if auto_exposure_pct:
-                clean = np.clip(clean * np.float32(hunt[i]), 0.0, 255.0).astype(np.float32)
+            if flicker_pct or auto_exposure_pct:  # the light's flicker, the exposure's wander: both scale the scene
+                clean = np.clip(clean * np.float32(flicker[i] * hunt[i]), 0.0, 255.0).astype(np.float32)
             if banding_pct:
                 bands = rolling_shutter_gain(height, true_meta.exposure_time_s, float(band_phase[i]),
                                              banding_pct / 100.0, mains_hz, line_time_s)
@@ -309,12 +308,10 @@ def auto_exposure_wander(rng: np.random.Generator, frames: int, rms_pct: float) 
     """(frames,) exposure factors of an auto-exposure hunting about its set point: exp of a stationary AR(1)
     series of ``rms_pct`` % rms, correlated ``AUTO_EXPOSURE_CORRELATION`` from frame to frame; ones for 0."""
     z = rng.standard_normal(frames)
-    a = np.empty(frames)
-    a[0] = z[0]
     rho = AUTO_EXPOSURE_CORRELATION
-    for i in range(1, frames):
-        a[i] = rho * a[i - 1] + math.sqrt(1.0 - rho**2) * z[i]
-    return np.exp(rms_pct / 100.0 * a)
+    c = math.sqrt(1.0 - rho**2)
+    z[0] /= c  # a[0] = z[0]: the series starts stationary
+    return np.exp(rms_pct / 100.0 * lfilter([c], [1.0, -rho], z))
 
 
 def _held(us: np.ndarray, frames: int, fps: float, hold_s: float) -> np.ndarray:

@@ -198,7 +198,7 @@ def _classify(groups: dict[tuple[float, float | None], list[FrameSet]], toleranc
         for s in members:
             by_exposure.setdefault(s.exposure_time_s, []).append(s)
         lows = [min(sets, key=lambda s: s.mean) for sets in by_exposure.values() if len(sets) >= 2]
-        if len(lows) >= 2 and len({s.exposure_time_s for s in lows}) >= 2:
+        if len(lows) >= 2:  # one per exposure
             slope, intercept = np.polyfit([s.exposure_time_s for s in lows], [s.mean for s in lows], 1)
             lines[key] = (float(slope), float(intercept))
         elif lows:
