@@ -23,7 +23,13 @@ def histogram_weights(maps: np.ndarray) -> np.ndarray:
 def predict_patches(model: NoiseModel, maps: np.ndarray, meta: CameraMetadata, mode: str = "joint") -> dict[str, np.ndarray]:
     """Predicted sigma (DN) per effect and ``"total"`` for each clean-intensity map of an (N, H, W) batch;
     equal to ``model.predict(maps, meta, mode)``."""
-    weights = histogram_weights(maps)
+    return predict_histograms(model, histogram_weights(maps), meta, mode)
+
+
+def predict_histograms(model: NoiseModel, weights: np.ndarray, meta: CameraMetadata, mode: str = "joint"
+                       ) -> dict[str, np.ndarray]:
+    """:func:`predict_patches` of maps given by their :func:`histogram_weights` (N, G): for maps seen at many
+    metadata sets."""
     out: dict[str, np.ndarray] = {}
     for name, (t1, t2) in model.tables(meta, mode).items():
         var = weights @ t2 - (weights @ t1) ** 2

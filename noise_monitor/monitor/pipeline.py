@@ -25,7 +25,8 @@ from .alarm import EmaFilter, XiAlarm
 from .config import MonitorConfig
 from .frame import Frame
 from .frame import skip_reason as frame_skip_reason
-from .model_patches import predict_patches
+from .model_patches import histogram_weights, predict_histograms, predict_patches
+from .noise_change import ModelAt
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
 from .temporal import BLOCK as TEMPORAL_BLOCK
@@ -186,16 +187,18 @@ class Monitor:
         extra_effects = set(model.names) - set(SOURCES)
         self.xi_source = config.xi_source if config.xi_source != "auto" else ("model" if extra_effects else "estimator")
         self.filter = EmaFilter(config.filter_alpha)
-        self.temporal = TemporalNoise(config.temporal_frames, config.temporal_min_frames)
         # frame differences hold the temporal noise only: compare them with the model's temporal effects
         fixed = [e for e in model.effects if not e.temporal]
         self.temporal_model = NoiseModel([e for e in model.effects if e.temporal], interpolate=model.interpolate) if fixed else model
+        # a change of the noise by half the alarm threshold inside a static hold restarts its window
+        self.temporal = TemporalNoise(config.temporal_frames, config.temporal_min_frames, self._temporal_model,
+                                      config.xi_threshold_dn / 2.0)
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames, config.alarm_evidence)
         self._view_meta: CameraMetadata | None = None  # the previous processed frame's metadata
         self.view_frames = 0
         self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
-                         "frames_lost": 0, "stamp_intervals_implausible": 0}
+                         "frames_lost": 0, "stamp_intervals_implausible": 0, "temporal_noise_changes": 0}
         self.last_received_ns: int | None = None
         self.last_result: FrameResult | None = None
 
@@ -212,6 +215,7 @@ class Monitor:
         self.alarm.clear_level = cfg.xi_threshold_dn - cfg.xi_hysteresis_dn
         self.alarm.min_frames, self.alarm.clear_frames = cfg.alarm_min_frames, cfg.clear_min_frames
         self.alarm.evidence = cfg.alarm_evidence
+        self.temporal.change_dn = cfg.xi_threshold_dn / 2.0
         return cfg
 
     # --- bookkeeping -----------------------------------------------------------------------
@@ -304,6 +308,7 @@ class Monitor:
             bounded, xi_image = True, max(xi_bound, 0.0)
         xi, xi_t, weight, held, xi_err, motion, light = xi_image, None, 0.0, 0, cfg.image_xi_error_dn, None, None
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
+        self.counters["temporal_noise_changes"] = self.temporal.changes
         if tm is not None:
             held = tm.frames
             found = self._xi_temporal(tm, sigma, meta)
@@ -374,14 +379,19 @@ class Monitor:
         self.view_frames = 1 if step else self.view_frames + 1
         return step
 
-    def _temporal_model(self, patches: np.ndarray, accepted: np.ndarray, meta: CameraMetadata) -> np.ndarray:
-        """(K,) the model's temporal noise over the ``accepted`` blocks of ``patches`` (K, s, s; smoothed first)
-        at ``meta``."""
+    def _temporal_model(self, patches: np.ndarray, accepted: np.ndarray) -> ModelAt:
+        """The model's temporal noise (K,) over the ``accepted`` blocks (K, N) of ``patches`` (K, s, s; smoothed
+        first) as a function of the metadata (NaN for a patch without accepted blocks)."""
         smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in patches])
         blocks = blocks_of(smooth, TEMPORAL_BLOCK)  # (patches, blocks, pixels)
-        per_block = predict_patches(self.temporal_model, blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK), meta,
-                                    self.config.model_mode)["total"].reshape(blocks.shape[:2])
-        return np.sqrt(np.sum(accepted * per_block**2, axis=1) / accepted.sum(axis=1))
+        weights = histogram_weights(blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK))
+        n = accepted.sum(axis=1)
+
+        def at(meta: CameraMetadata) -> np.ndarray:
+            per_block = predict_histograms(self.temporal_model, weights, meta, self.config.model_mode)["total"]
+            var = np.sum(accepted * per_block.reshape(blocks.shape[:2]) ** 2, axis=1)
+            return np.sqrt(np.divide(var, n, out=np.full(var.shape, np.nan), where=n > 0))
+        return at
 
     def _xi_temporal(self, tm: TemporalMeasurement, sigma: dict[str, float],
                      meta: CameraMetadata) -> tuple[float, float] | None:
@@ -398,11 +408,11 @@ class Monitor:
         if not ok.any():
             return None
         acc = tm.accepted[ok]
-        model_t = self._temporal_model(tm.mean_patches[ok], acc, tm.meta)
+        model_t = self._temporal_model(tm.mean_patches[ok], acc)(tm.meta)
         d = model_t - tm.sigma_dn[ok]
         if tm.latest_patches is not None and not (math.isclose(meta.gain_db, tm.meta.gain_db, abs_tol=1e-9) and
                                                   math.isclose(meta.exposure_time_s, tm.meta.exposure_time_s)):
-            d = d * self._temporal_model(tm.latest_patches[ok], acc, meta) / np.maximum(model_t, 1e-9)
+            d = d * self._temporal_model(tm.latest_patches[ok], acc)(meta) / np.maximum(model_t, 1e-9)
         n = int(ok.sum())
         spread = float(np.std(d)) if n > 1 else 0.0
         err = 1.2533 * max(float(np.sqrt(np.mean(tm.err_dn[ok] ** 2))), spread) / np.sqrt(n)  # of a median

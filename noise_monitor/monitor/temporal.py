@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -34,6 +34,8 @@ import numpy as np
 from noise_monitor.measure import block_temporal, global_shift
 from noise_monitor.measure.temporal import HOLD_SHIFT_PX
 from noise_monitor.physics import CameraMetadata
+
+from .noise_change import Level, LevelReference, ModelAt, change_point
 
 #: edge (px) of the downsampled frame the global motion is estimated on
 MOTION_SIZE_PX = 256
@@ -135,25 +137,40 @@ class StillCamera:
         return still
 
 
-class TemporalNoise:
-    """Collects the patches of a static hold and measures their temporal noise (see module docstring)."""
+@dataclass(frozen=True)
+class _Held:
+    """A frame of the hold: its patches, metadata and noise level (None before the hold's first measurement)."""
 
-    def __init__(self, max_frames: int, min_frames: int) -> None:
+    patches: np.ndarray  # (K, s, s)
+    meta: CameraMetadata
+    level: Level | None
+
+
+class TemporalNoise:
+    """Collects the patches of a static hold and measures their temporal noise (see module docstring).
+
+    ``model``: for a measurement's temporal mean (K, s, s) and accepted blocks (K, N), the model's temporal sigma
+    of those blocks as a function of the metadata; with it, a change of the camera's noise of at least
+    ``change_dn`` (sigma, DN) inside the hold cuts the window at the change (:mod:`.noise_change`)."""
+
+    def __init__(self, max_frames: int, min_frames: int,
+                 model: Callable[[np.ndarray, np.ndarray], ModelAt] | None = None, change_dn: float = math.inf) -> None:
         self.max_frames, self.min_frames = max_frames, min_frames
-        self._stack: deque[np.ndarray] = deque(maxlen=max_frames)
-        self._metas: deque[CameraMetadata] = deque(maxlen=max_frames)
+        self.model, self.change_dn = model, change_dn
+        self._frames: deque[_Held] = deque(maxlen=max_frames)
         self._corners: list[tuple[int, int]] = []
         self._size = 0
         self._still = StillCamera(drift=True)
         self.holds = 0  # static holds started (resets)
+        self.changes = 0  # changes of the noise that cut a hold's window
         self._last: TemporalMeasurement | None = None  # the hold's latest measurement
+        self._reference: LevelReference | None = None  # what the frames' noise levels are read on
         self._since = 0  # frames added since it
 
     def reset(self) -> None:
-        self._stack.clear()
-        self._metas.clear()
+        self._frames.clear()
         self._corners = []
-        self._last = None
+        self._last = self._reference = None
         self._still.reset()
 
     def _static(self, image: np.ndarray, meta: CameraMetadata, size: int) -> bool:
@@ -171,20 +188,30 @@ class TemporalNoise:
         if self.max_frames < 2:
             return None
         if not self._static(image, meta, size):
-            self._stack.clear()
-            self._metas.clear()
+            self._frames.clear()
             self._corners, self._size = list(corners), size
-            self._last = None
+            self._last = self._reference = None
             self.holds += 1
         if not self._corners:
             return None
         latest = np.stack([image[y:y + size, x:x + size] for y, x in self._corners]).astype(np.float32)
-        self._stack.append(latest)
-        self._metas.append(meta)
-        while not _within_drift(self._metas):  # auto-exposure drifted: the oldest frames leave the window
-            self._stack.popleft()
-            self._metas.popleft()
-        k = len(self._stack)
+        level = None
+        if self._reference is not None and self._frames:
+            previous = self._frames[-1]
+            level = self._reference.level(latest, previous.patches, meta, previous.meta)
+        self._frames.append(_Held(latest, meta, level))
+        while not _within_drift([f.meta for f in self._frames]):  # auto-exposure drifted: the oldest frames leave
+            self._frames.popleft()
+        if level is not None and self._reference is not None:
+            sigma = float(np.nanmedian(self._reference.model(meta)))
+            cut = change_point([f.level for f in self._frames], sigma, self.change_dn)
+            if cut:  # the noise changed: the frames before the change leave the window
+                for _ in range(cut):
+                    self._frames.popleft()
+                # the first frame's level was read on its difference with the frame before the change
+                self._frames[0] = dataclasses.replace(self._frames[0], level=None)
+                self._last, self.changes = None, self.changes + 1
+        k = len(self._frames)
         if k < max(2, self.min_frames):
             self._last = None
             return None
@@ -192,13 +219,16 @@ class TemporalNoise:
         if self._last is not None and k == self.max_frames and self._since < FULL_WINDOW_STRIDE:
             return dataclasses.replace(self._last, latest_patches=latest)
         self._last, self._since = self._measure(k), 0
+        if self.model is not None:
+            self._reference = LevelReference.of(self._last.mean_patches, self._last.accepted, BLOCK,
+                                                self.model(self._last.mean_patches, self._last.accepted))
         return self._last
 
     def _measure(self, k: int) -> TemporalMeasurement:
         """The measurement of the window's ``k`` frames."""
         size = self._size
         n_patches = len(self._corners)
-        frames = np.stack(self._stack)  # (k, K, s, s)
+        frames = np.stack([f.patches for f in self._frames])  # (k, K, s, s)
         stats = block_temporal(frames.reshape(k, n_patches * size, size), BLOCK, view_rows=size)
         per_patch = (size // BLOCK) ** 2
         acc = stats.accepted.reshape(n_patches, per_patch)
@@ -211,7 +241,7 @@ class TemporalNoise:
             sigma = np.sqrt(np.maximum(v, 0.0))
             sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
-                                   float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(self._metas),
+                                   float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(f.meta for f in self._frames),
                                    stats.light_pct, frames[-1])
 
 

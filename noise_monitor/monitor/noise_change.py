@@ -1,0 +1,117 @@
+"""A change of the camera's noise inside a static hold: where the hold's frames stop sharing one noise.
+
+The hold's window pools up to ``temporal_frames`` frames. When the camera's noise steps while it looks at a still
+scene (a component failing, an amplifier switching, the fault ending), the pooled measurement would lag the step
+by up to the window's length and the alarm with it. So each frame's temporal noise is read on its own: from its
+difference with the previous frame (the scene cancels), on the blocks the hold's last measurement accepted as pure
+noise, after what the light's change and sub-pixel motion leave there is regressed out (each block's offset,
+brightness and gradients, from the measurement's temporal mean blurred first: the mean holds a share of the
+previous frame's noise, which its unblurred pixels would regress out of the difference, 8 % of the variance for a
+mean of 4 frames), and relative to what the model expects at both frames' metadata (a temperature drifting
+through the hold changes the dark-current noise as the model says it does). The window is cut where the frames'
+levels change most, when the change is significant (``CHANGE_SIGMAS`` standard errors) and large enough to
+matter to the alarm (``change_dn`` in sigma).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from noise_monitor.measure.temporal import blocks_of
+from noise_monitor.physics import CameraMetadata
+
+#: standard errors by which the frames after a cut must differ from those before it
+CHANGE_SIGMAS = 5.0
+#: box blur (px) of the measurement's temporal mean before the regressors are taken from it
+BASIS_BLUR = 3
+#: regressors per block: offset, brightness, x and y gradient
+N_BASIS = 4
+#: standard error of a median of many values over that of their mean
+MEDIAN_EFFICIENCY = 1.2533
+
+#: the model's temporal sigma (K,) of a hold's patches over their accepted blocks at a frame's metadata
+ModelAt = Callable[[CameraMetadata], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Level:
+    """One frame's temporal noise relative to the model: (K,) log variance ratio (NaN for a patch without
+    accepted blocks) and the residual degrees of freedom behind each."""
+
+    log_ratio: np.ndarray
+    dof: np.ndarray
+
+
+@dataclass(frozen=True)
+class LevelReference:
+    """What each frame's noise level is read on: a hold measurement's accepted blocks and scene (see module)."""
+
+    basis: np.ndarray  # (M, b*b, N_BASIS) orthonormal regressors of the M accepted blocks
+    selected: np.ndarray  # (K*N,) bool: the accepted blocks, patch after patch
+    shape: tuple[int, int]  # (K, N)
+    block: int
+    model: ModelAt
+
+    @classmethod
+    def of(cls, mean_patches: np.ndarray, accepted: np.ndarray, block: int, model: ModelAt) -> LevelReference | None:
+        """From a measurement's temporal mean (K, s, s) and accepted blocks (K, N); None without accepted blocks."""
+        if not accepted.any():
+            return None
+        size = (BASIS_BLUR, BASIS_BLUR)
+        mean = np.stack([cv2.blur(m, size) for m in np.asarray(mean_patches, dtype=np.float32)])
+        gy, gx = np.gradient(mean, axis=(1, 2))
+        selected = accepted.reshape(-1)
+
+        def accepted_blocks(a: np.ndarray) -> np.ndarray:
+            return blocks_of(a, block).reshape(-1, block * block)[selected]
+
+        mb = accepted_blocks(mean)
+        design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), accepted_blocks(gx),
+                           accepted_blocks(gy)], axis=2)
+        basis, _ = np.linalg.qr(design)
+        return cls(basis, selected, accepted.shape, block, model)
+
+    def level(self, patches: np.ndarray, previous: np.ndarray, meta: CameraMetadata,
+              previous_meta: CameraMetadata) -> Level:
+        """The temporal noise of ``patches`` (K, s, s) in their difference with the ``previous`` frame's, over
+        the model's at both frames' metadata."""
+        d = blocks_of(np.asarray(patches, np.float32) - previous, self.block).reshape(-1, self.block**2)[self.selected]
+        c = np.einsum("mn,mnr->mr", d, self.basis)
+        energy = np.zeros(self.selected.size)
+        energy[self.selected] = np.sum(d * d, axis=1) - np.sum(c * c, axis=1)
+        dof = self.selected.reshape(self.shape).sum(axis=1) * (self.block**2 - N_BASIS)
+        expected = self.model(meta) ** 2 + self.model(previous_meta) ** 2
+        ratio = energy.reshape(self.shape).sum(axis=1) / np.maximum(dof, 1) / np.maximum(expected, 1e-12)
+        with np.errstate(divide="ignore"):
+            log_ratio = np.where((dof > 0) & (ratio > 0) & (expected > 1e-12), np.log(ratio), np.nan)
+        return Level(log_ratio, dof)
+
+
+def change_point(levels: Sequence[Level | None], sigma_dn: float, change_dn: float) -> int:
+    """Index of the first frame after the largest change of the frames' noise ``levels`` (None: a frame without
+    a level) that is both significant and at least ``change_dn`` in sigma at ``sigma_dn``; 0 without one.
+
+    A frame's level is the median over the patches of its log ratio less that patch's median over the frames (a
+    patch's own offset: its blocks' intensities); its standard error is that of the median of Gaussian variance
+    estimates of the patches' degrees of freedom."""
+    at = [i for i, lv in enumerate(levels) if lv is not None]
+    if len(at) < 2 or not math.isfinite(change_dn):
+        return 0
+    ratios = np.array([levels[i].log_ratio for i in at])  # type: ignore[union-attr]
+    ok = np.isfinite(ratios).all(axis=0)
+    if not ok.any():
+        return 0
+    z = np.median(ratios[:, ok] - np.median(ratios[:, ok], axis=0), axis=1)
+    dof = float(np.median(np.array([levels[i].dof[ok] for i in at])))  # type: ignore[union-attr]
+    sd = MEDIAN_EFFICIENCY * math.sqrt(2.0 / dof / ok.sum())
+    best, cut = 0.0, 0
+    for j in range(1, len(z)):
+        step = float(z[j:].mean() - z[:j].mean())
+        score = abs(step) / (sd * math.sqrt(1.0 / (len(z) - j) + 1.0 / j))
+        if score > max(best, CHANGE_SIGMAS) and sigma_dn * abs(math.exp(step / 2.0) - 1.0) >= change_dn:
+            best, cut = score, at[j]
+    return cut
