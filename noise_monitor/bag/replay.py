@@ -313,6 +313,8 @@ def run_replay(
         "frames_skipped": len(table) - processed,
         # images missing from the recording (lost before it), inferred from header-stamp gaps as the node does
         "frames_lost": int(monitor.counters["frames_lost"]),
+        # changes of the camera's noise that cut a still hold's window (the temporal measurement restarted)
+        "temporal_noise_changes": int(monitor.counters["temporal_noise_changes"]),
         "skip_reasons": skip_reasons(table),
         "skipped": skipped_frames(table)[:MAX_LISTED_SKIPS],  # all of them are in the CSV
         "alarms": episodes,

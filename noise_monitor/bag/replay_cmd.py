@@ -55,6 +55,9 @@ def print_summary(s: dict[str, Any]) -> None:
         print(f"  skipped {n:4d} x {reason}")
     if s.get("frames_lost"):
         print(f"  lost    {s['frames_lost']:4d} frames before the recording (gaps in the image stamps)")
+    if s.get("temporal_noise_changes"):
+        print(f"  noise changed {s['temporal_noise_changes']} time(s) inside a still hold (its temporal measurement "
+              "restarted there)")
     if s.get("metadata_overrides"):
         print("  note: the bag's metadata set camera constants, which win over the profile's: " + ", ".join(
             f"{k} {v['bag']} (profile {v['profile']})" for k, v in s["metadata_overrides"].items()))

@@ -37,3 +37,34 @@ def predict_histograms(model: NoiseModel, weights: np.ndarray, meta: CameraMetad
     if "total" not in out:  # sequential protocol: total = sqrt of the sum of squares
         out["total"] = np.sqrt(sum(out[e.name] ** 2 for e in model.noise_effects))
     return out
+
+
+
+def predict_total(model: NoiseModel, weights: np.ndarray, meta: CameraMetadata, mode: str = "joint") -> np.ndarray:
+    """The ``"total"`` of :func:`predict_histograms` alone (one table product where the model tabulates it)."""
+    tables = model.tables(meta, mode)
+    if "total" not in tables:
+        return predict_histograms(model, weights, meta, mode)["total"]
+    t1, t2 = tables["total"]
+    return np.sqrt(np.maximum(weights @ t2 - (weights @ t1) ** 2, 0.0))
+
+
+def level_positions(levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Grid positions of single intensities (DN) for :func:`predict_levels`."""
+    return grid_position(np.clip(np.asarray(levels, dtype=np.float64).reshape(-1), 0.0, DN_MAX))
+
+
+def predict_levels(model: NoiseModel, positions: tuple[np.ndarray, np.ndarray], meta: CameraMetadata,
+                   mode: str = "joint") -> np.ndarray:
+    """The total sigma (DN) at single intensities (:func:`level_positions`): :func:`predict_total` of maps of one
+    intensity each, whose histograms hold two grid points (the tables' linear interpolation)."""
+    i0, frac = positions
+
+    def sigma(t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+        m1, m2 = (t[i0] * (1.0 - frac) + t[i0 + 1] * frac for t in (t1, t2))
+        return np.sqrt(np.maximum(m2 - m1**2, 0.0))
+
+    tables = model.tables(meta, mode)
+    if "total" in tables:
+        return sigma(*tables["total"])
+    return np.sqrt(sum(sigma(*tables[e.name]) ** 2 for e in model.noise_effects))

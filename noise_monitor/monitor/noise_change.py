@@ -44,6 +44,7 @@ class Level:
 
     log_ratio: np.ndarray
     dof: np.ndarray
+    model_dn: float  # the model's temporal sigma at the frame's metadata (median over the patches)
 
 
 @dataclass(frozen=True)
@@ -55,10 +56,13 @@ class LevelReference:
     shape: tuple[int, int]  # (K, N)
     block: int
     model: ModelAt
+    frames: int  # of the measurement it was made from
 
     @classmethod
-    def of(cls, mean_patches: np.ndarray, accepted: np.ndarray, block: int, model: ModelAt) -> LevelReference | None:
-        """From a measurement's temporal mean (K, s, s) and accepted blocks (K, N); None without accepted blocks."""
+    def of(cls, mean_patches: np.ndarray, accepted: np.ndarray, frames: int, block: int,
+           model: ModelAt) -> LevelReference | None:
+        """From a measurement of ``frames`` frames: its temporal mean (K, s, s) and accepted blocks (K, N); None
+        without accepted blocks."""
         if not accepted.any():
             return None
         size = (BASIS_BLUR, BASIS_BLUR)
@@ -73,45 +77,49 @@ class LevelReference:
         design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), accepted_blocks(gx),
                            accepted_blocks(gy)], axis=2)
         basis, _ = np.linalg.qr(design)
-        return cls(basis, selected, accepted.shape, block, model)
+        return cls(basis, selected, accepted.shape, block, model, frames)
 
     def level(self, patches: np.ndarray, previous: np.ndarray, meta: CameraMetadata,
               previous_meta: CameraMetadata) -> Level:
         """The temporal noise of ``patches`` (K, s, s) in their difference with the ``previous`` frame's, over
         the model's at both frames' metadata."""
         d = blocks_of(np.asarray(patches, np.float32) - previous, self.block).reshape(-1, self.block**2)[self.selected]
-        c = np.einsum("mn,mnr->mr", d, self.basis)
+        c = (d[:, None, :] @ self.basis)[:, 0, :]
         energy = np.zeros(self.selected.size)
-        energy[self.selected] = np.sum(d * d, axis=1) - np.sum(c * c, axis=1)
+        energy[self.selected] = np.einsum("mn,mn->m", d, d) - np.einsum("mr,mr->m", c, c)
         dof = self.selected.reshape(self.shape).sum(axis=1) * (self.block**2 - N_BASIS)
-        expected = self.model(meta) ** 2 + self.model(previous_meta) ** 2
+        model_dn = self.model(meta)
+        now = model_dn**2
+        expected = now + (now if previous_meta == meta else self.model(previous_meta) ** 2)
         ratio = energy.reshape(self.shape).sum(axis=1) / np.maximum(dof, 1) / np.maximum(expected, 1e-12)
         with np.errstate(divide="ignore"):
             log_ratio = np.where((dof > 0) & (ratio > 0) & (expected > 1e-12), np.log(ratio), np.nan)
-        return Level(log_ratio, dof)
+        return Level(log_ratio, dof, float(np.nanmedian(model_dn)) if np.isfinite(model_dn).any() else math.nan)
 
 
-def change_point(levels: Sequence[Level | None], sigma_dn: float, change_dn: float) -> int:
+def change_point(levels: Sequence[Level | None], change_dn: float) -> int:
     """Index of the first frame after the largest change of the frames' noise ``levels`` (None: a frame without
-    a level) that is both significant and at least ``change_dn`` in sigma at ``sigma_dn``; 0 without one.
+    a level) that is both significant and at least ``change_dn`` in sigma at the newest frame's model; 0 without one.
 
     A frame's level is the median over the patches of its log ratio less that patch's median over the frames (a
     patch's own offset: its blocks' intensities); its standard error is that of the median of Gaussian variance
     estimates of the patches' degrees of freedom."""
-    at = [i for i, lv in enumerate(levels) if lv is not None]
-    if len(at) < 2 or not math.isfinite(change_dn):
+    found = [(i, lv) for i, lv in enumerate(levels) if lv is not None]
+    if len(found) < 2 or not math.isfinite(change_dn):
         return 0
-    ratios = np.array([levels[i].log_ratio for i in at])  # type: ignore[union-attr]
+    at = [i for i, _ in found]
+    ratios = np.array([lv.log_ratio for _, lv in found])
     ok = np.isfinite(ratios).all(axis=0)
     if not ok.any():
         return 0
     z = np.median(ratios[:, ok] - np.median(ratios[:, ok], axis=0), axis=1)
-    dof = float(np.median(np.array([levels[i].dof[ok] for i in at])))  # type: ignore[union-attr]
+    dof = float(np.median(np.array([lv.dof[ok] for _, lv in found])))
     sd = MEDIAN_EFFICIENCY * math.sqrt(2.0 / dof / ok.sum())
-    best, cut = 0.0, 0
-    for j in range(1, len(z)):
-        step = float(z[j:].mean() - z[:j].mean())
-        score = abs(step) / (sd * math.sqrt(1.0 / (len(z) - j) + 1.0 / j))
-        if score > max(best, CHANGE_SIGMAS) and sigma_dn * abs(math.exp(step / 2.0) - 1.0) >= change_dn:
-            best, cut = score, at[j]
-    return cut
+    n = len(z)
+    j = np.arange(1, n)  # frames before each cut
+    before = np.cumsum(z)[:-1]
+    step = (z.sum() - before) / (n - j) - before / j
+    score = np.abs(step) / (sd * np.sqrt(1.0 / (n - j) + 1.0 / j))
+    large = found[-1][1].model_dn * np.abs(np.expm1(step / 2.0)) >= change_dn
+    score = np.where(large & (score > CHANGE_SIGMAS), score, 0.0)
+    return at[int(j[np.argmax(score)])] if score.max() > 0 else 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -25,7 +26,7 @@ from .alarm import EmaFilter, XiAlarm
 from .config import MonitorConfig
 from .frame import Frame
 from .frame import skip_reason as frame_skip_reason
-from .model_patches import histogram_weights, predict_histograms, predict_patches
+from .model_patches import histogram_weights, level_positions, predict_levels, predict_patches, predict_total
 from .noise_change import ModelAt
 from .patches import PatchSelection, select_patches
 from .status import ERROR, OK, STALE, WARN, StatusReport
@@ -191,7 +192,8 @@ class Monitor:
         fixed = [e for e in model.effects if not e.temporal]
         self.temporal_model = NoiseModel([e for e in model.effects if e.temporal], interpolate=model.interpolate) if fixed else model
         # a change of the noise by half the alarm threshold inside a static hold restarts its window
-        self.temporal = TemporalNoise(config.temporal_frames, config.temporal_min_frames, self._temporal_model,
+        self.temporal = TemporalNoise(config.temporal_frames, config.temporal_min_frames,
+                                      lambda patches, accepted: self._temporal_model(patches, accepted, coarse=True),
                                       config.xi_threshold_dn / 2.0)
         self.alarm = XiAlarm(config.xi_threshold_dn, config.xi_hysteresis_dn, config.alarm_min_frames,
                              config.clear_min_frames, config.alarm_evidence)
@@ -379,17 +381,23 @@ class Monitor:
         self.view_frames = 1 if step else self.view_frames + 1
         return step
 
-    def _temporal_model(self, patches: np.ndarray, accepted: np.ndarray) -> ModelAt:
+    def _temporal_model(self, patches: np.ndarray, accepted: np.ndarray, coarse: bool = False) -> ModelAt:
         """The model's temporal noise (K,) over the ``accepted`` blocks (K, N) of ``patches`` (K, s, s; smoothed
-        first) as a function of the metadata (NaN for a patch without accepted blocks)."""
+        first) as a function of the metadata (NaN for a patch without accepted blocks). ``coarse``: each block at
+        its mean intensity (for the ratios of one scene's noise between metadata sets: a table lookup per block)."""
         smooth = np.stack([cv2.blur(p, (SMOOTH_KERNEL, SMOOTH_KERNEL)) for p in patches])
         blocks = blocks_of(smooth, TEMPORAL_BLOCK)  # (patches, blocks, pixels)
-        weights = histogram_weights(blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK))
-        n = accepted.sum(axis=1)
+        model, mode, n = self.temporal_model, self.config.model_mode, accepted.sum(axis=1)
+        per_block: Callable[[CameraMetadata], np.ndarray]
+        if coarse:
+            positions = level_positions(blocks.mean(axis=2))
+            per_block = lambda meta: predict_levels(model, positions, meta, mode)  # noqa: E731
+        else:
+            weights = histogram_weights(blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK))
+            per_block = lambda meta: predict_total(model, weights, meta, mode)  # noqa: E731
 
         def at(meta: CameraMetadata) -> np.ndarray:
-            per_block = predict_histograms(self.temporal_model, weights, meta, self.config.model_mode)["total"]
-            var = np.sum(accepted * per_block.reshape(blocks.shape[:2]) ** 2, axis=1)
+            var = np.sum(accepted * per_block(meta).reshape(blocks.shape[:2]) ** 2, axis=1)
             return np.sqrt(np.divide(var, n, out=np.full(var.shape, np.nan), where=n > 0))
         return at
 

@@ -165,6 +165,7 @@ class TemporalNoise:
         self.changes = 0  # changes of the noise that cut a hold's window
         self._last: TemporalMeasurement | None = None  # the hold's latest measurement
         self._reference: LevelReference | None = None  # what the frames' noise levels are read on
+        self._reference_age = 0  # frames added since it was made
         self._since = 0  # frames added since it
 
     def reset(self) -> None:
@@ -200,11 +201,11 @@ class TemporalNoise:
             previous = self._frames[-1]
             level = self._reference.level(latest, previous.patches, meta, previous.meta)
         self._frames.append(_Held(latest, meta, level))
+        self._reference_age += 1
         while not _within_drift([f.meta for f in self._frames]):  # auto-exposure drifted: the oldest frames leave
             self._frames.popleft()
-        if level is not None and self._reference is not None:
-            sigma = float(np.nanmedian(self._reference.model(meta)))
-            cut = change_point([f.level for f in self._frames], sigma, self.change_dn)
+        if level is not None:
+            cut = change_point([f.level for f in self._frames], self.change_dn)
             if cut:  # the noise changed: the frames before the change leave the window
                 for _ in range(cut):
                     self._frames.popleft()
@@ -219,9 +220,12 @@ class TemporalNoise:
         if self._last is not None and k == self.max_frames and self._since < FULL_WINDOW_STRIDE:
             return dataclasses.replace(self._last, latest_patches=latest)
         self._last, self._since = self._measure(k), 0
-        if self.model is not None:
-            self._reference = LevelReference.of(self._last.mean_patches, self._last.accepted, BLOCK,
-                                                self.model(self._last.mean_patches, self._last.accepted))
+        if self.model is not None and (self._reference is None or k >= 2 * self._reference.frames
+                                       or self._reference_age >= self.max_frames):
+            tm = self._last
+            self._reference = LevelReference.of(tm.mean_patches, tm.accepted, k, BLOCK,
+                                                self.model(tm.mean_patches, tm.accepted))
+            self._reference_age = 0
         return self._last
 
     def _measure(self, k: int) -> TemporalMeasurement:

@@ -51,7 +51,7 @@ def replayed(noisy_bag, estimator, tmp_path_factory) -> tuple[dict, Path]:
 def test_summary_contract_and_accounting(replayed):
     s, _ = replayed
     assert s["frames_total"] == 20 and s["frames_processed"] + s["frames_skipped"] == 20
-    assert s["frames_processed"] == 20 and s["skip_reasons"] == {}
+    assert s["frames_processed"] == 20 and s["skip_reasons"] == {} and s["temporal_noise_changes"] == 0
     for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi"):
         st = s[key]
         assert st["p5"] <= st["mean"] <= st["p95"] and st["n"] == 20
@@ -72,6 +72,18 @@ def test_unexpected_noise_episode_is_one_alarm_with_negative_xi(replayed, noisy_
     check = s["truth_check"]  # the simulated bag's sidecar is compared automatically
     assert (check["detected"], check["missed"], check["false_alarms"]) == (1, 0, 0)
     assert 0 <= check["episodes"][0]["delay_s"] <= (truth["end_ns"] - truth["start_ns"]) / 1e9
+
+
+def test_a_noise_step_while_the_camera_holds_still_restarts_its_temporal_measurement(tmp_path, estimator):
+    """The image-noise episode starts and ends inside still stretches of the camera: both changes cut the hold's
+    window (summary ``temporal_noise_changes``) and the alarm comes on the episode's second frame (before: its third,
+    the window pooling frames of both noises)."""
+    ps = estimator.patch_size
+    bag = simulate_bag(tmp_path / "step.mcap", "ev76c661", "image_noise", frames=40, width=3 * ps, height=2 * ps,
+                       seed=5, fps=10.0)
+    s = replay(bag, "ev76c661", None, estimator=estimator, config=CONFIG, progress=False, plot=False)
+    assert s["temporal_noise_changes"] == 2
+    assert s["truth_check"]["detected"] == 1 and s["truth_check"]["episodes"][0]["delay_s"] <= 0.1 + 1e-9
 
 
 def test_doubled_thermal_noise_metadata_is_a_positive_xi_alarm(tmp_path, estimator):

@@ -284,6 +284,18 @@ def test_fast_patch_prediction_equals_model_predict(rng, mode, extra):
         np.testing.assert_allclose(fast[k], slow[k], rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.parametrize("mode,extra", [("joint", ["prnu"]), ("sequential", None)])
+def test_prediction_at_single_intensities_equals_the_patch_prediction(rng, mode, extra):
+    """The temporal noise levels' model: one table lookup per intensity, as for a map of that one intensity."""
+    from noise_monitor.monitor.model_patches import level_positions, predict_levels, predict_patches
+
+    model = NoiseModel(extra=extra)
+    levels = np.r_[rng.uniform(0.0, 255.0, 40), 0.0, 255.0, -3.0, 260.0]  # the last two clipped to the range
+    maps = np.clip(levels, 0.0, 255.0)[:, None, None] * np.ones((1, 2, 2))
+    fast = predict_levels(model, level_positions(levels), META, mode)
+    np.testing.assert_allclose(fast, predict_patches(model, maps, META, mode)["total"], rtol=1e-9, atol=1e-12)
+
+
 def test_estimator_nan_and_failing_model_effect_are_warnings(rng):
     from noise_monitor.physics import Effect
 
