@@ -61,9 +61,9 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lamps on the mains whose light is modulated by PCT %% (0-100), seen through a rolling "
                              "shutter: horizontal bands, deeper at short exposures, rolling from frame to frame "
                              "(default 0)")
-    parser.add_argument("--mains-hz", type=float, default=MAINS_HZ,
+    parser.add_argument("--mains-hz", type=float, default=None,
                         help=f"mains frequency of --banding (default {MAINS_HZ:g})")
-    parser.add_argument("--line-us", type=float, default=LINE_TIME_S * 1e6,
+    parser.add_argument("--line-us", type=float, default=None,
                         help=f"rolling shutter line time of --banding in microseconds (default {LINE_TIME_S * 1e6:g})")
     parser.add_argument("--auto-exposure", type=float, default=0.0, metavar="PCT",
                         help="a live driver's auto-exposure hunting under steady light: every frame's exposure, and "
@@ -72,9 +72,14 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def field_keywords(args: argparse.Namespace) -> FieldConditions:
-    """The ``simulate_bag`` keywords of :func:`add_field_arguments`' options."""
+    """The ``simulate_bag`` keywords of :func:`add_field_arguments`' options (ValueError: options of the banding
+    without it)."""
+    if not args.banding and (args.mains_hz is not None or args.line_us is not None):
+        raise ValueError("--mains-hz and --line-us shape the lamps' bands: give --banding PCT too")
+    mains_hz = MAINS_HZ if args.mains_hz is None else args.mains_hz
+    line_time_s = LINE_TIME_S if args.line_us is None else args.line_us * 1e-6
     return {"vibration_px": args.vibration, "flicker_pct": args.flicker, "banding_pct": args.banding,
-            "mains_hz": args.mains_hz, "line_time_s": args.line_us * 1e-6, "auto_exposure_pct": args.auto_exposure}
+            "mains_hz": mains_hz, "line_time_s": line_time_s, "auto_exposure_pct": args.auto_exposure}
 
 
 def _start_ns(text: str | None) -> int:

@@ -106,6 +106,8 @@ class MonitorConfig:
             (self.alarm_level in ALARM_LEVELS, f"alarm_level must be one of {ALARM_LEVELS}"),
             (self.temporal_frames == 0 or 2 <= self.temporal_frames <= 256, "temporal_frames must be 0 or in 2..256"),
             (2 <= self.temporal_min_frames, "temporal_min_frames must be >= 2"),
+            (self.temporal_frames == 0 or self.temporal_min_frames <= self.temporal_frames,
+             "temporal_min_frames must be <= temporal_frames (a window never holds more: no temporal measurement)"),
             (self.image_xi_error_dn > 0, "image_xi_error_dn must be > 0"),
         ]
         for ok, reason in checks:

@@ -241,3 +241,13 @@ def test_the_ptc_recording_takes_the_camera_id_and_start_and_refuses_field_condi
     for kw in ({"flicker_pct": 2.0}, {"banding_pct": 30.0}, {"auto_exposure_pct": 5.0}):
         with pytest.raises(ValueError, match="photon-transfer recording"):
             simulate_bag(tmp_path / "x.mcap", "generic", "ptc", frames=60, width=32, height=32, **kw)
+
+
+def test_the_banding_options_without_banding_are_an_error(capsys) -> None:
+    """Before, ``--mains-hz`` or ``--line-us`` without ``--banding`` were accepted and had no effect."""
+    from noise_monitor.cli import main as cli_main
+
+    for extra in (["--mains-hz", "60"], ["--line-us", "20"]):
+        args = ["simulate-bag", "x.mcap", "--profile", "ev76c661", "--scenario", "static", "--frames", "2", *extra]
+        assert cli_main(args) == 2 and "give --banding PCT too" in capsys.readouterr().err
+

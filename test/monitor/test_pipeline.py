@@ -78,6 +78,9 @@ def test_config_validation_and_yaml():
         MonitorConfig(patches_per_frame=2.5)
     with pytest.raises(ValueError, match="xi_source"):
         MonitorConfig(xi_source="magic")
+    with pytest.raises(ValueError, match="temporal_min_frames must be <= temporal_frames"):
+        MonitorConfig(temporal_frames=8, temporal_min_frames=10)  # before: no temporal measurement, silently
+    assert MonitorConfig(temporal_frames=0, temporal_min_frames=10).temporal_frames == 0  # off: nothing to compare
 
 
 # --- patch selection -----------------------------------------------------------------------
