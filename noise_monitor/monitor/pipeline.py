@@ -310,6 +310,7 @@ class Monitor:
             bounded, xi_image = True, max(xi_bound, 0.0)
         xi, xi_t, weight, held, xi_err, motion, light = xi_image, None, 0.0, 0, cfg.image_xi_error_dn, None, None
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
+        changed = self.temporal.changes > self.counters["temporal_noise_changes"]
         self.counters["temporal_noise_changes"] = self.temporal.changes
         if tm is not None:
             held = tm.frames
@@ -333,6 +334,8 @@ class Monitor:
         level, message = self._status(xi, xi_f, meta)
         if bounded and weight < 0.5:
             message += f"; no patch measurable (texture hides the noise): the image proves only xi >= {xi_bound:+.2f} DN"
+        if changed:
+            message += "; the noise changed inside the still view: its frame-difference measurement restarts here"
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_bounded=bounded, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,

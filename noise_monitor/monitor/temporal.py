@@ -9,7 +9,8 @@ test of :func:`noise_monitor.measure.block_temporal` (a moving object, residual 
 of the patch rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, hot pixels) is the same in
 every frame and so absent from this measurement: it is compared with the model's temporal effects only.
 The measurement pools the hold's frames, so it is compared with the model at the frames' mean metadata
-(a temperature drifting inside the hold changes the dark-current noise from frame to frame).
+(a temperature drifting inside the hold changes the dark-current noise from frame to frame); a change of the
+camera's noise inside the hold cuts the window at it (:mod:`.noise_change`).
 
 A live driver's auto-exposure and auto-gain move a little from frame to frame even when the camera looks at a
 still scene. The frames of a still camera stay one scene seen through another gain: each frame is the hold's

@@ -174,6 +174,8 @@ def test_a_noise_step_in_a_still_hold_cuts_the_window_at_it(estimator, extra_dn)
         assert mon.temporal.changes == 0 and frames[19:] == [16] * 21
         return
     assert mon.temporal.changes == 2 and results[-1].counters["temporal_noise_changes"] == 2
+    said = [i for i, r in enumerate(results) if "the noise changed inside the still view" in r.message]
+    assert said == [20, 32]
     assert frames[19] == 16 and frames[20:24] == [0, 0, 0, 4] and frames[32:36] == [0, 0, 0, 4]
     assert frames[31] == 12 and frames[39] == 8
     assert abs(results[31].sigma["temporal"] - hold_truth(mon, noise[20:32])) <= 0.05
