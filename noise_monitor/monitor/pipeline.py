@@ -11,6 +11,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Protocol
 
 import cv2
@@ -393,11 +394,10 @@ class Monitor:
         model, mode, n = self.temporal_model, self.config.model_mode, accepted.sum(axis=1)
         per_block: Callable[[CameraMetadata], np.ndarray]
         if coarse:
-            positions = level_positions(blocks.mean(axis=2))
-            per_block = lambda meta: predict_levels(model, positions, meta, mode)  # noqa: E731
+            per_block = partial(predict_levels, model, level_positions(blocks.mean(axis=2)), mode=mode)
         else:
             weights = histogram_weights(blocks.reshape(-1, TEMPORAL_BLOCK, TEMPORAL_BLOCK))
-            per_block = lambda meta: predict_total(model, weights, meta, mode)  # noqa: E731
+            per_block = partial(predict_total, model, weights, mode=mode)
 
         def at(meta: CameraMetadata) -> np.ndarray:
             var = np.sum(accepted * per_block(meta).reshape(blocks.shape[:2]) ** 2, axis=1)

@@ -165,9 +165,9 @@ class TemporalNoise:
         self.holds = 0  # static holds started (resets)
         self.changes = 0  # changes of the noise that cut a hold's window
         self._last: TemporalMeasurement | None = None  # the hold's latest measurement
+        self._since = 0  # frames added since it
         self._reference: LevelReference | None = None  # what the frames' noise levels are read on
         self._reference_age = 0  # frames added since it was made
-        self._since = 0  # frames added since it
 
     def reset(self) -> None:
         self._frames.clear()
