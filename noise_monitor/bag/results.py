@@ -19,6 +19,10 @@ BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_stat
                 "xi_measurement")
 #: Stated operating conditions per frame (from the frame's metadata), CSV columns after the base ones.
 CONDITION_KEYS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
+#: Numbers a processed frame has or not depending on the scene (a still camera, a patch the estimator can bound):
+#: the CSV's last columns, always, in this order (empty where a frame has none), so that replays of different bags
+#: with one estimator and model share their header
+SCENE_DEPENDENT_KEYS = ("xi_bound", "xi_temporal", "sigma_temporal", "temporal_motion_px", "temporal_light_pct")
 
 
 #: Rows per storage block of a :class:`FrameTable` column (blocks are never copied when the table grows).
@@ -126,7 +130,8 @@ class FrameTable:
 
 def write_csv(table: FrameTable, path: Path) -> None:
     """One line per frame (skipped frames too, with their reason and empty numbers)."""
-    numeric = [k for k in table.number_keys if k not in BASE_COLUMNS]
+    numeric = [k for k in table.number_keys if k not in BASE_COLUMNS and k not in SCENE_DEPENDENT_KEYS]
+    numeric += SCENE_DEPENDENT_KEYS
     base = {name: table.column(name) for name in ("index", "stamp_ns", "time_s", "processed", "level", "alarm")}
     texts = {name: table.texts(name) for name in ("alarm_state", "skip_reason", "xi_measurement")}
     values = {k: table.numbers(k) for k in (*CONDITION_KEYS, *numeric)}

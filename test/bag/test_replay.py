@@ -15,7 +15,7 @@ from msg_adapters.diagnostics import jazzy_typestore
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, IMAGE_TYPE, OUTPUT_TOPICS, debug_image_topic
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
-from noise_monitor.bag.results import truth_check
+from noise_monitor.bag.results import SCENE_DEPENDENT_KEYS, truth_check
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.staging import write_text_atomic
 from noise_monitor.bag.writer import BagWriter
@@ -171,6 +171,9 @@ def test_csv_png_and_json_files(replayed):
         rows = list(csv.DictReader(fh))
     assert len(rows) == 20
     assert {"sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "xi_filtered", "skip_reason", "gain_db"} <= set(rows[0])
+    # the columns a scene may or may not give end every replay's header, in one order (before: only when some frame
+    # had them, where that frame came: headers differed between bags)
+    assert tuple(rows[0])[-len(SCENE_DEPENDENT_KEYS):] == SCENE_DEPENDENT_KEYS
     assert [int(r["alarm"]) for r in rows].count(1) == s["alarms"][0]["frames"]
     png = (out / "replay.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
