@@ -75,7 +75,8 @@ def _bag_row(e: dict[str, Any]) -> dict[str, Any]:
         "alarm_episodes", "skip_reasons", "conditions", "xi_threshold_dn", "start_ns", "end_ns")}}
     row.update(start_utc=utc(r["start_ns"]), end_utc=utc(r["end_ns"]), stats=r["stats"],
                alarms=[{**a, "start_utc": utc(a["start_ns"]), "end_utc": utc(a["end_ns"])} for a in r["alarms"]],
-               wall_s=e.get("wall_s"), peak_rss_mb=e.get("peak_rss_mb"))
+               wall_s=e.get("wall_s"), peak_rss_mb=e.get("peak_rss_mb"),
+               temporal_noise_changes=r.get("temporal_noise_changes", 0))  # absent from records of older versions
     return row
 
 
@@ -132,13 +133,17 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         findings.append(f"{len(episodes)} alarm episode(s), {100 * symptoms['alarm']:.1f} % of processed frames in alarm")
     if symptoms["skipped"] > 0:
         findings.append(f"{100 * symptoms['skipped']:.1f} % of frames not evaluated")
+    changes = sum(r["temporal_noise_changes"] for r in rows)
+    if changes:
+        findings.append(f"the noise changed suddenly {changes} time(s) while the camera held still (each restarted its "
+                        "frame-difference measurement)")
     worst = max(symptoms, key=lambda k: symptoms[k])
     return {
         "hardware_id": hw, "profiles": sorted({str(r["profile"]) for r in rows}), "bags": len(rows),
         "first_utc": utc(min((r["start_ns"] for r in rows if r["start_ns"] is not None), default=None)),
         "last_utc": utc(max((r["end_ns"] for r in rows if r["end_ns"] is not None), default=None)),
         "frames_total": total, "frames_processed": processed, "frames_skipped": total - processed,
-        "frames_in_alarm": in_alarm, "alarm_episodes": len(episodes),
+        "frames_in_alarm": in_alarm, "alarm_episodes": len(episodes), "temporal_noise_changes": changes,
         "alarm_time_s": round(sum(a["duration_s"] for a in episodes), 3),
         "mean": means, "trends": trends, "xi_threshold_dn": thr,
         "health": round(1.0 - symptoms[worst], 4), "health_limited_by": worst if symptoms[worst] > 0 else None,
@@ -180,6 +185,7 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
             "frames_processed": sum(b["frames_processed"] for b in bags),
             "frames_skipped": sum(b["frames_skipped"] for b in bags),
             "alarm_episodes": len(episodes),
+            "temporal_noise_changes": sum(b["temporal_noise_changes"] for b in bags),
         },
         "run": run,
         "cameras": cameras,

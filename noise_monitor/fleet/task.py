@@ -160,6 +160,7 @@ def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
         "frames_skipped": summary["frames_skipped"], "skip_reasons": summary["skip_reasons"],
         "frames_in_alarm": int(table.column("alarm")[processed].sum()),
         "alarm_episodes": len(summary["alarms"]),
+        "temporal_noise_changes": int(summary.get("temporal_noise_changes", 0)),
         "alarms": [{k: e[k] for k in keep} for e in summary["alarms"][:MAX_EPISODES]],
         "stats": {k: summary[k] for k in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model", "sigma_image", "xi")},
         "conditions": conditions,

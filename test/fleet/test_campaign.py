@@ -71,7 +71,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     good.mkdir()
     for i in range(3):
         _sim(good / f"a{i}.mcap", "robot1/front", 7 * i, seed=i)
-    _sim(good / "b0.mcap", "robot2/front", 3, seed=10, scenario="image_noise", frames=24)
+    _sim(good / "b0.mcap", "robot2/front", 3, seed=10, scenario="image_noise", frames=40)
     bad = root / "bad"
     bad.mkdir()
     (bad / "empty.mcap").write_bytes(b"")
@@ -149,7 +149,7 @@ def test_bad_inputs_reported_by_name_and_rest_completes(pool_run: tuple[dict, Pa
     t = c["totals"]
     assert (t["bags_found"], t["bags_evaluated"], t["bags_failed"], t["bags_duplicate"], t["inputs_rejected"]) == \
         (10, 4, 5, 1, 2)
-    assert t["frames_total"] == 3 * 6 + 24 and t["cameras"] == 2
+    assert t["frames_total"] == 3 * 6 + 40 and t["cameras"] == 2
 
 
 def test_report_outputs_and_alarm_times(pool_run: tuple[dict, Path]) -> None:
@@ -162,6 +162,9 @@ def test_report_outputs_and_alarm_times(pool_run: tuple[dict, Path]) -> None:
     noisy = next(cam for cam in c["cameras"] if cam["hardware_id"] == "robot2/front")
     assert noisy["alarm_episodes"] >= 1 and noisy["health_limited_by"] in ("alarm", "xi_bias")
     assert c["cameras"][0]["hardware_id"] == "robot2/front"  # the camera with unexpected noise ranks worst
+    # its episode starts and ends while the camera holds still: both changes are counted and named
+    assert noisy["temporal_noise_changes"] == c["totals"]["temporal_noise_changes"] == 2
+    assert any("the noise changed suddenly 2 time(s)" in f for f in noisy["findings"])
     ep = c["alarm_episodes"][0]
     assert ep["start_utc"].startswith("2023-11-17T") and ep["start_utc"].endswith("Z")  # START_NS + 3 days, UTC
 
@@ -185,7 +188,7 @@ def test_ray_gives_the_pool_results(pool_run: tuple[dict, Path], fleet: dict[str
     assert c["run"]["backend"] == "ray" and c["totals"]["bags_evaluated"] == 4
     ref = pq.read_table(pool_run[1] / "frames.parquet").sort_by([("bag", "ascending"), ("index", "ascending")])
     got = pq.read_table(tmp_path / "frames.parquet").sort_by([("bag", "ascending"), ("index", "ascending")])
-    assert got.num_rows == ref.num_rows == 3 * 6 + 24
+    assert got.num_rows == ref.num_rows == 3 * 6 + 40
     for k in got.column_names:
         if k in TIMING:
             continue
