@@ -7,6 +7,8 @@ patch and a small matrix product, with the same result.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+
 import numpy as np
 
 from noise_monitor.physics import CameraMetadata, NoiseModel
@@ -39,14 +41,19 @@ def predict_histograms(model: NoiseModel, weights: np.ndarray, meta: CameraMetad
     return out
 
 
+def _total(model: NoiseModel, tables: Mapping[str, tuple[np.ndarray, np.ndarray]],
+           sigma: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """The total sigma from the model's tables by ``sigma(E[n|v], E[n^2|v])``: the tabulated total, or the sequential
+    protocol's sum of squares over the noise effects."""
+    if "total" in tables:
+        return sigma(*tables["total"])
+    return np.sqrt(sum(sigma(*tables[e.name]) ** 2 for e in model.noise_effects))
+
 
 def predict_total(model: NoiseModel, weights: np.ndarray, meta: CameraMetadata, mode: str = "joint") -> np.ndarray:
     """The ``"total"`` of :func:`predict_histograms` alone (one table product where the model tabulates it)."""
-    tables = model.tables(meta, mode)
-    if "total" not in tables:
-        return predict_histograms(model, weights, meta, mode)["total"]
-    t1, t2 = tables["total"]
-    return np.sqrt(np.maximum(weights @ t2 - (weights @ t1) ** 2, 0.0))
+    return _total(model, model.tables(meta, mode),
+                  lambda t1, t2: np.sqrt(np.maximum(weights @ t2 - (weights @ t1) ** 2, 0.0)))
 
 
 def level_positions(levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -64,7 +71,4 @@ def predict_levels(model: NoiseModel, positions: tuple[np.ndarray, np.ndarray], 
         m1, m2 = (t[i0] * (1.0 - frac) + t[i0 + 1] * frac for t in (t1, t2))
         return np.sqrt(np.maximum(m2 - m1**2, 0.0))
 
-    tables = model.tables(meta, mode)
-    if "total" in tables:
-        return sigma(*tables["total"])
-    return np.sqrt(sum(sigma(*tables[e.name]) ** 2 for e in model.noise_effects))
+    return _total(model, model.tables(meta, mode), sigma)
