@@ -223,11 +223,22 @@ class TemporalNoise:
         self._last, self._since = self._measure(k), 0
         if self.model is not None and (self._reference is None or k >= 2 * self._reference.frames
                                        or self._reference_age >= self.max_frames):
-            tm = self._last
+            tm, first = self._last, self._reference is None
             self._reference = LevelReference.of(tm.mean_patches, tm.accepted, k, BLOCK,
                                                 self.model(tm.mean_patches, tm.accepted))
             self._reference_age = 0
+            if first and self._reference is not None:  # the hold's frames so far: a change right after them shows
+                self._read_levels(self._reference)
         return self._last
+
+    def _read_levels(self, reference: LevelReference) -> None:
+        """The noise levels of the window's frames that have none, each on its difference with the frame before."""
+        frames = self._frames
+        for i in range(1, len(frames)):
+            if frames[i].level is None:
+                previous = frames[i - 1]
+                frames[i] = dataclasses.replace(frames[i], level=reference.level(frames[i].patches, previous.patches,
+                                                                                frames[i].meta, previous.meta))
 
     def _measure(self, k: int) -> TemporalMeasurement:
         """The measurement of the window's ``k`` frames."""

@@ -184,6 +184,18 @@ def test_a_noise_step_in_a_still_hold_cuts_the_window_at_it(estimator, extra_dn)
     assert all(r.alarm_active for r in results[23:32]) and not any(r.alarm_active for r in results[:23])
 
 
+def test_a_noise_step_right_after_a_holds_first_measurement_is_cut_too(estimator):
+    """The hold's frames before its first measurement (they wait for ``temporal_min_frames``) get their noise levels
+    when it is made: a step on the next frame is cut at once (before, they had no level: the cut came a frame late
+    here, with frame 4 in the new window, and never on tuned campaign seed 2, where the step's first frame's level,
+    read across the step, was the only one before it)."""
+    extra = np.r_[np.zeros(4), np.full(12, 4.0)]
+    mon, results, noise = run(estimator, [photo()] * 16, NoiseModel(), seed=13, extra_dn=extra)
+    assert mon.temporal.changes == 1
+    assert [r.temporal_frames for r in results[3:8]] == [4, 0, 0, 0, 4]
+    assert abs(results[-1].sigma["temporal"] - hold_truth(mon, noise[4:])) <= 0.05
+
+
 def test_a_still_hold_under_vibration_flicker_and_warming_keeps_its_window(estimator):
     """What changes the frames but not the camera's noise against the model cuts nothing: a camera vibrating by
     0.3 px rms, lights flickering by 2 % rms and the temperature rising 0.2 degC per frame at high gain and a long
