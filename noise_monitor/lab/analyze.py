@@ -25,6 +25,7 @@ from .compare import (
 from .diagnose import EffectSpec, candidate_names, component_errors, diagnose, diagnosis_line, fit
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
+from .noise_events import events, set_apart, without_segments
 from .signature import plugin_skeleton, unexplained
 
 
@@ -132,6 +133,13 @@ def analyze(
     with tqdm(total=len(meas.segments), desc="model", unit="segment", disable=not progress) as bar:
         comp = Comparison(meas, NoiseModel(base), progress=bar)
     rows = comp.cell_table()
+    apart_segments = set_apart(meas, rows)
+    apart = events(meas, apart_segments, rows)
+    apart_rows = [r for r in rows if r["segment"] in apart_segments]
+    if apart_segments:  # a change of the noise inside a hold is no law of the conditions (:mod:`.noise_events`)
+        meas = without_segments(meas, apart_segments)
+        comp = Comparison(meas, NoiseModel(base))
+        rows = comp.cell_table()
     names = list(candidates) if candidates is not None else candidate_names(plugin_names)
     with tqdm(total=len(names), desc="diagnose", unit="effect", disable=not progress) as bar:
         cands = diagnose(comp, names, progress=bar)
@@ -140,6 +148,8 @@ def analyze(
         "profile": prof.name if prof else None,
         "model_effects": [e.name for e in base],
         "measurement": meas.summary(),
+        "set_apart": apart,
+        "set_apart_cells": _strip(apart_rows),
         "rms_error_dn": rms_error(rows),
         "rms_error_raw_dn": rms_error_raw(rows),
         "measurement_scatter_dn": measurement_scatter(rows),

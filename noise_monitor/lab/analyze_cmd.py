@@ -5,6 +5,7 @@ import argparse
 
 from .analyze import analyze, component_change_text, write_json
 from .measure import field_conditions_text, scene_in_views_text
+from .noise_events import events_text
 from .shape import fixed_shape_text
 
 
@@ -59,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  not measured ({what}): {why}")
     print(f"  {fixed_shape_text(m['fixed_pattern_shape'])}")
     print(f"  field conditions: {field_conditions_text(m['field_conditions'])}")
+    for line in events_text(m["noise_changes"], summary["set_apart"]):
+        print(f"  {line}")
     if m["scene_in_partner_views"]:
         print(f"  {scene_in_views_text(m['scene_in_partner_views'])}")
     top = summary["candidates"][:5]

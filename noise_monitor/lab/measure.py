@@ -54,6 +54,8 @@ from ..measure.temporal import (
 from ..monitor.config import MonitorConfig
 from ..monitor.frame import Frame, skip_reason
 from ..physics import CameraMetadata
+from . import hold_change
+from .hold_change import NoiseChange
 from .shape import FixedShape, fixed_shape, fourth_moments
 
 BLOCK = 8
@@ -187,6 +189,12 @@ class SegmentMeasurement:
     #: (:meth:`..measure.temporal.LightChange.percent`, %) and the camera's vibration (rms displacement, px)
     light_pct: float = 0.0
     motion_px: float = 0.0
+    #: the change of the noise this segment starts at, inside a hold (:mod:`.hold_change`)
+    change: NoiseChange | None = None
+    last_stamp_ns: int = 0  # the stamp of its last frame
+
+    def __post_init__(self) -> None:
+        self.last_stamp_ns = max(self.last_stamp_ns, self.stamp_ns)
 
     @property
     def n_frames(self) -> int:
@@ -234,6 +242,11 @@ class Measurements:
     #: cross-view components whose errors took the partner views' spread (the scene showed in their views)
     scene_in_views: list[str] = field(default_factory=list)
 
+    @property
+    def noise_changes(self) -> list[NoiseChange]:
+        """The changes of the noise inside holds, in time order: each cut its hold in two segments."""
+        return [s.change for s in self.segments if s.change is not None]
+
     def field_conditions(self) -> dict[str, Any]:
         """What the holds' temporal measurement took out: how many holds (of those measured from frame differences)
         saw the light change from frame to frame or the camera vibrate, and the largest of each. A hold of 2-3
@@ -254,6 +267,7 @@ class Measurements:
             "not_measured": dict(self.not_measured),
             "scene_in_partner_views": list(self.scene_in_views),
             "field_conditions": self.field_conditions(),
+            "noise_changes": [c.summary(self.segments[0].stamp_ns) for c in self.noise_changes],
             "segments": len(self.segments),
             "cells": len(self.cells),
             "image_shape": list(self.shape),
@@ -396,7 +410,9 @@ class _SegmentAccumulator:
         self.proj, self.slopes = plane
         self.frames: list[int] = []
         self.metas: list[CameraMetadata] = []
+        self.stamps: list[int] = []
         self.images: list[np.ndarray] = []
+        self.change: NoiseChange | None = None  # the noise change the segment starts at
         self.pose = np.zeros(2)
         # accumulators, shaped by the first frame (blocks x components)
         self.s1: Any = None
@@ -411,8 +427,9 @@ class _SegmentAccumulator:
         self.light: LightChange | None = None  # the light's change from frame to frame, once measured
         self.motion_px = 0.0  # the camera's vibration taken out (rms displacement, px), once measured
 
-    def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata) -> None:
+    def add(self, frame_index: int, img: np.ndarray, meta: CameraMetadata, stamp_ns: int) -> None:
         self.images.append(img.astype(np.float32))
+        self.stamps.append(stamp_ns)
         blocks = _blocks(img, self.b)
         r = blocks @ self.proj
         if self.s1 is None:
@@ -467,7 +484,42 @@ class _SegmentAccumulator:
             self.dof = steady.dof
             self.motion_px = motion_rms(displacement[0])
 
-    def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> _Full:
+    def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> list[_Full]:
+        """The hold's measurement, or those of its parts when its noise changed (:mod:`.hold_change`)."""
+        full = self._measure(grid, shape)
+        at = self._noise_change(full.still)
+        if not at:
+            self.images = []
+            return [full]
+        before, after = (self._part(lo, hi).finish(grid, shape) for lo, hi in ((0, at), (at, len(self.frames))))
+        self.images = []
+        before[0].change = self.change
+        # the change's size from the parts on either side of it, once cut again where they changed too
+        both = before[-1].still & after[0].still
+        after[0].change = NoiseChange(self.frames[at], self.stamps[at], *hold_change.sigmas(
+            before[-1].values["temporal"][both], after[0].values["temporal"][both]))
+        return before + after
+
+    def _part(self, lo: int, hi: int) -> _SegmentAccumulator:
+        """The hold's frames lo..hi-1, to be measured on their own."""
+        part = _SegmentAccumulator(self.index, self.metas[lo], self.stamps[lo], self.b, (self.proj, self.slopes))
+        part.pose = self.pose.copy()
+        for j in range(lo, hi):
+            part.add(self.frames[j], self.images[j], self.metas[j], self.stamps[j])
+        return part
+
+    def _noise_change(self, still: np.ndarray) -> int:
+        """The position of the hold's largest material noise change among its frames, read on its ``still`` blocks;
+        0 without one."""
+        if len(self.frames) < hold_change.MIN_FRAMES or not still.any():
+            return 0
+        residuals, light = hold_change.residuals(np.stack(self.images), still, self.b)
+        stepped = np.array([i > 0 and (m.gain_db, m.exposure_time_s) != (self.metas[i - 1].gain_db,
+                                                                        self.metas[i - 1].exposure_time_s)
+                            for i, m in enumerate(self.metas)])
+        return hold_change.cut(residuals, light, stepped)
+
+    def _measure(self, grid: tuple[int, int], shape: tuple[int, int] | None) -> _Full:
         self._steady()
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
@@ -492,6 +544,7 @@ class _SegmentAccumulator:
         else:
             temporal = None
             values = {"single": core}
+        still = np.zeros(0, dtype=bool)
         values |= {"column": col, "row": row, "outlier": np.sum(np.where(is_out, centred**2, 0.0), axis=1) / (b * b)}
 
         n = v.size
@@ -531,11 +584,13 @@ class _SegmentAccumulator:
             # frame differences that do not fit pure noise: residual motion, flicker, a moving object
             # (blinking pixels are temporal noise, measured as temporal_spikes, not a scene change)
             blinking = self._blinking(k)
-            static = block_temporal(np.stack(self.images), b, exclude=blinking, whiteness=True).accepted
-            moving = keep & (~static | (_largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER))
+            run = block_temporal(np.stack(self.images), b, exclude=blinking, whiteness=True)
+            changed = _largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER
+            moving = keep & (~run.accepted | changed)
+            assert run.still is not None
+            still = keep & run.still & ~changed
             excluded["not_static"] = int(np.sum(moving))
             keep &= ~moving
-        self.images = []
         spikes = self._blinking(k).sum(axis=1) if k >= 2 else np.zeros(n, dtype=int)
         gy, gx = grid
         iy, ix = np.divmod(np.arange(n), gx)
@@ -545,7 +600,8 @@ class _SegmentAccumulator:
         return _Full(self.index, _mean_meta(self.metas), self.stamp_ns, list(self.frames), self.dof, self.pose,
                      v, region, values, robust, span, is_out, centred,
                      keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes,
-                     light_pct=0.0 if self.light is None else self.light.percent(), motion_px=self.motion_px)
+                     light_pct=0.0 if self.light is None else self.light.percent(), motion_px=self.motion_px,
+                     change=self.change, last_stamp_ns=self.stamps[-1], still=still)
 
 
 @dataclass
@@ -582,6 +638,11 @@ class _Full:
     square: np.ndarray | None = None  # (N,)
     light_pct: float = 0.0  # the light's change taken out of the hold's frames (%)
     motion_px: float = 0.0  # the camera's vibration taken out (rms displacement, px)
+    change: NoiseChange | None = None  # the noise change the segment starts at
+    last_stamp_ns: int = 0  # the stamp of its last frame
+    #: (N,) bool: flat, unclipped and without a scene change, whatever its noise did (the blocks a change of the
+    #: noise is read on: :mod:`.hold_change`); empty for a single frame
+    still: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -618,6 +679,8 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         fixed_square=None if f.square is None else f.square[keep],
         light_pct=f.light_pct,
         motion_px=f.motion_px,
+        change=f.change,
+        last_stamp_ns=f.last_stamp_ns,
     )
 
 
@@ -876,6 +939,7 @@ def measure_frames(
         hist += np.bincount(idx.ravel(), minlength=hist.size)
         meta = fr.metadata
         assert meta is not None  # skip_reason checked it
+        stamp_ns = int(getattr(fr, "stamp_ns", i))
         # a segment is a static hold: the camera stays within HOLD_SHIFT_PX of the hold's first frame (global
         # shifts accumulated: a vibrating camera returns about one pose) and the metadata agree
         shift = np.asarray(camera_shift(prev, img)) if prev is not None else np.zeros(2)
@@ -885,12 +949,12 @@ def measure_frames(
         if (acc is None or moved or len(acc.frames) >= tolerance.max_frames
                 or not tolerance.same(acc.metas[0], meta)):
             if acc is not None:
-                segments.append(acc.finish(grid, shape))
-            acc = _SegmentAccumulator(len(segments), meta, int(getattr(fr, "stamp_ns", i)), block, plane)
+                segments.extend(acc.finish(grid, shape))
+            acc = _SegmentAccumulator(len(segments), meta, stamp_ns, block, plane)
             acc.pose = pose.copy()
-        acc.add(i, img, meta)
+        acc.add(i, img, meta, stamp_ns)
     if acc is not None:
-        segments.append(acc.finish(grid, shape))
+        segments.extend(acc.finish(grid, shape))
     if not segments:
         reasons = ", ".join(f"{k}: {v}" for k, v in skipped.items()) or "no frames"
         raise ValueError(f"no usable frames to measure ({reasons})")

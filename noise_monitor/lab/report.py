@@ -20,6 +20,7 @@ from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve, signed_sigma  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
 from .measure import BLOCK, field_conditions_text, scene_in_views_text  # noqa: E402
+from .noise_events import events_text  # noqa: E402
 from .shape import fixed_shape_text  # noqa: E402
 
 CONDITION_LABELS = {
@@ -119,6 +120,32 @@ def _residual_plot(summary: dict[str, Any]) -> str:
     ax.set_xlabel("intensity [DN]")
     ax.set_ylabel("measured - model sigma [DN]")
     ax.set_title("Residual per cell (segment x intensity bin)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _png(fig)
+
+
+def _events_plot(summary: dict[str, Any]) -> str:
+    """Each segment's mean residual over time, the compared ones and the set-apart ones, with the noise changes."""
+    fig, ax = plt.subplots(figsize=(9, 3.6))
+    for rows, color, fmt, label in ((summary["cells"], "k", "o", "compared with the model"),
+                                    (summary["set_apart_cells"], "tab:red", "s", "set apart")):
+        by_segment: dict[int, list[dict[str, Any]]] = {}
+        for r in rows:
+            by_segment.setdefault(r["segment"], []).append(r)
+        if by_segment:
+            t = [seg[0]["time_s"] for seg in by_segment.values()]
+            ax.errorbar(t, [np.mean([r["residual_dn"] for r in seg]) for seg in by_segment.values()],
+                        yerr=[np.sqrt(np.sum([r["measured_sigma_err_dn"] ** 2 for r in seg])) / len(seg)
+                              for seg in by_segment.values()], fmt=fmt, color=color, ms=5, ls="none", label=label)
+    for ev in summary["set_apart"]:
+        ax.axvspan(ev["from_s"], ev["to_s"], color="tab:red", alpha=0.12)
+    for i, c in enumerate(summary["measurement"]["noise_changes"]):
+        ax.axvline(c["time_s"], color="tab:orange", ls="--", lw=1, label="noise change inside a hold" if i == 0 else None)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xlabel(CONDITION_LABELS["time_s"])
+    ax.set_ylabel("measured - model sigma [DN]\n(segment mean over its cells)")
+    ax.set_title("Noise changes inside holds: the segments compared and those set apart")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _png(fig)
@@ -247,6 +274,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         "Residuals": _residual_plot(summary),
         "Components": _component_plot(summary),
     }
+    if summary["measurement"].get("noise_changes"):
+        images["Noise changes inside holds"] = _events_plot(summary)
     if summary.get("estimator"):
         images["Estimator: xi per frame"] = _xi_plot(summary["estimator"])
     un = summary.get("unexplained") or {}
@@ -279,6 +308,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     if "field_conditions" in summary["measurement"]:
         text = field_conditions_text(summary["measurement"]["field_conditions"])
         parts.append(f"<p>Field conditions: {html.escape(text)}.</p>")
+    for line in events_text(summary["measurement"].get("noise_changes", []), summary.get("set_apart", [])):
+        parts.append(f"<p><b>{html.escape(line[:1].upper() + line[1:])}.</b></p>")
     if "rms_error_after_dn" in summary:
         added = "; ".join(f"{a['effect']} ({_fmt(a['params'])}): {a['reading']}" for a in summary["added_effects"])
         parts.append(f"<p>Added: {html.escape(added)}<br><b>rms error before {summary['rms_error_before_dn']:.4f} DN, "

@@ -145,6 +145,9 @@ class BlockTemporal:
     accepted: np.ndarray  # (N,) bool: the block's frame differences fit pure noise
     motion_px: float = 0.0  # the frames' rms displacement about their mean (px, :func:`run_displacement`)
     light_pct: float = 0.0  # the light's change from frame to frame taken out (:meth:`LightChange.percent`, %)
+    #: (N,) bool: no scene change the regressors explain (the pure-noise test without the whiteness test, which
+    #: also rejects a block whose noise changes within the run); None: all accepted
+    still: np.ndarray | None = None
 
     def sigma_dn(self) -> tuple[float, float]:
         """Temporal sigma over all accepted blocks and its standard error (NaN if none)."""
@@ -542,11 +545,13 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (m - N_REGRESSORS)
     ratio = (explained / d1) / np.maximum((total - explained) / d2, 1e-12)
     p = f_dist.sf(ratio, d1, d2)
+    still = p > p_value
     if whiteness:
         p = np.minimum(p, _scene_p(d - np.einsum("knr,npr->knp", coef, q), block))
     steady = steady_run(x, block, displacement)
     if k < 4 and (moved(*displacement) or (light is not None and light.noise_bias() > LIGHT_BIAS)):
         p = np.zeros_like(p)  # too few frames to take the camera's motion or the light's out: no static run
+        still[:] = False
     if steady is None:
         per_pixel, dof = np.sum(d * d, axis=0) / (k - 1), k - 1  # (N, n), zero where excluded
     else:
@@ -558,4 +563,4 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
     return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion_rms(displacement[0]),
-                         0.0 if light is None else light.percent())
+                         0.0 if light is None else light.percent(), still)

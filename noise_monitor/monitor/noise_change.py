@@ -97,15 +97,16 @@ class LevelReference:
         return Level(log_ratio, dof, float(np.nanmedian(model_dn)) if np.isfinite(model_dn).any() else math.nan)
 
 
-def change_point(levels: Sequence[Level | None], change_dn: float) -> int:
+def change_point(levels: Sequence[Level | None], change_dn: float, min_side: int = 1) -> int:
     """Index of the first frame after the largest change of the frames' noise ``levels`` (None: a frame without
-    a level) that is both significant and at least ``change_dn`` in sigma at the newest frame's model; 0 without one.
+    a level) that is both significant and at least ``change_dn`` in sigma at the newest frame's model, with at
+    least ``min_side`` levels on either side; 0 without one.
 
     A frame's level is the median over the patches of its log ratio less that patch's median over the frames (a
     patch's own offset: its blocks' intensities); its standard error is that of the median of Gaussian variance
     estimates of the patches' degrees of freedom."""
     found = [(i, lv) for i, lv in enumerate(levels) if lv is not None]
-    if len(found) < 2 or not math.isfinite(change_dn):
+    if len(found) < 2 * max(min_side, 1) or not math.isfinite(change_dn):
         return 0
     at = [i for i, _ in found]
     ratios = np.array([lv.log_ratio for _, lv in found])
@@ -121,5 +122,5 @@ def change_point(levels: Sequence[Level | None], change_dn: float) -> int:
     step = (z.sum() - before) / (n - j) - before / j
     score = np.abs(step) / (sd * np.sqrt(1.0 / (n - j) + 1.0 / j))
     large = found[-1][1].model_dn * np.abs(np.expm1(step / 2.0)) >= change_dn
-    score = np.where(large & (score > CHANGE_SIGMAS), score, 0.0)
+    score = np.where(large & (score > CHANGE_SIGMAS) & (j >= min_side) & (n - j >= min_side), score, 0.0)
     return at[int(j[np.argmax(score)])] if score.max() > 0 else 0

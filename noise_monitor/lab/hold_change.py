@@ -1,0 +1,123 @@
+"""A change of the camera's noise inside one of the lab's static holds: where the hold's frames stop sharing one noise.
+
+A hold pools up to 64 frames into one measurement per block. When the noise steps while the camera holds still (a
+component failing or recovering, an amplifier switching), the pooled variance is a mix of both noises that no
+function of the conditions gives: the comparison reads it as a missing law. So each frame's noise is read on its
+own, as its deviation from the hold's mean on the flat blocks (the scene cancels; the light's change and the
+camera's vibration are taken out before), each block relative to itself over the frames (its intensity's level
+cancels: no model is needed), and the hold is cut where those levels change most
+(:func:`..monitor.noise_change.change_point`: beyond ``CHANGE_SIGMAS`` standard errors and at least ``change_dn``
+in sigma). Every part is measured again on its own, and may be cut again.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..measure.temporal import blocks_of
+from ..monitor.config import MonitorConfig
+from ..monitor.noise_change import BASIS_BLUR, CHANGE_SIGMAS, MEDIAN_EFFICIENCY, N_BASIS, Level, change_point
+
+#: most blocks the frames' levels are read on (evenly spread over them): the median over 2,048 blocks of 60
+#: degrees of freedom has a standard error of 0.5 % in variance
+MAX_BLOCKS = 2048
+#: fewest frames on either side of a cut (a part needs two frames for its temporal noise)
+MIN_SIDE_FRAMES = 2
+#: fewest frames of a hold searched for a change
+MIN_FRAMES = 2 * MIN_SIDE_FRAMES
+#: smallest change (sigma, DN) cut at: what the live monitor cuts its window at with its default alarm threshold
+CHANGE_DN = MonitorConfig.xi_threshold_dn / 2.0
+
+
+@dataclass(frozen=True)
+class NoiseChange:
+    """A change of the noise inside a hold, at the first frame of the noise after it."""
+
+    frame: int  # the recording's frame index
+    stamp_ns: int
+    sigma_before_dn: float  # the typical temporal sigma of the flat blocks before and after it
+    sigma_after_dn: float
+
+    def summary(self, t0_ns: int) -> dict[str, float | int]:
+        return {"frame": self.frame, "time_s": round((self.stamp_ns - t0_ns) * 1e-9, 4),
+                "sigma_before_dn": round(self.sigma_before_dn, 4), "sigma_after_dn": round(self.sigma_after_dn, 4)}
+
+
+def _level_blocks(still: np.ndarray) -> np.ndarray:
+    """Indices of the ``still`` blocks (N,) bool the levels are read on: all of them, or MAX_BLOCKS evenly spread."""
+    idx = np.flatnonzero(still)
+    return idx if idx.size <= MAX_BLOCKS else idx[np.linspace(0, idx.size - 1, MAX_BLOCKS).astype(int)]
+
+
+def residuals(frames: np.ndarray, still: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """((k, M, b*b) each frame's deviation from the frames' mean in M of the ``still`` blocks, less what each block's
+    offset, brightness and gradients explain in it (a light changing from frame to frame, the camera's sub-pixel
+    vibration): regressors from the mean blurred BASIS_BLUR x BASIS_BLUR, as the live monitor's; (k,) each frame's
+    light over the mean's in those blocks)."""
+    use = _level_blocks(still)
+    mean = frames.mean(axis=0, dtype=np.float32)
+    blurred = cv2.blur(mean, (BASIS_BLUR, BASIS_BLUR))
+    gy, gx = np.gradient(blurred)
+
+    def blocks(a: np.ndarray) -> np.ndarray:
+        return blocks_of(a, b)[..., use, :]
+
+    mb = blocks(blurred)
+    basis, _ = np.linalg.qr(np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks(gx), blocks(gy)],
+                                     axis=2))
+    d = blocks(frames - mean)
+    light = 1.0 + d.sum(axis=(1, 2)) / max(float(blocks(mean).sum()), 1e-9)
+    return d - np.einsum("mpr,kmr->kmp", basis, np.einsum("mpr,kmp->kmr", basis, d)), light
+
+
+def _variances(res: np.ndarray) -> np.ndarray:
+    """(k, M) each frame's per-pixel variance estimate in each block: its residual's deviation from the frames'."""
+    k = res.shape[0]
+    dev = res - res.mean(axis=0)
+    return np.einsum("kmp,kmp->km", dev, dev) / (res.shape[2] - N_BASIS) * k / (k - 1)
+
+
+def cut(res: np.ndarray, light: np.ndarray, stepped: np.ndarray, change_dn: float = CHANGE_DN) -> int:
+    """First frame after the hold's largest material noise change in its :func:`residuals` ``res`` and ``light``, 0
+    without one or when the conditions explain it: ``stepped`` (k,) frames whose gain or exposure differ from the
+    previous frame's (the noise follows them), a light changing in the hold by enough to explain half of it (shot
+    noise's variance follows the light at most in proportion: a photon-transfer recording's illumination steps), a
+    change no sharper than a ramp (a temperature drifting through the hold: the levels fit a line over the frames
+    within ``CHANGE_SIGMAS`` standard errors of the step)."""
+    k, m, p = res.shape
+    if k < MIN_FRAMES or m == 0:
+        return 0
+    var = np.maximum(_variances(res), 1e-12)
+    dofs = np.full(m, float(p - N_BASIS))
+    typical = np.sqrt(np.median(var, axis=1))
+    levels = [Level(np.log(var[i]), dofs, float(typical[i])) for i in range(k)]
+    at = change_point(levels, change_dn, MIN_SIDE_FRAMES)
+    if not at or stepped[at]:
+        return 0
+    variances = [_variances(side).mean(axis=0) for side in (res[:at], res[at:])]
+    before, after = sigmas(*variances)
+    noise = 2.0 * abs(math.log(max(after, 1e-9) / max(before, 1e-9)))
+    log_light = np.log(np.maximum(light, 1e-9))
+    if np.max(np.abs(log_light - np.median(log_light))) >= noise / 2.0:
+        return 0
+    log_var = np.log(var)
+    z = np.median(log_var - np.median(log_var, axis=0), axis=1)
+    t = np.arange(k)
+    step = z - np.where(t < at, z[:at].mean(), z[at:].mean())
+    line = z - np.polyval(np.polyfit(t, z, 1), t)
+    sd2 = MEDIAN_EFFICIENCY**2 * 2.0 / (p - N_BASIS) / m
+    return at if (np.sum(line**2) - np.sum(step**2)) / sd2 > CHANGE_SIGMAS**2 else 0
+
+
+def sigmas(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
+    """The typical temporal sigma (DN) before and after a change from the same blocks' per-pixel variances (DN^2)
+    on either side: the median before, and that plus the median of the blocks' changes (white noise added changes
+    every block's variance alike; the median after would also move with the blocks' spread of intensities). NaN
+    without blocks."""
+    if before.size == 0:
+        return math.nan, math.nan
+    typical = float(np.median(before))
+    return math.sqrt(max(typical, 0.0)), math.sqrt(max(typical + float(np.median(after - before)), 0.0))

@@ -1,0 +1,103 @@
+"""Which segments the model is not compared with when the noise changed inside holds, and what they hold.
+
+A change of the noise while the camera held still and its conditions stayed (:mod:`.hold_change`) is no function of
+the conditions: no effect of the model can explain both sides of it, and a fit over both reads the mixture as a
+missing law. So the side of each change that the model fits worse is *set apart* as an event, with every segment
+between two changes facing each other (a fault seen to start and to end), and reported with its excess over the
+model per component (a fault adding white noise of sigma s shows as +s^2 per pixel in the temporal component).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from .compare import rms_error_raw
+from .measure import Measurements
+
+
+def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> set[int]:
+    """The segments set apart from the comparison: on each change's side whose part of the hold the model fits worse
+    (the larger rms residual of its cells ``rows``), and every segment between two changes that both face
+    it (a fault seen to start and to end). Between holds a change is not seen: where only one end of an event is, only
+    the part of the hold next to it is set apart and the rest stays in the comparison, misfit and all."""
+    order = [s.index for s in meas.segments]
+    changed = [j for j, s in enumerate(meas.segments) if s.change is not None and j > 0]
+    by_segment: dict[int, list[dict[str, Any]]] = {}
+    for r in rows:
+        by_segment.setdefault(r["segment"], []).append(r)
+
+    def error(j: int) -> float:
+        mine = by_segment.get(order[j], [])
+        return rms_error_raw(mine) if mine else math.nan
+
+    # +1: the event is after the change, -1: before it, 0: unknown (a side without cells)
+    side = [int(np.sign(error(j) - error(j - 1))) if math.isfinite(error(j) - error(j - 1)) else 0 for j in changed]
+    apart = {order[j] if s > 0 else order[j - 1] for j, s in zip(changed, side) if s}
+    for (a, a_side), (b, b_side) in zip(zip(changed, side), zip(changed[1:], side[1:])):
+        if a_side > 0 and b_side < 0:
+            apart.update(order[a:b])
+    return apart
+
+
+def without_segments(meas: Measurements, apart: set[int]) -> Measurements:
+    """``meas`` with the cells of the ``apart`` segments left out (the segments stay: their views still separate
+    the fixed pattern of others)."""
+    return replace(meas, cells=[c for c in meas.cells if c.segment not in apart])
+
+
+def events(meas: Measurements, apart: set[int], rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The runs of consecutive set-apart segments: time span, whether a change was seen at each end, frames, cells and
+    the mean excess variance (measured - model, DN^2 per pixel) per component with its standard error."""
+    t0 = meas.segments[0].stamp_ns
+    runs: list[list[int]] = []
+    for j, seg in enumerate(meas.segments):
+        if seg.index in apart:
+            if runs and runs[-1][-1] == j - 1:
+                runs[-1].append(j)
+            else:
+                runs.append([j])
+    out = []
+    for run in runs:
+        segs = [meas.segments[j] for j in run]
+        mine = [r for r in rows if r["segment"] in {s.index for s in segs}]
+        excess = {}
+        for c in (mine[0]["measured_var_dn2"] if mine else {}):
+            d = np.array([r["measured_var_dn2"][c] - r["model_var_dn2"][c] for r in mine])
+            err = math.sqrt(sum(r["measured_var_err_dn2"][c] ** 2 for r in mine)) / len(mine)
+            excess[c] = {"dn2": round(float(d.mean()), 4), "err_dn2": round(err, 4)}
+        after = run[-1] + 1
+        out.append({
+            "segments": [s.index for s in segs],
+            "from_s": round((segs[0].stamp_ns - t0) * 1e-9, 4),
+            "to_s": round((segs[-1].last_stamp_ns - t0) * 1e-9, 4),
+            "starts_at_change": segs[0].change is not None,
+            "ends_at_change": after < len(meas.segments) and meas.segments[after].change is not None,
+            "frames": sum(s.n_frames for s in segs),
+            "cells": len(mine),
+            "mean_residual_dn": round(float(np.mean([r["residual_dn"] for r in mine])), 4) if mine else None,
+            "excess_var_dn2": excess,
+        })
+    return out
+
+
+def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any]]) -> list[str]:
+    """Lines for people: the changes and what was set apart."""
+    if not changes:
+        return []
+    lines = ["noise changed inside holds (camera still, conditions unchanged): " + ", ".join(
+        f"{c['time_s']:.2f} s ({c['sigma_before_dn']:.2f} -> {c['sigma_after_dn']:.2f} DN)" for c in changes)]
+    for ev in apart:
+        strong = [(c, v) for c, v in ev["excess_var_dn2"].items() if abs(v["dn2"]) > 3.0 * v["err_dn2"]]
+        what = "; ".join(f"{c} {v['dn2']:+.2f} +- {v['err_dn2']:.2f} DN^2 per pixel"
+                         + (f" (sigma {math.sqrt(v['dn2']):.2f} DN)" if v["dn2"] > 0 else "") for c, v in strong)
+        ends = {(True, True): "between two changes", (True, False): "from a change", (False, True): "up to a change",
+                (False, False): ""}[(ev["starts_at_change"], ev["ends_at_change"])]
+        lines.append(f"set apart {ev['from_s']:.2f}-{ev['to_s']:.2f} s ({ends}; {len(ev['segments'])} segment(s), {ev['frames']} "
+                     f"frames, {ev['cells']} cells): beyond the model {what or 'nothing significant'}; not a function of "
+                     "the conditions (a fault, interference, the driver switching its processing): the model is "
+                     "compared with the rest")
+    return lines

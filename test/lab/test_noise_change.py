@@ -1,0 +1,144 @@
+"""The lab cuts a hold where its noise changes with the conditions unchanged, and compares the model with the noise
+state it fits, setting the other apart as an event."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.lab import hold_change
+from noise_monitor.lab.analyze import analyze
+from noise_monitor.lab.measure import measure_frames
+from noise_monitor.lab.synthetic import simulate_frames, tiled_scene
+from noise_monitor.monitor.frame import Frame
+from noise_monitor.physics import NoiseModel, load_profile
+
+torch.set_num_threads(1)
+PROFILE = load_profile("icx285")
+SWEEP = ((6.0, 0.01, 25.0), (12.0, 0.01, 25.0))
+PERIOD_S = 0.05  # simulate_frames' frame period
+
+
+def _extra_noise(frames: list[Frame], lo: int, hi: int, sigma_dn: float, seed: int = 3) -> list[Frame]:
+    """``frames`` with white noise of ``sigma_dn`` added to frames lo..hi-1 (8-bit output again)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for f in frames:
+        if lo <= f.index < hi:
+            assert f.image_dn is not None
+            noisy = f.image_dn + rng.normal(0.0, sigma_dn, f.image_dn.shape)
+            f = dataclasses.replace(f, image_dn=np.rint(np.clip(noisy, 0, 255)).astype(np.float32))
+        out.append(f)
+    return out
+
+
+def test_a_noise_step_inside_a_hold_cuts_it_at_both_ends() -> None:
+    frames = _extra_noise(simulate_frames(PROFILE, conditions=SWEEP, frames_per_condition=16, seed=4), 20, 28, 3.0)
+    meas = measure_frames(frames)
+    assert [s.frames[0] for s in meas.segments] == [0, 16, 20, 28]
+    up, down = meas.noise_changes
+    assert (up.frame, down.frame) == (20, 28)
+    assert up.stamp_ns == 20 * int(PERIOD_S * 1e9)
+    # white noise of 3 DN adds 9 DN^2 to every block's variance (8-bit rounding and clipping aside)
+    assert up.sigma_after_dn**2 - up.sigma_before_dn**2 == pytest.approx(9.0, abs=1.0)
+    assert down.sigma_before_dn**2 - down.sigma_after_dn**2 == pytest.approx(9.0, abs=1.0)
+    assert meas.summary()["noise_changes"][0] == {"frame": 20, "time_s": 1.0, "sigma_before_dn": round(
+        up.sigma_before_dn, 4), "sigma_after_dn": round(up.sigma_after_dn, 4)}
+
+
+def test_the_model_is_compared_with_the_state_it_fits_and_the_event_is_set_apart(monkeypatch: pytest.MonkeyPatch
+                                                                                 ) -> None:
+    frames = _extra_noise(simulate_frames(PROFILE, conditions=SWEEP, frames_per_condition=16, seed=4), 20, 28, 3.0)
+    out = analyze(frames, profile=PROFILE, estimator=None)
+    (event,) = out["set_apart"]
+    assert event["segments"] == [2] and event["frames"] == 8 and event["starts_at_change"]
+    assert (event["from_s"], event["to_s"]) == pytest.approx((20 * PERIOD_S, 27 * PERIOD_S))
+    excess = event["excess_var_dn2"]["temporal"]
+    assert abs(excess["dn2"] - 9.0) < max(4.0 * excess["err_dn2"], 0.5)
+    assert abs(event["excess_var_dn2"]["fixed"]["dn2"]) < 4.0 * event["excess_var_dn2"]["fixed"]["err_dn2"] + 0.1
+    assert {r["segment"] for r in out["cells"]} == {0, 1, 3}  # the event's cells are not compared
+    assert out["rms_error_dn"] < 0.05
+    assert not any(c["significant"] for c in out["candidates"])
+    # pooled over the hold (no cut), the same frames read as a missing temporal effect
+    monkeypatch.setattr(hold_change, "cut", lambda *args, **kwargs: 0)
+    pooled = analyze(frames, profile=PROFILE, estimator=None, candidates=[])
+    assert pooled["set_apart"] == [] and pooled["rms_error_dn"] > 0.2 and pooled["unexplained"]["significant"]
+
+
+@pytest.mark.parametrize("case", ["clean", "immaterial", "light_step", "warming"])
+def test_no_cut_where_the_noise_did_not_step_or_the_conditions_explain_it(case: str) -> None:
+    if case in ("clean", "immaterial"):
+        frames = simulate_frames(PROFILE, conditions=SWEEP, frames_per_condition=16, seed=4)
+        if case == "immaterial":  # +1 DN white: 0.1-0.3 DN in sigma, under half the alarm threshold
+            frames = _extra_noise(frames, 20, 28, 1.0)
+    else:
+        frames = _held_frames(case)
+    meas = measure_frames(frames)
+    assert meas.noise_changes == []
+    assert meas.summary()["noise_changes"] == []
+
+
+def _held_frames(case: str) -> list[Frame]:
+    """32 frames of one hold: the light halved at frame 16 (a photon-transfer recording's next flat: cut there
+    without the light test), or the sensor warming 3 degC through long, hot exposures at 24 dB (the noise variance
+    rising by ~20 % with the dark current's shot noise: cut in two without the ramp test)."""
+    model, rng = NoiseModel(), np.random.default_rng(7)
+    scene = tiled_scene(128, 160, seed=2)
+    frames = []
+    for i in range(32):
+        if case == "light_step":
+            meta = PROFILE.metadata(gain_db=18.0, exposure_time_s=0.01, sensor_temperature_c=25.0)
+            clean = scene * (0.9 if i < 16 else 0.45)
+        else:
+            meta = PROFILE.metadata(gain_db=24.0, exposure_time_s=4.0,
+                                   sensor_temperature_c=70.0 + 3.0 * i / 31)
+            clean = scene * 0.5
+        noisy, _ = model.simulate(clean, meta, rng, mode="joint")
+        frames.append(Frame(i * 50_000_000, np.rint(np.clip(noisy, 0, 255)).astype(np.float32), meta, index=i))
+    return frames
+
+
+@pytest.fixture(scope="module")
+def image_noise_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("noise_change") / "image_noise.mcap"
+    return simulate_bag(out, "ev76c661", "image_noise", frames=100, width=160, height=128, seed=5, fps=10.0)
+
+
+def test_an_intermittent_fault_in_a_bag_is_an_event_not_a_missing_effect(image_noise_bag: Path) -> None:
+    """The scenario adds N(0, 5 DN) to frames 40-69 (4.0-6.9 s); the camera holds still across both ends."""
+    out = analyze(image_noise_bag, estimator=None)
+    assert [c["frame"] for c in out["measurement"]["noise_changes"]] == [40, 70]
+    (event,) = out["set_apart"]
+    assert (event["from_s"], event["to_s"]) == pytest.approx((4.0, 6.9))
+    excess = event["excess_var_dn2"]["temporal"]["dn2"]
+    assert np.sqrt(excess) == pytest.approx(5.0, abs=0.25)
+    assert out["rms_error_dn"] < 0.05 and out["diagnosis"] == "no candidate effect is significant"
+    assert not out["unexplained"]["significant"]
+
+
+@pytest.mark.parametrize("lo,hi,apart", [(24, 40, [(24, 31), (32, 39)]), (24, 48, [(24, 31)])])
+def test_an_event_is_set_apart_between_its_ends_across_holds_and_only_next_to_an_end_seen_alone(
+        lo: int, hi: int, apart: list[tuple[int, int]]) -> None:
+    """Three holds of 16 frames; +3 DN white noise from frame ``lo`` to ``hi`` - 1: seen to start in the second hold and
+    to end in the third (everything between set apart), or to start only (it lasts to the recording's end: the third
+    hold stays in the comparison, its misfit shown)."""
+    sweep = (*SWEEP, (6.0, 0.02, 25.0))
+    frames = _extra_noise(simulate_frames(PROFILE, conditions=sweep, frames_per_condition=16, seed=4), lo, hi, 3.0)
+    out = analyze(frames, profile=PROFILE, estimator=None, candidates=[])
+    (event,) = out["set_apart"]
+    meas = measure_frames(frames)
+    spans = [(meas.segments[i].frames[0], meas.segments[i].frames[-1]) for i in event["segments"]]
+    assert spans == apart and event["starts_at_change"] and event["ends_at_change"] == (hi < 48)
+    assert abs(event["excess_var_dn2"]["temporal"]["dn2"] - 9.0) < 1.0
+    compared = {r["segment"] for r in out["cells"]}
+    assert compared.isdisjoint(event["segments"])
+    if hi == 48:  # the unseen rest of the event stays in the comparison
+        last = [r["residual_dn"] for r in out["cells"] if meas.segments[r["segment"]].frames[0] == 32]
+        assert min(last) > 0.5
+        assert out["rms_error_dn"] > 0.3
+    else:
+        assert out["rms_error_dn"] < 0.05
