@@ -12,6 +12,7 @@ in sigma). Every part is measured again on its own, and may be cut again.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -52,13 +53,16 @@ def _level_blocks(still: np.ndarray) -> np.ndarray:
     return idx if idx.size <= MAX_BLOCKS else idx[np.linspace(0, idx.size - 1, MAX_BLOCKS).astype(int)]
 
 
-def residuals(frames: np.ndarray, still: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+def residuals(frames: Sequence[np.ndarray], still: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     """((k, M, b*b) each frame's deviation from the frames' mean in M of the ``still`` blocks, less what each block's
     offset, brightness and gradients explain in it (a light changing from frame to frame, the camera's sub-pixel
     vibration): regressors from the mean blurred BASIS_BLUR x BASIS_BLUR, as the live monitor's; (k,) each frame's
     light over the mean's in those blocks)."""
     use = _level_blocks(still)
-    mean = frames.mean(axis=0, dtype=np.float32)
+    mean = np.zeros(frames[0].shape, dtype=np.float32)
+    for f in frames:  # frame by frame: a hold of big frames is large
+        mean += f
+    mean /= len(frames)
     blurred = cv2.blur(mean, (BASIS_BLUR, BASIS_BLUR))
     gy, gx = np.gradient(blurred)
 
@@ -68,7 +72,7 @@ def residuals(frames: np.ndarray, still: np.ndarray, b: int) -> tuple[np.ndarray
     mb = blocks(blurred)
     basis, _ = np.linalg.qr(np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), blocks(gx), blocks(gy)],
                                      axis=2))
-    d = blocks(frames - mean)
+    d = np.stack([blocks(f - mean) for f in frames])
     light = 1.0 + d.sum(axis=(1, 2)) / max(float(blocks(mean).sum()), 1e-9)
     return d - np.einsum("mpr,kmr->kmp", basis, np.einsum("mpr,kmp->kmr", basis, d)), light
 

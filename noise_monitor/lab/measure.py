@@ -513,7 +513,7 @@ class _SegmentAccumulator:
         0 without one."""
         if len(self.frames) < hold_change.MIN_FRAMES or not still.any():
             return 0
-        residuals, light = hold_change.residuals(np.stack(self.images), still, self.b)
+        residuals, light = hold_change.residuals(self.images, still, self.b)
         stepped = np.array([i > 0 and (m.gain_db, m.exposure_time_s) != (self.metas[i - 1].gain_db,
                                                                         self.metas[i - 1].exposure_time_s)
                             for i, m in enumerate(self.metas)])
