@@ -34,6 +34,16 @@ CHANGE_DN = MonitorConfig.xi_threshold_dn / 2.0
 
 
 @dataclass(frozen=True)
+class Cut:
+    """Where a hold's noise changed (``at``: the first frame after it among the hold's, 0: nowhere) and its typical
+    temporal sigma (DN) before and after, read on the whole hold's blocks."""
+
+    at: int
+    sigma_before_dn: float = math.nan
+    sigma_after_dn: float = math.nan
+
+
+@dataclass(frozen=True)
 class NoiseChange:
     """A change of the noise inside a hold, at the first frame of the noise after it."""
 
@@ -42,9 +52,10 @@ class NoiseChange:
     sigma_before_dn: float  # the typical temporal sigma of the flat blocks before and after it
     sigma_after_dn: float
 
-    def summary(self, t0_ns: int) -> dict[str, float | int]:
+    def summary(self, t0_ns: int) -> dict[str, float | int | None]:
         return {"frame": self.frame, "time_s": round((self.stamp_ns - t0_ns) * 1e-9, 4),
-                "sigma_before_dn": round(self.sigma_before_dn, 4), "sigma_after_dn": round(self.sigma_after_dn, 4)}
+                **{k: round(v, 4) if math.isfinite(v) else None for k, v in (
+                    ("sigma_before_dn", self.sigma_before_dn), ("sigma_after_dn", self.sigma_after_dn))}}
 
 
 def _level_blocks(still: np.ndarray) -> np.ndarray:
@@ -84,36 +95,36 @@ def _variances(res: np.ndarray) -> np.ndarray:
     return np.einsum("kmp,kmp->km", dev, dev) / (res.shape[2] - N_BASIS) * k / (k - 1)
 
 
-def cut(res: np.ndarray, light: np.ndarray, stepped: np.ndarray, change_dn: float = CHANGE_DN) -> int:
-    """First frame after the hold's largest material noise change in its :func:`residuals` ``res`` and ``light``, 0
-    without one or when the conditions explain it: ``stepped`` (k,) frames whose gain or exposure differ from the
-    previous frame's (the noise follows them), a light changing in the hold by enough to explain half of it (shot
+def cut(res: np.ndarray, light: np.ndarray, stepped: np.ndarray, change_dn: float = CHANGE_DN) -> Cut:
+    """The hold's largest material noise change in its :func:`residuals` ``res`` and ``light``; ``Cut(0)`` without
+    one or when the conditions explain it: ``stepped`` (k,) frames whose gain or exposure differ from the previous
+    frame's (the noise follows them), a light changing in the hold by enough to explain half of it (shot
     noise's variance follows the light at most in proportion: a photon-transfer recording's illumination steps), a
     change no sharper than a ramp (a temperature drifting through the hold: the levels fit a line over the frames
     within ``CHANGE_SIGMAS`` standard errors of the step)."""
     k, m, p = res.shape
     if k < MIN_FRAMES or m == 0:
-        return 0
+        return Cut(0)
     var = np.maximum(_variances(res), 1e-12)
     dofs = np.full(m, float(p - N_BASIS))
     typical = np.sqrt(np.median(var, axis=1))
     levels = [Level(np.log(var[i]), dofs, float(typical[i])) for i in range(k)]
     at = change_point(levels, change_dn, MIN_SIDE_FRAMES)
     if not at or stepped[at]:
-        return 0
+        return Cut(0)
     variances = [_variances(side).mean(axis=0) for side in (res[:at], res[at:])]
     before, after = sigmas(*variances)
     noise = 2.0 * abs(math.log(max(after, 1e-9) / max(before, 1e-9)))
     log_light = np.log(np.maximum(light, 1e-9))
     if np.max(np.abs(log_light - np.median(log_light))) >= noise / 2.0:
-        return 0
+        return Cut(0)
     log_var = np.log(var)
     z = np.median(log_var - np.median(log_var, axis=0), axis=1)
     t = np.arange(k)
     step = z - np.where(t < at, z[:at].mean(), z[at:].mean())
     line = z - np.polyval(np.polyfit(t, z, 1), t)
     sd2 = MEDIAN_EFFICIENCY**2 * 2.0 / (p - N_BASIS) / m
-    return at if (np.sum(line**2) - np.sum(step**2)) / sd2 > CHANGE_SIGMAS**2 else 0
+    return Cut(at, before, after) if (np.sum(line**2) - np.sum(step**2)) / sd2 > CHANGE_SIGMAS**2 else Cut(0)
 
 
 def sigmas(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:

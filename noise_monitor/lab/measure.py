@@ -487,17 +487,20 @@ class _SegmentAccumulator:
     def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> list[_Full]:
         """The hold's measurement, or those of its parts when its noise changed (:mod:`.hold_change`)."""
         full = self._measure(grid, shape)
-        at = self._noise_change(full.still)
+        found = self._noise_change(full.still)
+        at = found.at
         if not at:
             self.images = []
             return [full]
         before, after = (self._part(lo, hi).finish(grid, shape) for lo, hi in ((0, at), (at, len(self.frames))))
         self.images = []
         before[0].change = self.change
-        # the change's size from the parts on either side of it, once cut again where they changed too
+        # the change's size from the parts on either side of it, once cut again where they changed too (else from the
+        # whole hold's blocks: no block flat and still in both parts)
         both = before[-1].still & after[0].still
-        after[0].change = NoiseChange(self.frames[at], self.stamps[at], *hold_change.sigmas(
-            before[-1].values["temporal"][both], after[0].values["temporal"][both]))
+        size = (hold_change.sigmas(before[-1].values["temporal"][both], after[0].values["temporal"][both])
+                if both.any() else (found.sigma_before_dn, found.sigma_after_dn))
+        after[0].change = NoiseChange(self.frames[at], self.stamps[at], *size)
         return before + after
 
     def _part(self, lo: int, hi: int) -> _SegmentAccumulator:
@@ -508,11 +511,10 @@ class _SegmentAccumulator:
             part.add(self.frames[j], self.images[j], self.metas[j], self.stamps[j])
         return part
 
-    def _noise_change(self, still: np.ndarray) -> int:
-        """The position of the hold's largest material noise change among its frames, read on its ``still`` blocks;
-        0 without one."""
+    def _noise_change(self, still: np.ndarray) -> hold_change.Cut:
+        """The hold's largest material noise change among its frames, read on its ``still`` blocks."""
         if len(self.frames) < hold_change.MIN_FRAMES or not still.any():
-            return 0
+            return hold_change.Cut(0)
         residuals, light = hold_change.residuals(self.images, still, self.b)
         stepped = np.array([i > 0 and (m.gain_db, m.exposure_time_s) != (self.metas[i - 1].gain_db,
                                                                         self.metas[i - 1].exposure_time_s)

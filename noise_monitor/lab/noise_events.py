@@ -89,7 +89,7 @@ def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any
     if not changes:
         return []
     lines = ["noise changed inside holds (camera still, conditions unchanged): " + ", ".join(
-        f"{c['time_s']:.2f} s ({c['sigma_before_dn']:.2f} -> {c['sigma_after_dn']:.2f} DN)" for c in changes)]
+        f"{c['time_s']:.2f} s ({_dn(c['sigma_before_dn'])} -> {_dn(c['sigma_after_dn'])} DN)" for c in changes)]
     for ev in apart:
         strong = [(c, v) for c, v in ev["excess_var_dn2"].items() if abs(v["dn2"]) > 3.0 * v["err_dn2"]]
         what = "; ".join(f"{c} {v['dn2']:+.2f} +- {v['err_dn2']:.2f} DN^2 per pixel"
@@ -101,3 +101,7 @@ def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any
                      "the conditions (a fault, interference, the driver switching its processing): the model is "
                      "compared with the rest")
     return lines
+
+
+def _dn(value: float | None) -> str:
+    return "?" if value is None else f"{value:.2f}"

@@ -99,3 +99,10 @@ def test_an_image_noise_episode_is_no_dark_current_that_falls_with_temperature(t
     assert law["params"]["rate_per_k"] >= -0.06
     reading = summary["unexplained"]["reading"]
     assert summary["unexplained"]["residual_significant"] and "constant in DN" in reading, reading
+    # the episode starts inside a hold (frames 10-13): cut at frame 12, its size read on the whole hold's blocks; its
+    # parts of 2 frames each have no block to compare with the model (too few frames to take these bands out), so
+    # nothing tells which side is the fault's and nothing is set apart (its end falls between holds)
+    (change,) = summary["measurement"]["noise_changes"]
+    assert change["frame"] == 12 and change["sigma_after_dn"] ** 2 - change["sigma_before_dn"] ** 2 == pytest.approx(
+        25.0, abs=3.0)
+    assert summary["set_apart"] == []

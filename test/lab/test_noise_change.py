@@ -64,7 +64,7 @@ def test_the_model_is_compared_with_the_state_it_fits_and_the_event_is_set_apart
     assert out["rms_error_dn"] < 0.05
     assert not any(c["significant"] for c in out["candidates"])
     # pooled over the hold (no cut), the same frames read as a missing temporal effect
-    monkeypatch.setattr(hold_change, "cut", lambda *args, **kwargs: 0)
+    monkeypatch.setattr(hold_change, "cut", lambda *args, **kwargs: hold_change.Cut(0))
     pooled = analyze(frames, profile=PROFILE, estimator=None, candidates=[])
     assert pooled["set_apart"] == [] and pooled["rms_error_dn"] > 0.2 and pooled["unexplained"]["significant"]
 
