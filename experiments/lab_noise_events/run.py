@@ -5,6 +5,7 @@ and prints per bag the lab's cuts, the segments around the fault, what it set ap
 model's rms error on what it compares. Runs on versions without the cut too (for before/after):
 
     PYTHONPATH=. python experiments/lab_noise_events/run.py [--sigma 4] [--out DIR] [--tuned-seeds ...] [--heldout-seeds ...]
+        [--effect NAME=VALUE]
 """
 from __future__ import annotations
 
@@ -31,13 +32,15 @@ def main() -> None:
     ap.add_argument("--tuned-seeds", type=int, nargs="*", default=[1, 2, 3, 4], help="seeds of the `campaign` scenario")
     ap.add_argument("--heldout-seeds", type=int, nargs="*", default=[21, 22, 23, 24],
                     help="seeds of the `campaign_heldout` scenario")
+    ap.add_argument("--effect", default=None, help="a hidden effect of the camera too (e.g. extra_read_noise=10)")
     args = ap.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix="lab_noise_events_"))
     bags = [("campaign", s) for s in args.tuned_seeds] + [("campaign_heldout", s) for s in args.heldout_seeds]
     for scenario, seed in bags:
-        bag = out / f"{scenario}_{seed}.mcap"
+        bag = out / f"{scenario}_{seed}{'_' + args.effect if args.effect else ''}.mcap"
         if not bag.exists():
-            simulate_bag(bag, "ev76c661", scenario, frames=120, width=320, height=256, seed=seed, fps=10.0)
+            simulate_bag(bag, "ev76c661", scenario, effects=[args.effect] if args.effect else [], frames=120, width=320,
+                         height=256, seed=seed, fps=10.0)
         rng = np.random.default_rng(11)
         with open_bag(bag) as r:
             frames = list(r.frames(None))

@@ -135,9 +135,9 @@ def analyze(
     rows = comp.cell_table()
     apart_segments = set_apart(meas, rows)
     apart = events(meas, apart_segments, rows)
-    apart_rows = [r for r in rows if r["segment"] in apart_segments]
-    if apart_segments:  # a change of the noise inside a hold is no law of the conditions (:mod:`.noise_events`)
-        meas = without_segments(meas, apart_segments)
+    apart_rows = [r for r in rows if r["segment"] in apart_segments.segments]
+    if apart_segments.segments:  # a change of the noise inside a hold is no law of the conditions (:mod:`.noise_events`)
+        meas = without_segments(meas, apart_segments.segments)
         comp = Comparison(meas, NoiseModel(base))
         rows = comp.cell_table()
     names = list(candidates) if candidates is not None else candidate_names(plugin_names)

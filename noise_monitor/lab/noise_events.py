@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -19,11 +19,20 @@ from .compare import rms_error_raw
 from .measure import Measurements
 
 
-def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> set[int]:
+@dataclass(frozen=True)
+class Apart:
+    """The segments set apart, and those of them set apart by their likeness to an event seen at one end only."""
+
+    segments: set[int]
+    alike: set[int]
+
+
+def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
     """The segments set apart from the comparison: on each change's side whose part of the hold the model fits worse
-    (the larger rms residual of its cells ``rows``), and every segment between two changes that both face
-    it (a fault seen to start and to end). Between holds a change is not seen: where only one end of an event is, only
-    the part of the hold next to it is set apart and the rest stays in the comparison, misfit and all."""
+    (the larger rms residual of its cells ``rows``), every segment between two changes that both face it (a fault
+    seen to start and to end), and from each change's event side onwards, up to the next change, the segments whose
+    excess variance over the model (mean over their cells) lies nearer the event part's than the other part's, until
+    the first that does not (between holds a change is not seen: a fault that ends or starts in a pan)."""
     order = [s.index for s in meas.segments]
     changed = [j for j, s in enumerate(meas.segments) if s.change is not None and j > 0]
     by_segment: dict[int, list[dict[str, Any]]] = {}
@@ -34,13 +43,30 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> set[int]:
         mine = by_segment.get(order[j], [])
         return rms_error_raw(mine) if mine else math.nan
 
+    def excess(j: int) -> float:
+        mine = by_segment.get(order[j], [])
+        return float(np.mean([r["measured_sigma_dn"] ** 2 - r["model_sigma_dn"] ** 2 for r in mine])) if mine else math.nan
+
     # +1: the event is after the change, -1: before it, 0: unknown (a side without cells)
     side = [int(np.sign(error(j) - error(j - 1))) if math.isfinite(error(j) - error(j - 1)) else 0 for j in changed]
     apart = {order[j] if s > 0 else order[j - 1] for j, s in zip(changed, side) if s}
     for (a, a_side), (b, b_side) in zip(zip(changed, side), zip(changed[1:], side[1:])):
         if a_side > 0 and b_side < 0:
             apart.update(order[a:b])
-    return apart
+    alike: set[int] = set()
+    for n, (j, s) in enumerate(zip(changed, side)):
+        if not s:
+            continue
+        event, other = (excess(j), excess(j - 1)) if s > 0 else (excess(j - 1), excess(j))
+        scan = (range(j + 1, changed[n + 1] if n + 1 < len(changed) else len(order)) if s > 0 else
+                range(j - 2, (changed[n - 1] if n > 0 else 0) - 1, -1))
+        for k in scan:
+            x = excess(k)
+            if math.isfinite(x) and abs(x - event) >= abs(x - other):
+                break
+            if math.isfinite(x) and order[k] not in apart:
+                alike.add(order[k])
+    return Apart(apart | alike, alike)
 
 
 def without_segments(meas: Measurements, apart: set[int]) -> Measurements:
@@ -49,13 +75,13 @@ def without_segments(meas: Measurements, apart: set[int]) -> Measurements:
     return replace(meas, cells=[c for c in meas.cells if c.segment not in apart])
 
 
-def events(meas: Measurements, apart: set[int], rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def events(meas: Measurements, apart: Apart, rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """The runs of consecutive set-apart segments: time span, whether a change was seen at each end, frames, cells and
     the mean excess variance (measured - model, DN^2 per pixel) per component with its standard error."""
     t0 = meas.segments[0].stamp_ns
     runs: list[list[int]] = []
     for j, seg in enumerate(meas.segments):
-        if seg.index in apart:
+        if seg.index in apart.segments:
             if runs and runs[-1][-1] == j - 1:
                 runs[-1].append(j)
             else:
@@ -77,6 +103,7 @@ def events(meas: Measurements, apart: set[int], rows: Sequence[dict[str, Any]]) 
             "starts_at_change": segs[0].change is not None,
             "ends_at_change": after < len(meas.segments) and meas.segments[after].change is not None,
             "frames": sum(s.n_frames for s in segs),
+            "alike": [s.index for s in segs if s.index in apart.alike],
             "cells": len(mine),
             "mean_residual_dn": round(float(np.mean([r["residual_dn"] for r in mine])), 4) if mine else None,
             "excess_var_dn2": excess,
@@ -95,8 +122,9 @@ def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any
         what = "; ".join(f"{c} {v['dn2']:+.2f} +- {v['err_dn2']:.2f} DN^2 per pixel"
                          + (f" (sigma {math.sqrt(v['dn2']):.2f} DN)" if v["dn2"] > 0 else "") for c, v in strong)
         ends = {(True, True): "between two changes", (True, False): "from a change", (False, True): "up to a change",
-                (False, False): ""}[(ev["starts_at_change"], ev["ends_at_change"])]
-        lines.append(f"set apart {ev['from_s']:.2f}-{ev['to_s']:.2f} s ({ends}; {len(ev['segments'])} segment(s), {ev['frames']} "
+                (False, False): "next to a change"}[(ev["starts_at_change"], ev["ends_at_change"])]
+        alike = f", {len(ev['alike'])} of them by their likeness to the side of the change" if ev["alike"] else ""
+        lines.append(f"set apart {ev['from_s']:.2f}-{ev['to_s']:.2f} s ({ends}; {len(ev['segments'])} segment(s){alike}, {ev['frames']} "
                      f"frames, {ev['cells']} cells): beyond the model {what or 'nothing significant'}; not a function of "
                      "the conditions (a fault, interference, the driver switching its processing): the model is "
                      "compared with the rest")

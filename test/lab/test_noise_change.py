@@ -120,25 +120,25 @@ def test_an_intermittent_fault_in_a_bag_is_an_event_not_a_missing_effect(image_n
     assert not out["unexplained"]["significant"]
 
 
-@pytest.mark.parametrize("lo,hi,apart", [(24, 40, [(24, 31), (32, 39)]), (24, 48, [(24, 31)])])
-def test_an_event_is_set_apart_between_its_ends_across_holds_and_only_next_to_an_end_seen_alone(
-        lo: int, hi: int, apart: list[tuple[int, int]]) -> None:
-    """Three holds of 16 frames; +3 DN white noise from frame ``lo`` to ``hi`` - 1: seen to start in the second hold and
-    to end in the third (everything between set apart), or to start only (it lasts to the recording's end: the third
-    hold stays in the comparison, its misfit shown)."""
-    sweep = (*SWEEP, (6.0, 0.02, 25.0))
+@pytest.mark.parametrize("lo,hi,apart,alike", [(24, 40, [(24, 31), (32, 39)], []),
+                                               (24, 48, [(24, 31), (32, 47)], [(32, 47)])])
+def test_an_event_is_set_apart_between_its_ends_and_by_likeness_where_one_end_fell_between_holds(
+        lo: int, hi: int, apart: list[tuple[int, int]], alike: list[tuple[int, int]]) -> None:
+    """Four holds of 16 frames; +3 DN white noise from frame ``lo`` to ``hi`` - 1: seen to start in the second hold and
+    to end in the third (everything between set apart), or to start only (it ends between the third and fourth holds:
+    the third hold looks like the event's side of the change and is set apart, the fourth does not and stays)."""
+    sweep = (*SWEEP, (6.0, 0.02, 25.0), (12.0, 0.02, 25.0))
     frames = _extra_noise(simulate_frames(PROFILE, conditions=sweep, frames_per_condition=16, seed=4), lo, hi, 3.0)
     out = analyze(frames, profile=PROFILE, estimator=None, candidates=[])
     (event,) = out["set_apart"]
     meas = measure_frames(frames)
-    spans = [(meas.segments[i].frames[0], meas.segments[i].frames[-1]) for i in event["segments"]]
-    assert spans == apart and event["starts_at_change"] and event["ends_at_change"] == (hi < 48)
+
+    def span(i: int) -> tuple[int, int]:
+        return meas.segments[i].frames[0], meas.segments[i].frames[-1]
+
+    assert [span(i) for i in event["segments"]] == apart and [span(i) for i in event["alike"]] == alike
+    assert event["starts_at_change"] and event["ends_at_change"] == (hi < 48)
     assert abs(event["excess_var_dn2"]["temporal"]["dn2"] - 9.0) < 1.0
-    compared = {r["segment"] for r in out["cells"]}
-    assert compared.isdisjoint(event["segments"])
-    if hi == 48:  # the unseen rest of the event stays in the comparison
-        last = [r["residual_dn"] for r in out["cells"] if meas.segments[r["segment"]].frames[0] == 32]
-        assert min(last) > 0.5
-        assert out["rms_error_dn"] > 0.3
-    else:
-        assert out["rms_error_dn"] < 0.05
+    assert {span(r["segment"]) for r in out["cells"]} == {(0, 15), (16, 23), *([(40, 47)] if hi < 48 else []),
+                                                          (48, 63)}
+    assert out["rms_error_dn"] < 0.05
