@@ -18,6 +18,9 @@ import numpy as np
 from .compare import rms_error_raw
 from .measure import Measurements
 
+#: smallest excess variance (DN^2 per pixel) of a set-apart run named in its line (also beyond 3 standard errors)
+NOTABLE_DN2 = 0.1
+
 
 @dataclass(frozen=True)
 class Apart:
@@ -118,7 +121,8 @@ def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any
     lines = ["noise changed inside holds (camera still, conditions unchanged): " + ", ".join(
         f"{c['time_s']:.2f} s ({_dn(c['sigma_before_dn'])} -> {_dn(c['sigma_after_dn'])} DN)" for c in changes)]
     for ev in apart:
-        strong = [(c, v) for c, v in ev["excess_var_dn2"].items() if abs(v["dn2"]) > 3.0 * v["err_dn2"]]
+        strong = [(c, v) for c, v in ev["excess_var_dn2"].items()
+                  if abs(v["dn2"]) > max(3.0 * v["err_dn2"], NOTABLE_DN2)]
         what = "; ".join(f"{c} {v['dn2']:+.2f} +- {v['err_dn2']:.2f} DN^2 per pixel"
                          + (f" (sigma {math.sqrt(v['dn2']):.2f} DN)" if v["dn2"] > 0 else "") for c, v in strong)
         ends = {(True, True): "between two changes", (True, False): "from a change", (False, True): "up to a change",
