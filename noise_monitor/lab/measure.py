@@ -412,7 +412,6 @@ class _SegmentAccumulator:
         self.metas: list[CameraMetadata] = []
         self.stamps: list[int] = []
         self.images: list[np.ndarray] = []
-        self.change: NoiseChange | None = None  # the noise change the segment starts at
         self.pose = np.zeros(2)
         # accumulators, shaped by the first frame (blocks x components)
         self.s1: Any = None
@@ -494,7 +493,6 @@ class _SegmentAccumulator:
             return [full]
         before, after = (self._part(lo, hi).finish(grid, shape) for lo, hi in ((0, at), (at, len(self.frames))))
         self.images = []
-        before[0].change = self.change
         # the change's size from the parts on either side of it, once cut again where they changed too (else from the
         # whole hold's blocks: no block flat and still in both parts)
         both = before[-1].still & after[0].still
@@ -603,7 +601,7 @@ class _SegmentAccumulator:
                      v, region, values, robust, span, is_out, centred,
                      keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes,
                      light_pct=0.0 if self.light is None else self.light.percent(), motion_px=self.motion_px,
-                     change=self.change, last_stamp_ns=self.stamps[-1], still=still)
+                     last_stamp_ns=self.stamps[-1], still=still)
 
 
 @dataclass
