@@ -3,11 +3,12 @@
 A hold pools up to 64 frames into one measurement per block. When the noise steps while the camera holds still (a
 component failing or recovering, an amplifier switching), the pooled variance is a mix of both noises that no
 function of the conditions gives: the comparison reads it as a missing law. So each frame's noise is read on its
-own, as its deviation from the hold's mean on the flat blocks (the scene cancels; the light's change and the
-camera's vibration are taken out before), each block relative to itself over the frames (its intensity's level
-cancels: no model is needed), and the hold is cut where those levels change most
-(:func:`..monitor.noise_change.change_point`: beyond ``CHANGE_SIGMAS`` standard errors and at least ``change_dn``
-in sigma). Every part is measured again on its own, and may be cut again.
+own, as its deviation from the hold's mean in the blocks that are flat and show no scene change (the scene cancels),
+less what each block's offset, brightness and gradients explain (the light's change, sub-pixel vibration), each
+block relative to itself over the frames (its intensity's level cancels: no model is needed), and the hold is cut
+where those levels change most (:func:`..monitor.noise_change.change_point`: beyond ``CHANGE_SIGMAS`` standard errors
+and at least ``CHANGE_DN`` in sigma), unless the conditions explain the change (:func:`cut`). Every part is measured
+again on its own, and may be cut again.
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ class NoiseChange:
 
     frame: int  # the recording's frame index
     stamp_ns: int
-    sigma_before_dn: float  # the typical temporal sigma of the flat blocks before and after it
+    sigma_before_dn: float  # the typical temporal sigma (DN) of the still blocks before and after it (NaN: unread)
     sigma_after_dn: float
 
     def summary(self, t0_ns: int) -> dict[str, float | int | None]:
