@@ -50,9 +50,11 @@ def run(args: argparse.Namespace) -> int:
         weights=args.weights,
         device=args.device,
     )
+    apart = sum(ev["frames"] for ev in summary["set_apart"])
     print(f"rms error (model vs measured total sigma, net of the measurement's scatter): {summary['rms_error_dn']:.4f} DN "
           f"(raw {summary['rms_error_raw_dn']:.4f} DN, measurement scatter {summary['measurement_scatter_dn']:.4f} DN) "
-          f"over {summary['measurement']['cells']} cells, {summary['measurement']['frames_used']} frames")
+          f"over {summary['measurement']['cells']} cells, {summary['measurement']['frames_used'] - apart} frames"
+          + (f" ({apart} more set apart, below)" if apart else ""))
     m = summary["measurement"]
     for reason, n in m["frames_skipped"].items():
         print(f"  {n} frame(s) not measured: {reason}")
