@@ -21,7 +21,7 @@ import numpy as np
 
 from ..measure.temporal import blocks_of
 from ..monitor.config import MonitorConfig
-from ..monitor.noise_change import BASIS_BLUR, CHANGE_SIGMAS, MEDIAN_EFFICIENCY, N_BASIS, Level, change_point
+from ..monitor.noise_change import BASIS_BLUR, N_BASIS, Level, change_point, step_beats_ramp
 
 #: most blocks the frames' levels are read on (evenly spread over them): the median over 2,048 blocks of 60
 #: degrees of freedom has a standard error of 0.5 % in variance
@@ -119,13 +119,7 @@ def cut(res: np.ndarray, light: np.ndarray, stepped: np.ndarray, change_dn: floa
     log_light = np.log(np.maximum(light, 1e-9))
     if np.max(np.abs(log_light - np.median(log_light))) >= noise / 2.0:
         return Cut(0)
-    log_var = np.log(var)
-    z = np.median(log_var - np.median(log_var, axis=0), axis=1)
-    t = np.arange(k)
-    step = z - np.where(t < at, z[:at].mean(), z[at:].mean())
-    line = z - np.polyval(np.polyfit(t, z, 1), t)
-    sd2 = MEDIAN_EFFICIENCY**2 * 2.0 / (p - N_BASIS) / m
-    return Cut(at, before, after) if (np.sum(line**2) - np.sum(step**2)) / sd2 > CHANGE_SIGMAS**2 else Cut(0)
+    return Cut(at, before, after) if step_beats_ramp(levels, at) else Cut(0)
 
 
 def sigmas(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:

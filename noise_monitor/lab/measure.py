@@ -193,9 +193,6 @@ class SegmentMeasurement:
     change: NoiseChange | None = None
     last_stamp_ns: int = 0  # the stamp of its last frame
 
-    def __post_init__(self) -> None:
-        self.last_stamp_ns = max(self.last_stamp_ns, self.stamp_ns)
-
     @property
     def n_frames(self) -> int:
         return len(self.frames)
@@ -587,7 +584,6 @@ class _SegmentAccumulator:
             run = block_temporal(np.stack(self.images), b, exclude=blinking, whiteness=True)
             changed = _largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER
             moving = keep & (~run.accepted | changed)
-            assert run.still is not None
             still = keep & run.still & ~changed
             excluded["not_static"] = int(np.sum(moving))
             keep &= ~moving

@@ -143,11 +143,11 @@ class BlockTemporal:
     variance_err_dn2: np.ndarray  # (N,) its standard error
     p_value: np.ndarray  # (N,) pure-noise test
     accepted: np.ndarray  # (N,) bool: the block's frame differences fit pure noise
+    #: (N,) bool: no scene change the regressors explain (the pure-noise test without the whiteness test, which
+    #: also rejects a block whose noise changes within the run)
+    still: np.ndarray
     motion_px: float = 0.0  # the frames' rms displacement about their mean (px, :func:`run_displacement`)
     light_pct: float = 0.0  # the light's change from frame to frame taken out (:meth:`LightChange.percent`, %)
-    #: (N,) bool: no scene change the regressors explain (the pure-noise test without the whiteness test, which
-    #: also rejects a block whose noise changes within the run); None: all accepted
-    still: np.ndarray | None = None
 
     def sigma_dn(self) -> tuple[float, float]:
         """Temporal sigma over all accepted blocks and its standard error (NaN if none)."""
@@ -562,5 +562,5 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     gauss = var * np.sqrt(2.0 / (dof * m))
     err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
-    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, motion_rms(displacement[0]),
-                         0.0 if light is None else light.percent(), still)
+    return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, still, motion_rms(displacement[0]),
+                         0.0 if light is None else light.percent())

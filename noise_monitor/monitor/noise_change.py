@@ -97,25 +97,45 @@ class LevelReference:
         return Level(log_ratio, dof, float(np.nanmedian(model_dn)) if np.isfinite(model_dn).any() else math.nan)
 
 
+def _relative(found: Sequence[Level]) -> tuple[np.ndarray, float] | None:
+    """(each frame's level: the median over the patches of its log ratio less that patch's median over the frames, a
+    patch's own offset (its blocks' intensities); their standard error, that of the median of Gaussian variance
+    estimates of the patches' degrees of freedom), or None without a patch that every frame has."""
+    ratios = np.array([lv.log_ratio for lv in found])
+    ok = np.isfinite(ratios).all(axis=0)
+    if not ok.any():
+        return None
+    z = np.median(ratios[:, ok] - np.median(ratios[:, ok], axis=0), axis=1)
+    dof = float(np.median(np.array([lv.dof[ok] for lv in found])))
+    return z, MEDIAN_EFFICIENCY * math.sqrt(2.0 / dof / ok.sum())
+
+
+def step_beats_ramp(levels: Sequence[Level], at: int) -> bool:
+    """Whether a step at frame ``at`` fits the frames' ``levels`` better than a line over the frames by more than
+    ``CHANGE_SIGMAS`` standard errors (a change no sharper than a ramp, e.g. a temperature drifting, does not)."""
+    relative = _relative(levels)
+    if relative is None:
+        return False
+    z, sd = relative
+    t = np.arange(z.size)
+    step = z - np.where(t < at, z[:at].mean(), z[at:].mean())
+    line = z - np.polyval(np.polyfit(t, z, 1), t)
+    return bool((np.sum(line**2) - np.sum(step**2)) / sd**2 > CHANGE_SIGMAS**2)
+
+
 def change_point(levels: Sequence[Level | None], change_dn: float, min_side: int = 1) -> int:
     """Index of the first frame after the largest change of the frames' noise ``levels`` (None: a frame without
     a level) that is both significant and at least ``change_dn`` in sigma at the newest frame's model, with at
-    least ``min_side`` levels on either side; 0 without one.
-
-    A frame's level is the median over the patches of its log ratio less that patch's median over the frames (a
-    patch's own offset: its blocks' intensities); its standard error is that of the median of Gaussian variance
-    estimates of the patches' degrees of freedom."""
+    least ``min_side`` levels on either side; 0 without one. The frames' levels relative to each patch:
+    :func:`_relative`."""
     found = [(i, lv) for i, lv in enumerate(levels) if lv is not None]
     if len(found) < 2 * max(min_side, 1) or not math.isfinite(change_dn):
         return 0
     at = [i for i, _ in found]
-    ratios = np.array([lv.log_ratio for _, lv in found])
-    ok = np.isfinite(ratios).all(axis=0)
-    if not ok.any():
+    relative = _relative([lv for _, lv in found])
+    if relative is None:
         return 0
-    z = np.median(ratios[:, ok] - np.median(ratios[:, ok], axis=0), axis=1)
-    dof = float(np.median(np.array([lv.dof[ok] for _, lv in found])))
-    sd = MEDIAN_EFFICIENCY * math.sqrt(2.0 / dof / ok.sum())
+    z, sd = relative
     n = len(z)
     j = np.arange(1, n)  # frames before each cut
     before = np.cumsum(z)[:-1]
