@@ -42,16 +42,12 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
     for r in rows:
         by_segment.setdefault(r["segment"], []).append(r)
 
-    def error(j: int) -> float:
-        mine = by_segment.get(order[j], [])
-        return rms_error_raw(mine) if mine else math.nan
-
-    def excess(j: int) -> float:
-        mine = by_segment.get(order[j], [])
-        return float(np.mean([r["measured_sigma_dn"] ** 2 - r["model_sigma_dn"] ** 2 for r in mine])) if mine else math.nan
-
-    # +1: the event is after the change, -1: before it, 0: unknown (a side without cells)
-    side = [int(np.sign(error(j) - error(j - 1))) if math.isfinite(error(j) - error(j - 1)) else 0 for j in changed]
+    cells = [by_segment.get(i, []) for i in order]
+    error = [rms_error_raw(c) if c else math.nan for c in cells]
+    excess = [float(np.mean([r["measured_sigma_dn"] ** 2 - r["model_sigma_dn"] ** 2 for r in c])) if c else math.nan
+              for c in cells]
+    # +1: the event is after the change, -1: before it, 0: unknown (a side without cells: NaN)
+    side = [int(np.nan_to_num(np.sign(error[j] - error[j - 1]))) for j in changed]
     apart = {order[j] if s > 0 else order[j - 1] for j, s in zip(changed, side) if s}
     for (a, a_side), (b, b_side) in zip(zip(changed, side), zip(changed[1:], side[1:])):
         if a_side > 0 and b_side < 0:
@@ -60,11 +56,11 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
     for n, (j, s) in enumerate(zip(changed, side)):
         if not s:
             continue
-        event, other = (excess(j), excess(j - 1)) if s > 0 else (excess(j - 1), excess(j))
+        event, other = (excess[j], excess[j - 1]) if s > 0 else (excess[j - 1], excess[j])
         scan = (range(j + 1, changed[n + 1] if n + 1 < len(changed) else len(order)) if s > 0 else
                 range(j - 2, (changed[n - 1] if n > 0 else 0) - 1, -1))
         for k in scan:
-            x = excess(k)
+            x = excess[k]
             if math.isfinite(x) and abs(x - event) >= abs(x - other):
                 break
             if math.isfinite(x) and order[k] not in apart:
