@@ -5,29 +5,41 @@ the conditions: no effect of the model can explain both sides of it, and a fit o
 missing law. So the side of each change that the model fits worse is *set apart* as an event, with every segment
 between two changes facing each other (a fault seen to start and to end), and reported with its excess over the
 model per component (a fault adding white noise of sigma s shows as +s^2 per pixel in the temporal component).
+
+A fault that starts and ends between holds (in pans, at metadata changes) shows no change inside one. It shows as
+noise no law of the conditions makes: every effect's temporal variance grows (in magnitude) with the gain, the
+exposure, the temperature and the signal, so a cell under conditions at least as high in every one as another's
+cannot hold much less excess over the model. The smallest run of segments in time holding every such quieter-than-
+its-conditions cell's partner is set apart (:func:`lawless`), with its neighbours alike to it.
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from ..monitor.noise_change import CHANGE_SIGMAS
 from .compare import rms_error_raw
-from .measure import Measurements
+from .hold_change import CHANGE_DN
+from .measure import BIN_WIDTH_DN, Measurements
 
 #: smallest excess variance (DN^2 per pixel) of a set-apart run named in its line (also beyond 3 standard errors)
 NOTABLE_DN2 = 0.1
+#: the conditions a law's temporal variance grows with (in magnitude), as the cell table names them
+CONDITIONS = ("gain_db", "exposure_time_s", "sensor_temperature_c", "intensity_dn")
 
 
 @dataclass(frozen=True)
 class Apart:
-    """The segments set apart, and those of them set apart by their likeness to an event seen at one end only."""
+    """The segments set apart, those of them set apart by their likeness to an event seen at one end only, and those
+    of a run seen to break every law of the conditions (no end inside a hold: :func:`lawless`)."""
 
     segments: set[int]
     alike: set[int]
+    lawless: set[int] = field(default_factory=set)
 
 
 def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
@@ -65,7 +77,71 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
                 break
             if math.isfinite(x) and order[k] not in apart:
                 alike.add(order[k])
-    return Apart(apart | alike, alike)
+    apart |= alike
+    rest = [i for i in order if i not in apart]
+    run, like = lawless([r for r in rows if r["segment"] not in apart], rest, dict(zip(order, excess)),
+                        {s.index: s.n_frames for s in meas.segments})
+    return Apart(apart | run, alike | like, run)
+
+
+def quieter_than_conditions(rows: Sequence[dict[str, Any]]) -> set[tuple[int, int]]:
+    """The pairs (segment a, segment b) of cells ``rows`` of one intensity bin where a's conditions
+    (:data:`CONDITIONS`) are at least b's in every one and b's temporal excess variance over the model exceeds a's in
+    magnitude beyond ``CHANGE_SIGMAS`` standard errors and by ``CHANGE_DN`` in sigma (at b's model): no law of the
+    conditions makes them. One bin: a cell's intensity also says where its blocks lie (the scene's bright and dark
+    parts), and a law of the position (an amplifier's glow in a corner) orders cells of other intensities by
+    where they are. A condition not stated (NaN) orders nothing."""
+    rows = [r for r in rows if "temporal" in r["measured_var_dn2"]]  # a recording without holds has none
+    if not rows:
+        return set()
+    cond = np.array([[np.nan if r[c] is None else r[c] for c in CONDITIONS] for r in rows], dtype=float)
+    model = np.array([r["model_var_dn2"]["temporal"] for r in rows])
+    size = np.abs(np.array([r["measured_var_dn2"]["temporal"] for r in rows]) - model)
+    err = np.array([r["measured_var_err_dn2"]["temporal"] for r in rows])
+    seg = np.array([r["segment"] for r in rows])
+    level = np.floor(cond[:, CONDITIONS.index("intensity_dn")] / BIN_WIDTH_DN)
+    pairs: set[tuple[int, int]] = set()
+    for a in range(len(rows)):  # one cell against all (memory linear in the cells)
+        broken = (np.all(cond[a] >= cond, axis=1) & (seg != seg[a]) & (level == level[a])
+                  & (size - size[a] > CHANGE_SIGMAS * np.hypot(err, err[a]))
+                  & (np.sqrt(model + size) - np.sqrt(np.maximum(model + size[a], 0.0)) >= CHANGE_DN))
+        pairs.update((int(seg[a]), int(b)) for b in np.unique(seg[broken]))
+    return pairs
+
+
+def lawless(rows: Sequence[dict[str, Any]], order: Sequence[int], excess: dict[int, float], frames: dict[int, int]
+            ) -> tuple[set[int], set[int]]:
+    """(the run of segments set apart as noise no law of the conditions makes, those of them set apart by likeness).
+    The run: the shortest run (fewest ``frames``, then segments) of ``order`` (segment indices in time) that holds the louder segment of every pair of
+    :func:`quieter_than_conditions` and leaves no pair outside it; then its neighbours whose ``excess`` (mean over
+    their cells, DN^2) lies nearer the run's mean than the rest's median, until the first that does not. Empty
+    without a pair, or when no run clears them (the pairs are no one event's)."""
+    pairs = quieter_than_conditions(rows)
+    if not pairs:
+        return set(), set()
+    louder = {b for _, b in pairs}
+    best: tuple[int, int, int, int] | None = None
+    for i in range(len(order)):
+        for j in range(i + 1, len(order) + 1):
+            inside = set(order[i:j])
+            if louder <= inside and not any(a not in inside and b not in inside for a, b in pairs):
+                size = (sum(frames[k] for k in inside), j - i, i, j)
+                best = size if best is None else min(best, size)
+    if best is None:
+        return set(), set()
+    *_, i, j = best
+    run = set(order[i:j])
+    event = float(np.nanmean([excess[k] for k in run]))
+    other = float(np.nanmedian([excess[k] for k in order if k not in run])) if len(run) < len(order) else math.nan
+    like: set[int] = set()
+    for scan in (range(i - 1, -1, -1), range(j, len(order))):
+        for k in scan:
+            x = excess[order[k]]
+            if not math.isfinite(other) or (math.isfinite(x) and abs(x - event) >= abs(x - other)):
+                break
+            if math.isfinite(x):
+                like.add(order[k])
+    return run | like, like
 
 
 def without_segments(meas: Measurements, apart: set[int]) -> Measurements:
@@ -103,6 +179,7 @@ def events(meas: Measurements, apart: Apart, rows: Sequence[dict[str, Any]]) -> 
             "ends_at_change": after < len(meas.segments) and meas.segments[after].change is not None,
             "frames": sum(s.n_frames for s in segs),
             "alike": [s.index for s in segs if s.index in apart.alike],
+            "lawless": [s.index for s in segs if s.index in apart.lawless],
             "cells": len(mine),
             "mean_residual_dn": round(float(np.mean([r["residual_dn"] for r in mine])), 4) if mine else None,
             "excess_var_dn2": excess,
@@ -112,10 +189,9 @@ def events(meas: Measurements, apart: Apart, rows: Sequence[dict[str, Any]]) -> 
 
 def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any]]) -> list[str]:
     """Lines for people: the changes and what was set apart."""
-    if not changes:
-        return []
     lines = ["noise changed inside holds (camera still, conditions unchanged): " + ", ".join(
-        f"{c['time_s']:.2f} s ({_dn(c['sigma_before_dn'])} -> {_dn(c['sigma_after_dn'])} DN)" for c in changes)]
+        f"{c['time_s']:.2f} s ({_dn(c['sigma_before_dn'])} -> {_dn(c['sigma_after_dn'])} DN)" for c in changes)
+             ] if changes else []
     for ev in apart:
         strong = [(c, v) for c, v in ev["excess_var_dn2"].items()
                   if abs(v["dn2"]) > max(3.0 * v["err_dn2"], NOTABLE_DN2)]
@@ -123,7 +199,11 @@ def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any
                          + (f" (sigma {math.sqrt(v['dn2']):.2f} DN)" if v["dn2"] > 0 else "") for c, v in strong)
         ends = {(True, True): "between two changes", (True, False): "from a change", (False, True): "up to a change",
                 (False, False): "next to a change"}[(ev["starts_at_change"], ev["ends_at_change"])]
-        alike = f", {len(ev['alike'])} of them by their likeness to the side of the change" if ev["alike"] else ""
+        if ev["lawless"] and not (ev["starts_at_change"] or ev["ends_at_change"]):
+            ends = ("no change seen inside a hold: noisier than segments under a gain, exposure, temperature and "
+                    "intensity at least as high, which no law of the conditions makes")
+        like = "the side of the change" if ev["starts_at_change"] or ev["ends_at_change"] else "the rest of the run"
+        alike = f", {len(ev['alike'])} of them by their likeness to {like}" if ev["alike"] else ""
         lines.append(f"set apart {ev['from_s']:.2f}-{ev['to_s']:.2f} s ({ends}; {len(ev['segments'])} segment(s){alike}, {ev['frames']} "
                      f"frames, {ev['cells']} cells): beyond the model {what or 'nothing significant'}; not a function of "
                      "the conditions (a fault, interference, the driver switching its processing): the model is "

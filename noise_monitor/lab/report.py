@@ -126,7 +126,8 @@ def _residual_plot(summary: dict[str, Any]) -> str:
 
 
 def _events_plot(summary: dict[str, Any]) -> str:
-    """Each segment's mean residual over time, the compared ones and the set-apart ones, with the noise changes."""
+    """Each segment's mean residual over time, the compared ones and the set-apart ones, with the noise changes inside
+    holds."""
     fig, ax = plt.subplots(figsize=(9, 3.6))
     for rows, color, fmt, label in ((summary["cells"], "k", "o", "compared with the model"),
                                     (summary["set_apart_cells"], "tab:red", "s", "set apart")):
@@ -145,7 +146,7 @@ def _events_plot(summary: dict[str, Any]) -> str:
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel(CONDITION_LABELS["time_s"])
     ax.set_ylabel("measured - model sigma [DN]\n(segment mean over its cells)")
-    ax.set_title("Noise changes inside holds: the segments compared and those set apart")
+    ax.set_title("Noise events: the segments compared with the model and those set apart")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _png(fig)
@@ -274,8 +275,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
         "Residuals": _residual_plot(summary),
         "Components": _component_plot(summary),
     }
-    if summary["measurement"].get("noise_changes"):
-        images["Noise changes inside holds"] = _events_plot(summary)
+    if summary["measurement"].get("noise_changes") or summary.get("set_apart"):
+        images["Noise events"] = _events_plot(summary)
     if summary.get("estimator"):
         images["Estimator: xi per frame"] = _xi_plot(summary["estimator"])
     un = summary.get("unexplained") or {}

@@ -87,22 +87,25 @@ def test_plugin_effect_is_found(bags: Path, tmp_path: Path) -> None:
 
 
 def test_an_image_noise_episode_is_no_dark_current_that_falls_with_temperature(tmp_path: Path) -> None:
-    """30 frames of the field scenario (an episode of +N(0, 5 DN) image noise) under 100 % mains bands: three holds.
+    """30 frames of the field scenario (an episode of +N(0, 5 DN) image noise) under 100 % mains bands: six holds.
     Before, a dark-current law falling by 28 % per K (x 1769 at 25 degC) fitted the episode's holds and was claimed;
     a thermal dark current rises with the temperature (the law's extra rate is bounded at -0.06/K): nothing is
-    claimed, and the residual reads as white temporal noise constant in DN (it arises after the gain)."""
+    claimed. Until 2026-11-28 the episode's last hold stayed in the comparison, read as white temporal noise the model
+    lacks; it is noisier than the next hold under a higher gain, exposure and temperature, which no law of the
+    conditions makes: it is set apart and the rest fits."""
     bag = simulate_bag(tmp_path / "f.mcap", "ev76c661", "field", frames=30, seed=0, banding_pct=100.0, mains_hz=60.0,
                        line_time_s=10e-6)
     summary = analyze(bag, "ev76c661", estimator=None)
     assert not [c["effect"] for c in summary["candidates"] if c["significant"]]
     law = next(c for c in summary["candidates"] if c["effect"] == "dark_current_law")
     assert law["params"]["rate_per_k"] >= -0.06
-    reading = summary["unexplained"]["reading"]
-    assert summary["unexplained"]["residual_significant"] and "constant in DN" in reading, reading
     # the episode starts inside a hold (frames 10-13): cut at frame 12, its size read on the whole hold's blocks; its
     # parts of 2 frames each have no block to compare with the model (too few frames to take these bands out), so
-    # nothing tells which side is the fault's and nothing is set apart (its end falls between holds)
+    # nothing tells which side is the fault's; its end falls between holds: its last hold (frames 20-21) is set apart
     (change,) = summary["measurement"]["noise_changes"]
     assert change["frame"] == 12 and change["sigma_after_dn"] ** 2 - change["sigma_before_dn"] ** 2 == pytest.approx(
         25.0, abs=3.0)
-    assert summary["set_apart"] == []
+    (event,) = summary["set_apart"]
+    assert event["segments"] == event["lawless"] and event["frames"] == 2 and event["from_s"] == pytest.approx(4.0)
+    assert event["excess_var_dn2"]["temporal"]["dn2"] > 20.0 * event["excess_var_dn2"]["temporal"]["err_dn2"]
+    assert summary["rms_error_dn"] < 0.05 and not summary["unexplained"]["residual_significant"]

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from noise_monitor.bag.simulate import simulate_bag
-from noise_monitor.lab import hold_change
+from noise_monitor.lab import hold_change, noise_events
 from noise_monitor.lab.analyze import analyze
 from noise_monitor.lab.measure import measure_frames
 from noise_monitor.lab.synthetic import simulate_frames, tiled_scene
@@ -142,3 +142,43 @@ def test_an_event_is_set_apart_between_its_ends_and_by_likeness_where_one_end_fe
     assert {span(r["segment"]) for r in out["cells"]} == {(0, 15), (16, 23), *([(40, 47)] if hi < 48 else []),
                                                           (48, 63)}
     assert out["rms_error_dn"] < 0.05
+
+
+def test_a_fault_with_no_end_inside_a_hold_is_set_apart_as_noise_no_law_makes() -> None:
+    """+3 DN white noise over the whole second hold (12 dB, 10 ms) of four: no hold sees it change, but the fourth
+    (12 dB, 20 ms) is quieter under conditions at least as high in every one, which no law of the conditions makes.
+    Without the fault nothing is set apart."""
+    sweep = (*SWEEP, (6.0, 0.02, 25.0), (12.0, 0.02, 25.0))
+    clean = simulate_frames(PROFILE, conditions=sweep, frames_per_condition=16, seed=4)
+    out = analyze(_extra_noise(clean, 16, 32, 3.0), profile=PROFILE, estimator=None, candidates=[])
+    assert out["measurement"]["noise_changes"] == []
+    (event,) = out["set_apart"]
+    assert event["segments"] == event["lawless"] == [1] and event["frames"] == 16
+    assert not (event["starts_at_change"] or event["ends_at_change"])
+    assert (event["from_s"], event["to_s"]) == pytest.approx((16 * PERIOD_S, 31 * PERIOD_S))
+    assert abs(event["excess_var_dn2"]["temporal"]["dn2"] - 9.0) < 1.0
+    assert out["rms_error_dn"] < 0.05
+    assert analyze(clean, profile=PROFILE, estimator=None, candidates=[])["set_apart"] == []
+
+
+def _row(segment: int, gain_db: float, excess_dn2: float, intensity_dn: float = 100.0) -> dict:
+    """A cell of the comparison's table: 10 DN^2 of modelled temporal variance, 0.2 DN^2 standard error."""
+    return {"segment": segment, "gain_db": gain_db, "exposure_time_s": 0.01, "sensor_temperature_c": 30.0,
+            "intensity_dn": intensity_dn, "frames": 8, "model_var_dn2": {"temporal": 10.0},
+            "measured_var_dn2": {"temporal": 10.0 + excess_dn2}, "measured_var_err_dn2": {"temporal": 0.2}}
+
+
+def test_only_noise_that_falls_as_the_conditions_rise_is_no_law() -> None:
+    # a law growing with the gain (an excess in proportion to it, of either sign) orders no pair
+    assert noise_events.quieter_than_conditions([_row(i, g, 0.5 * g) for i, g in enumerate((0, 6, 12, 18))]) == set()
+    assert noise_events.quieter_than_conditions([_row(i, g, -0.3 * g) for i, g in enumerate((0, 6, 12, 18))]) == set()
+    # the segment at 6 dB 9 DN^2 noisier than the one at 12 dB: a pair, and only that segment is set apart
+    rows = [_row(0, 0, 0.0), _row(1, 6, 9.0), _row(2, 12, 0.1), _row(3, 18, 0.0)]
+    assert noise_events.quieter_than_conditions(rows) == {(2, 1), (3, 1)}
+    excess = {r["segment"]: r["measured_var_dn2"]["temporal"] - 10.0 for r in rows}
+    assert noise_events.lawless(rows, [0, 1, 2, 3], excess, dict.fromkeys(range(4), 8)) == ({1}, set())
+    # not beyond 5 standard errors, or below 0.5 DN in sigma: no pair
+    assert noise_events.quieter_than_conditions([_row(0, 6, 1.2), _row(1, 12, 0.0)]) == set()
+    assert noise_events.quieter_than_conditions([_row(0, 6, 2.0), _row(1, 12, 0.0)]) == set()
+    # a cell of another intensity bin is no partner (its blocks lie elsewhere: a law of the position)
+    assert noise_events.quieter_than_conditions([_row(0, 6, 9.0, 100.0), _row(1, 12, 0.0, 120.0)]) == set()
