@@ -8,7 +8,8 @@ less what each block's offset, brightness and gradients explain (the light's cha
 block relative to itself over the frames (its intensity's level cancels: no model is needed), and the hold is cut
 where those levels change most (:func:`..monitor.noise_change.change_point`: beyond ``CHANGE_SIGMAS`` standard errors
 and at least ``CHANGE_DN`` in sigma), unless the conditions explain the change (:func:`cut`). Every part is measured
-again on its own, and may be cut again.
+again on its own, and may be cut again; a part of one frame at the hold's edge is not measured (it has no temporal
+noise of its own), its change is kept.
 """
 from __future__ import annotations
 
@@ -26,10 +27,11 @@ from ..monitor.noise_change import BASIS_BLUR, N_BASIS, Level, change_point, ste
 #: most blocks the frames' levels are read on (evenly spread over them): the median over 2,048 blocks of 60
 #: degrees of freedom has a standard error of 0.5 % in variance
 MAX_BLOCKS = 2048
-#: fewest frames on either side of a cut (a part needs two frames for its temporal noise)
-MIN_SIDE_FRAMES = 2
+#: fewest frames on either side of a cut: a lone frame at a hold's edge has no temporal noise of its own, so it is
+#: not measured (``measure.LONE``), but its change is kept (else it pools with the other side's frames)
+MIN_SIDE_FRAMES = 1
 #: fewest frames of a hold searched for a change
-MIN_FRAMES = 2 * MIN_SIDE_FRAMES
+MIN_FRAMES = 4
 #: smallest change (sigma, DN) cut at: what the live monitor cuts its window at with its default alarm threshold
 CHANGE_DN = MonitorConfig.xi_threshold_dn / 2.0
 
@@ -113,8 +115,9 @@ def cut(res: np.ndarray, light: np.ndarray, stepped: np.ndarray, change_dn: floa
     at = change_point(levels, change_dn, MIN_SIDE_FRAMES)
     if not at or stepped[at]:
         return Cut(0)
-    variances = [_variances(side).mean(axis=0) for side in (res[:at], res[at:])]
-    before, after = sigmas(*variances)
+    # a side of one frame: its variance from the whole hold's mean (its own mean is itself)
+    before, after = sigmas(*[(_variances(res[side]) if len(range(k)[side]) > 1 else var[side]).mean(axis=0)
+                             for side in (slice(0, at), slice(at, k))])
     noise = 2.0 * abs(math.log(max(after, 1e-9) / max(before, 1e-9)))
     log_light = np.log(np.maximum(light, 1e-9))
     if np.max(np.abs(log_light - np.median(log_light))) >= noise / 2.0:

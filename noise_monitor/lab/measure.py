@@ -30,6 +30,7 @@ temporal parts of two holds are independent). Blinking pixels are counted per ho
 """
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -79,6 +80,8 @@ TRIM_PIXELS = 4
 MIN_VAR_ERR_DN2 = 0.01
 #: skip reason of frames outside static holds when the sequence has static holds
 NOT_HELD = "not in a static hold (camera moving, or metadata changed at this frame)"
+#: skip reason of a hold's first or last frame alone on its side of a noise change inside the hold
+LONE = "alone on its side of a noise change at its hold's edge (one frame has no temporal noise of its own)"
 #: smallest camera displacement (px) between two holds for a cross-view fixed-pattern measurement
 MIN_PARTNER_SHIFT_PX = 16.0
 #: most partner views per hold
@@ -189,8 +192,6 @@ class SegmentMeasurement:
     #: (:meth:`..measure.temporal.LightChange.percent`, %) and the camera's vibration (rms displacement, px)
     light_pct: float = 0.0
     motion_px: float = 0.0
-    #: the change of the noise this segment starts at, inside a hold (:mod:`.hold_change`)
-    change: NoiseChange | None = None
     last_stamp_ns: int = 0  # the stamp of its last frame
 
     @property
@@ -239,10 +240,15 @@ class Measurements:
     #: cross-view components whose errors took the partner views' spread (the scene showed in their views)
     scene_in_views: list[str] = field(default_factory=list)
 
-    @property
-    def noise_changes(self) -> list[NoiseChange]:
-        """The changes of the noise inside holds, in time order: each cut its hold in two segments."""
-        return [s.change for s in self.segments if s.change is not None]
+    #: the changes of the noise inside holds, in time order (each cut its hold in two; a lone frame on one side of it
+    #: is not measured)
+    noise_changes: list[NoiseChange] = field(default_factory=list)
+
+    def after_changes(self) -> set[int]:
+        """Positions in ``segments`` of the segments a noise change came just before (in their hold, or at the end of
+        the hold before them where the change left one frame there)."""
+        firsts = [s.frames[0] for s in self.segments]
+        return {j for j in (bisect.bisect_left(firsts, c.frame) for c in self.noise_changes) if 0 < j < len(firsts)}
 
     def field_conditions(self) -> dict[str, Any]:
         """What the holds' temporal measurement took out: how many holds (of those measured from frame differences)
@@ -490,9 +496,12 @@ class _SegmentAccumulator:
             return [full]
         before, after = (self._part(lo, hi).finish(grid, shape) for lo, hi in ((0, at), (at, len(self.frames))))
         self.images = []
+        for part in (before, after):
+            part[0].lone = len(part) == 1 and len(part[0].frames) == 1
         # the change's size from the parts on either side of it, once cut again where they changed too (else from the
-        # whole hold's blocks: no block flat and still in both parts)
-        both = before[-1].still & after[0].still
+        # whole hold's blocks: a lone frame, or no block flat and still in both parts)
+        both = (before[-1].still & after[0].still if not (before[-1].lone or after[0].lone)
+                else np.zeros(0, dtype=bool))
         size = (hold_change.sigmas(before[-1].values["temporal"][both], after[0].values["temporal"][both])
                 if both.any() else (found.sigma_before_dn, found.sigma_after_dn))
         after[0].change = NoiseChange(self.frames[at], self.stamps[at], *size)
@@ -639,6 +648,7 @@ class _Full:
     #: (N,) bool: flat, unclipped and without a scene change, whatever its noise did (the blocks a change of the
     #: noise is read on: :mod:`.hold_change`); empty for a single frame
     still: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    lone: bool = False  # a hold's edge frame alone on its side of a noise change (not measured: ``LONE``)
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -675,7 +685,6 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         fixed_square=None if f.square is None else f.square[keep],
         light_pct=f.light_pct,
         motion_px=f.motion_px,
-        change=f.change,
         last_stamp_ns=f.last_stamp_ns,
     )
 
@@ -955,12 +964,16 @@ def measure_frames(
         reasons = ", ".join(f"{k}: {v}" for k, v in skipped.items()) or "no frames"
         raise ValueError(f"no usable frames to measure ({reasons})")
     not_measured: dict[str, str] = {}
+    changes = [s.change for s in segments if s.change is not None]
     held = [s for s in segments if len(s.frames) >= 2]
     if held:
-        single = len(segments) - len(held)
+        lone = sum(s.lone for s in segments)
+        single = len(segments) - len(held) - lone
         if single:  # frames of a pan or between metadata changes: no temporal reference
             skipped[NOT_HELD] = single
-            used -= single
+        if lone:
+            skipped[LONE] = lone
+        used -= single + lone
         for j, s in enumerate(held):
             s.index = j
         segments = held
@@ -994,4 +1007,5 @@ def measure_frames(
         not_measured=not_measured,
         fixed_shape=shape_of_fixed,
         scene_in_views=_widen_where_the_scene_shows(cells),
+        noise_changes=changes,
     )

@@ -49,7 +49,7 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
     excess variance over the model (mean over their cells) lies nearer the event part's than the other part's, until
     the first that does not (between holds a change is not seen: a fault that ends or starts in a pan)."""
     order = [s.index for s in meas.segments]
-    changed = [j for j, s in enumerate(meas.segments) if s.change is not None and j > 0]
+    changed = sorted(meas.after_changes())
     by_segment: dict[int, list[dict[str, Any]]] = {}
     for r in rows:
         by_segment.setdefault(r["segment"], []).append(r)
@@ -154,6 +154,7 @@ def events(meas: Measurements, apart: Apart, rows: Sequence[dict[str, Any]]) -> 
     """The runs of consecutive set-apart segments: time span, whether a change was seen at each end, frames, cells and
     the mean excess variance (measured - model, DN^2 per pixel) per component with its standard error."""
     t0 = meas.segments[0].stamp_ns
+    after_change = meas.after_changes()
     runs: list[list[int]] = []
     for j, seg in enumerate(meas.segments):
         if seg.index in apart.segments:
@@ -175,8 +176,8 @@ def events(meas: Measurements, apart: Apart, rows: Sequence[dict[str, Any]]) -> 
             "segments": [s.index for s in segs],
             "from_s": round((segs[0].stamp_ns - t0) * 1e-9, 4),
             "to_s": round((segs[-1].last_stamp_ns - t0) * 1e-9, 4),
-            "starts_at_change": segs[0].change is not None,
-            "ends_at_change": after < len(meas.segments) and meas.segments[after].change is not None,
+            "starts_at_change": run[0] in after_change,
+            "ends_at_change": after in after_change,
             "frames": sum(s.n_frames for s in segs),
             "alike": [s.index for s in segs if s.index in apart.alike],
             "lawless": [s.index for s in segs if s.index in apart.lawless],

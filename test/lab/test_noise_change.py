@@ -12,7 +12,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.lab import hold_change, noise_events
 from noise_monitor.lab.analyze import analyze
-from noise_monitor.lab.measure import measure_frames
+from noise_monitor.lab.measure import LONE, measure_frames
 from noise_monitor.lab.synthetic import simulate_frames, tiled_scene
 from noise_monitor.monitor.frame import Frame
 from noise_monitor.physics import NoiseModel, load_profile
@@ -182,3 +182,21 @@ def test_only_noise_that_falls_as_the_conditions_rise_is_no_law() -> None:
     assert noise_events.quieter_than_conditions([_row(0, 6, 2.0), _row(1, 12, 0.0)]) == set()
     # a cell of another intensity bin is no partner (its blocks lie elsewhere: a law of the position)
     assert noise_events.quieter_than_conditions([_row(0, 6, 9.0, 100.0), _row(1, 12, 0.0, 120.0)]) == set()
+
+
+@pytest.mark.parametrize("lo,hi,cut,lone", [(15, 32, 15, 15), (16, 33, 33, 32)])
+def test_a_change_that_leaves_one_frame_at_a_holds_edge_drops_that_frame_and_keeps_the_change(
+        lo: int, hi: int, cut: int, lone: int) -> None:
+    """+3 DN white noise over the second of four holds of 16 frames and over the last frame of the first (or the first
+    of the third): the lone frame on its side of the change has no temporal noise of its own and is not measured,
+    under its own reason; the change is kept, and the second hold alone is set apart (the lone frame used to pool with
+    its hold's other frames, a mixed part)."""
+    sweep = (*SWEEP, (6.0, 0.02, 25.0), (12.0, 0.02, 25.0))
+    frames = _extra_noise(simulate_frames(PROFILE, conditions=sweep, frames_per_condition=16, seed=4), lo, hi, 3.0)
+    meas = measure_frames(frames)
+    assert [c.frame for c in meas.noise_changes] == [cut] and meas.skipped == {LONE: 1}
+    assert lone not in {f for s in meas.segments for f in s.frames} and meas.frames_used == 63
+    out = analyze(frames, profile=PROFILE, estimator=None, candidates=[])
+    (event,) = out["set_apart"]
+    assert [(meas.segments[i].frames[0], meas.segments[i].frames[-1]) for i in event["segments"]] == [(16, 31)]
+    assert abs(event["excess_var_dn2"]["temporal"]["dn2"] - 9.0) < 1.0 and out["rms_error_dn"] < 0.05
