@@ -9,8 +9,8 @@ model per component (a fault adding white noise of sigma s shows as +s^2 per pix
 A fault that starts and ends between holds (in pans, at metadata changes) shows no change inside one. It shows as
 noise no law of the conditions makes: every effect's temporal variance grows (in magnitude) with the gain, the
 exposure, the temperature and the signal, so a cell under conditions at least as high in every one as another's
-cannot hold much less excess over the model. The smallest run of segments in time holding every such quieter-than-
-its-conditions cell's partner is set apart (:func:`lawless`), with its neighbours alike to it.
+cannot hold much less excess over the model. The run of segments in time from the first to the last such louder
+segment is set apart (:func:`lawless`), with its neighbours alike to it.
 """
 from __future__ import annotations
 
@@ -79,8 +79,7 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
                 alike.add(order[k])
     apart |= alike
     rest = [i for i in order if i not in apart]
-    run, like = lawless([r for r in rows if r["segment"] not in apart], rest, dict(zip(order, excess)),
-                        {s.index: s.n_frames for s in meas.segments})
+    run, like = lawless([r for r in rows if r["segment"] not in apart], rest, dict(zip(order, excess)))
     return Apart(apart | run, alike | like, run)
 
 
@@ -109,27 +108,18 @@ def quieter_than_conditions(rows: Sequence[dict[str, Any]]) -> set[tuple[int, in
     return pairs
 
 
-def lawless(rows: Sequence[dict[str, Any]], order: Sequence[int], excess: dict[int, float], frames: dict[int, int]
+def lawless(rows: Sequence[dict[str, Any]], order: Sequence[int], excess: dict[int, float]
             ) -> tuple[set[int], set[int]]:
     """(the run of segments set apart as noise no law of the conditions makes, those of them set apart by likeness).
-    The run: the shortest run (fewest ``frames``, then segments) of ``order`` (segment indices in time) that holds the louder segment of every pair of
-    :func:`quieter_than_conditions` and leaves no pair outside it; then its neighbours whose ``excess`` (mean over
-    their cells, DN^2) lies nearer the run's mean than the rest's median, until the first that does not. Empty
-    without a pair, or when no run clears them (the pairs are no one event's)."""
+    The run: the segments of ``order`` (segment indices in time) from the first to the last louder segment of a pair
+    of :func:`quieter_than_conditions` (the shortest run that leaves no pair outside it); then its neighbours whose
+    ``excess`` (mean over their cells, DN^2) lies nearer the run's mean than the rest's median, until the first that
+    does not. Empty without a pair."""
     pairs = quieter_than_conditions(rows)
     if not pairs:
         return set(), set()
-    louder = {b for _, b in pairs}
-    best: tuple[int, int, int, int] | None = None
-    for i in range(len(order)):
-        for j in range(i + 1, len(order) + 1):
-            inside = set(order[i:j])
-            if louder <= inside and not any(a not in inside and b not in inside for a, b in pairs):
-                size = (sum(frames[k] for k in inside), j - i, i, j)
-                best = size if best is None else min(best, size)
-    if best is None:
-        return set(), set()
-    *_, i, j = best
+    where = [order.index(b) for _, b in pairs]
+    i, j = min(where), max(where) + 1
     run = set(order[i:j])
     event = float(np.nanmean([excess[k] for k in run]))
     other = float(np.nanmedian([excess[k] for k in order if k not in run])) if len(run) < len(order) else math.nan

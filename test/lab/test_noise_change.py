@@ -176,7 +176,7 @@ def test_only_noise_that_falls_as_the_conditions_rise_is_no_law() -> None:
     rows = [_row(0, 0, 0.0), _row(1, 6, 9.0), _row(2, 12, 0.1), _row(3, 18, 0.0)]
     assert noise_events.quieter_than_conditions(rows) == {(2, 1), (3, 1)}
     excess = {r["segment"]: r["measured_var_dn2"]["temporal"] - 10.0 for r in rows}
-    assert noise_events.lawless(rows, [0, 1, 2, 3], excess, dict.fromkeys(range(4), 8)) == ({1}, set())
+    assert noise_events.lawless(rows, [0, 1, 2, 3], excess) == ({1}, set())
     # not beyond 5 standard errors, or below 0.5 DN in sigma: no pair
     assert noise_events.quieter_than_conditions([_row(0, 6, 1.2), _row(1, 12, 0.0)]) == set()
     assert noise_events.quieter_than_conditions([_row(0, 6, 2.0), _row(1, 12, 0.0)]) == set()
