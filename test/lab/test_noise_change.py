@@ -200,3 +200,15 @@ def test_a_change_that_leaves_one_frame_at_a_holds_edge_drops_that_frame_and_kee
     (event,) = out["set_apart"]
     assert [(meas.segments[i].frames[0], meas.segments[i].frames[-1]) for i in event["segments"]] == [(16, 31)]
     assert abs(event["excess_var_dn2"]["temporal"]["dn2"] - 9.0) < 1.0 and out["rms_error_dn"] < 0.05
+
+
+def test_the_bundled_field_bags_noise_episode_is_set_apart_and_the_rest_fits() -> None:
+    """The demo bag: +N(0, 5 DN) over frames 40-69 (8.0-13.8 s at 5 Hz), a dusk drive whose gain, exposure and
+    temperature rise throughout, a pan between every few holds: no hold sees the episode start or end. Until
+    2026-11-28 the lab read it as shot-noise-like temporal noise the model lacks (rms error 1.25 DN)."""
+    out = analyze(Path(__file__).resolve().parents[2] / "bags" / "ev76c661_field.mcap", "ev76c661", estimator=None)
+    assert out["measurement"]["noise_changes"] == []
+    (event,) = out["set_apart"]
+    assert (event["from_s"], event["to_s"]) == pytest.approx((8.0, 13.8)) and event["lawless"] == event["segments"]
+    assert np.sqrt(event["excess_var_dn2"]["temporal"]["dn2"]) == pytest.approx(5.0, abs=0.2)
+    assert out["rms_error_dn"] < 0.05 and out["diagnosis"] == "no candidate effect is significant"
