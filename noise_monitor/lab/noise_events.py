@@ -100,11 +100,13 @@ def quieter_than_conditions(rows: Sequence[dict[str, Any]]) -> set[tuple[int, in
     seg = np.array([r["segment"] for r in rows])
     level = np.floor(cond[:, CONDITIONS.index("intensity_dn")] / BIN_WIDTH_DN)
     pairs: set[tuple[int, int]] = set()
-    for a in range(len(rows)):  # one cell against all (memory linear in the cells)
-        broken = (np.all(cond[a] >= cond, axis=1) & (seg != seg[a]) & (level == level[a])
-                  & (size - size[a] > CHANGE_SIGMAS * np.hypot(err, err[a]))
-                  & (np.sqrt(model + size) - np.sqrt(np.maximum(model + size[a], 0.0)) >= CHANGE_DN))
-        pairs.update((int(seg[a]), int(b)) for b in np.unique(seg[broken]))
+    for one in np.unique(level):  # [a, b] within each bin
+        i = np.flatnonzero(level == one)
+        c, m, x, e, g = cond[i], model[i], size[i], err[i], seg[i]
+        broken = (np.all(c[:, None, :] >= c[None, :, :], axis=2) & (g[:, None] != g[None, :])
+                  & (x[None, :] - x[:, None] > CHANGE_SIGMAS * np.hypot(e[None, :], e[:, None]))
+                  & (np.sqrt(m + x)[None, :] - np.sqrt(m[None, :] + x[:, None]) >= CHANGE_DN))
+        pairs.update((int(g[a]), int(g[b])) for a, b in zip(*np.nonzero(broken)))
     return pairs
 
 
