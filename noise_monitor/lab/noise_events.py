@@ -193,13 +193,13 @@ def events_text(changes: Sequence[dict[str, Any]], apart: Sequence[dict[str, Any
         ends = {(True, True): "between two changes", (True, False): "from a change", (False, True): "up to a change",
                 (False, False): "next to a change"}[(ev["starts_at_change"], ev["ends_at_change"])]
         if ev["lawless"] and not (ev["starts_at_change"] or ev["ends_at_change"]):
-            ends = ("no change seen inside a hold: noisier than segments under a gain, exposure, temperature and "
+            ends = ("no change seen inside a hold: further from the model than segments under a gain, exposure, temperature and "
                     "intensity at least as high, which no law of the conditions makes")
         like = "the side of the change" if ev["starts_at_change"] or ev["ends_at_change"] else "the rest of the run"
         alike = f", {len(ev['alike'])} of them by their likeness to {like}" if ev["alike"] else ""
         lines.append(f"set apart {ev['from_s']:.2f}-{ev['to_s']:.2f} s ({ends}; {len(ev['segments'])} segment(s){alike}, {ev['frames']} "
                      f"frames, {ev['cells']} cells): beyond the model {what or 'nothing significant'}; not a function of "
-                     "the conditions (a fault, interference, the driver switching its processing): the model is "
+                     "the conditions (a fault, interference, the driver switching its processing, metadata misstating them): the model is "
                      "compared with the rest")
     return lines
 

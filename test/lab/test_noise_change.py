@@ -212,3 +212,16 @@ def test_the_bundled_field_bags_noise_episode_is_set_apart_and_the_rest_fits() -
     assert (event["from_s"], event["to_s"]) == pytest.approx((8.0, 13.8)) and event["lawless"] == event["segments"]
     assert np.sqrt(event["excess_var_dn2"]["temporal"]["dn2"]) == pytest.approx(5.0, abs=0.2)
     assert out["rms_error_dn"] < 0.05 and out["diagnosis"] == "no candidate effect is significant"
+
+
+def test_metadata_that_misstates_an_episode_is_set_apart_with_its_negative_excess(tmp_path: Path) -> None:
+    """`double_thermal_noise`: the stated thermal white noise doubles for frames 40-69 (8.0-13.8 s at 5 Hz) while the
+    camera's does not. The model overstates those holds, further from it than holds under conditions at least as high:
+    set apart, excess below zero; the rest fits and nothing is claimed."""
+    bag = simulate_bag(tmp_path / "d.mcap", "ev76c661", "double_thermal_noise", frames=100, width=256, height=192,
+                       seed=3, fps=5.0)
+    out = analyze(bag, "ev76c661", estimator=None)
+    (event,) = out["set_apart"]
+    assert (event["from_s"], event["to_s"]) == pytest.approx((8.0, 13.8)) and event["lawless"]
+    assert event["excess_var_dn2"]["temporal"]["dn2"] < -20.0
+    assert out["rms_error_dn"] < 0.05 and out["diagnosis"] == "no candidate effect is significant"
