@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +39,7 @@ class Apart:
 
     segments: set[int]
     alike: set[int]
-    lawless: set[int] = field(default_factory=set)
+    lawless: set[int]
 
 
 def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
