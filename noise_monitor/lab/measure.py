@@ -496,8 +496,8 @@ class _SegmentAccumulator:
             return [full]
         before, after = (self._part(lo, hi).finish(grid, shape) for lo, hi in ((0, at), (at, len(self.frames))))
         self.images = []
-        for part in (before, after):
-            part[0].lone = len(part) == 1 and len(part[0].frames) == 1
+        for part in before + after:  # a part of one frame, here or where a part was cut again
+            part.lone = len(part.frames) == 1
         # the change's size from the parts on either side of it, once cut again where they changed too (else from the
         # whole hold's blocks: a lone frame, or no block flat and still in both parts)
         both = (before[-1].still & after[0].still if not (before[-1].lone or after[0].lone)

@@ -225,3 +225,10 @@ def test_metadata_that_misstates_an_episode_is_set_apart_with_its_negative_exces
     assert (event["from_s"], event["to_s"]) == pytest.approx((8.0, 13.8)) and event["lawless"]
     assert event["excess_var_dn2"]["temporal"]["dn2"] < -20.0
     assert out["rms_error_dn"] < 0.05 and out["diagnosis"] == "no candidate effect is significant"
+
+
+def test_a_lone_frame_left_where_a_part_is_cut_again_is_counted_as_lone() -> None:
+    """+3 DN on frame 0 and on frames 8-15 of a 16-frame hold: cut at 8, then its first part at 1 (frame 0 alone)."""
+    frames = simulate_frames(PROFILE, conditions=SWEEP, frames_per_condition=16, seed=4)
+    meas = measure_frames(_extra_noise(_extra_noise(frames, 0, 1, 3.0), 8, 16, 3.0, seed=5))
+    assert [c.frame for c in meas.noise_changes] == [1, 8] and meas.skipped == {LONE: 1}
