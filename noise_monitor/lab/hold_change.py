@@ -116,8 +116,8 @@ def cut(res: np.ndarray, light: np.ndarray, stepped: np.ndarray, change_dn: floa
     if not at or stepped[at]:
         return Cut(0)
     # a side of one frame: its variance from the whole hold's mean (its own mean is itself)
-    before, after = sigmas(*[(_variances(res[side]) if len(range(k)[side]) > 1 else var[side]).mean(axis=0)
-                             for side in (slice(0, at), slice(at, k))])
+    before, after = sigmas(*[(_variances(res[lo:hi]) if hi - lo > 1 else var[lo:hi]).mean(axis=0)
+                             for lo, hi in ((0, at), (at, k))])
     noise = 2.0 * abs(math.log(max(after, 1e-9) / max(before, 1e-9)))
     log_light = np.log(np.maximum(light, 1e-9))
     if np.max(np.abs(log_light - np.median(log_light))) >= noise / 2.0:
