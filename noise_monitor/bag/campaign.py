@@ -180,16 +180,22 @@ def vignetting(height: int, width: int, strength: float) -> np.ndarray:
 
 
 def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray,
-           shake: tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, tuple[float, float]]:
+           shake: np.ndarray | tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, tuple[float, float]]:
     """The clean view (DN, float32) of a frame: bilinear sub-pixel crop of the world, times the
     brightness and the vignetting, clipped to 0..255; and its nominal top-left corner in world pixels.
-    ``shake``: the view's displacement (dx, dy, px) from that corner by vibration."""
+    ``shake``: the view's displacement (dx, dy, px) from that corner by vibration, or (n, 2) displacements over
+    the exposure (:func:`vibration_during_exposure`), whose views the sensor integrates (their mean)."""
     h, w = vignette.shape
     x = fp.x * (world.shape[1] - w - 1)
     y = fp.y * (world.shape[0] - h - 1)
-    cx = min(max(x + shake[0], 0.0), world.shape[1] - w - 1.0) + (w - 1) / 2.0
-    cy = min(max(y + shake[1], 0.0), world.shape[0] - h - 1.0) + (h - 1) / 2.0
-    win = cv2.getRectSubPix(world, (w, h), (cx, cy))
+    win = np.zeros((h, w), dtype=np.float32)
+    path = np.asarray(shake, dtype=np.float64).reshape(-1, 2)
+    for dx, dy in path:
+        cx = min(max(x + dx, 0.0), world.shape[1] - w - 1.0) + (w - 1) / 2.0
+        cy = min(max(y + dy, 0.0), world.shape[0] - h - 1.0) + (h - 1) / 2.0
+        win += cv2.getRectSubPix(world, (w, h), (cx, cy))
+    if len(path) > 1:
+        win /= np.float32(len(path))
     return np.clip(win * vignette * np.float32(fp.brightness), 0.0, 255.0), (round(x, 4), round(y, 4))
 
 
@@ -197,6 +203,28 @@ def vibration(rng: np.random.Generator, frames: int, rms_px: float) -> np.ndarra
     """(frames, 2) displacements (dx, dy, px) of a vibrating camera, independent from frame to frame (a
     vibration far faster than the frame rate), Gaussian with ``rms_px`` per axis."""
     return rng.normal(0.0, rms_px, (frames, 2)) if rms_px > 0 else np.zeros((frames, 2))
+
+
+#: instants per vibration period at which :func:`vibration_during_exposure` samples a frame's exposure, and at most
+#: per frame
+SAMPLES_PER_PERIOD, MAX_EXPOSURE_SAMPLES = 16, 64
+
+
+def vibration_during_exposure(rng: np.random.Generator, exposures_s: Sequence[float], rms_px: float,
+                              hz: float) -> list[np.ndarray]:
+    """Per frame, (n, 2) displacements (dx, dy, px) of a camera vibrating at ``hz`` over the frame's exposure: a
+    sinusoid per axis of ``rms_px`` rms, its phases random per frame and axis (the frame clock runs free of the
+    vibration), sampled at n evenly spaced instants (``SAMPLES_PER_PERIOD`` per period, at least one). A short
+    exposure freezes one displacement; one of about half a period or more smears the view along the path (motion
+    blur that changes from frame to frame); over many periods every frame sees the same blur about the pose."""
+    amplitude = math.sqrt(2.0) * rms_px
+    out = []
+    for t_exp in exposures_s:
+        n = int(min(MAX_EXPOSURE_SAMPLES, max(1, math.ceil(SAMPLES_PER_PERIOD * hz * t_exp))))
+        phase = rng.uniform(0.0, 2.0 * math.pi, 2)
+        t = (np.arange(n) + 0.5) / n * t_exp
+        out.append(amplitude * np.sin(2.0 * math.pi * hz * t[:, None] + phase[None, :]))
+    return out
 
 
 @dataclass(frozen=True)

@@ -77,6 +77,8 @@ MAX_FRAMES = 1_000_000
 MAX_FPS = 10_000.0
 #: largest rms vibration (px per axis) of a simulated campaign camera
 MAX_VIBRATION_PX = 5.0
+#: largest vibration frequency (Hz) during the exposure
+MAX_VIBRATION_HZ = 1000.0
 #: largest rms light flicker (%) of a simulated recording
 MAX_FLICKER_PCT = 20.0
 #: largest rms auto-exposure wander (%) of a simulated recording, and its correlation from frame to frame
@@ -89,6 +91,7 @@ class FieldConditions(TypedDict, total=False):
     """A recording's field conditions, keywords of :func:`simulate_bag`."""
 
     vibration_px: float
+    vibration_hz: float
     flicker_pct: float
     banding_pct: float
     mains_hz: float
@@ -116,6 +119,7 @@ def simulate_bag(
     images: ImageSet | None = None,
     moving_objects: int = 0,
     vibration_px: float = 0.0,
+    vibration_hz: float = 0.0,
     flicker_pct: float = 0.0,
     banding_pct: float = 0.0,
     mains_hz: float = MAINS_HZ,
@@ -140,7 +144,11 @@ def simulate_bag(
     painted into the clean view before the noise, from their own random generator (the campaign is that of the
     seed without them). ``vibration_px``: a campaign camera that vibrates, its view displaced every frame by an
     independent Gaussian of this rms per axis (:func:`.campaign.vibration`, own generator; the truth's
-    ``offset_px`` and ``moving`` stay the nominal pose's, ``shake_px`` holds the displacement). ``flicker_pct``:
+    ``offset_px`` and ``moving`` stay the nominal pose's, ``shake_px`` holds the displacement). ``vibration_hz``: the
+    camera vibrates at this frequency instead, sinusoidally, during each frame's exposure
+    (:func:`.campaign.vibration_during_exposure`, own generator): exposures of about half a period or more smear the
+    view (motion blur changing from frame to frame; truth ``shake_px`` the mean displacement, ``blur_px`` the rms
+    about it). ``flicker_pct``:
     lights that flicker, the scene's brightness scaled every frame by 1 + an independent Gaussian of this rms (%),
     before the noise (own generator; truth ``flicker_gain``). ``banding_pct``: lamps on ``mains_hz`` mains whose light
     is modulated by this depth (%), seen through a rolling shutter of ``line_time_s`` per row
@@ -176,6 +184,10 @@ def simulate_bag(
         raise ValueError(f"moving_objects must be 0-100, got {moving_objects}")
     if not 0 <= vibration_px <= MAX_VIBRATION_PX:
         raise ValueError(f"vibration_px must be 0-{MAX_VIBRATION_PX:g} px, got {vibration_px}")
+    if not 0 <= vibration_hz <= MAX_VIBRATION_HZ:
+        raise ValueError(f"vibration_hz must be 0-{MAX_VIBRATION_HZ:g} Hz, got {vibration_hz}")
+    if vibration_hz and not vibration_px:
+        raise ValueError("vibration_hz is the frequency of a vibration: give vibration_px too")
     if not 0 <= flicker_pct <= MAX_FLICKER_PCT:
         raise ValueError(f"flicker_pct must be 0-{MAX_FLICKER_PCT:g} %, got {flicker_pct}")
     if not 0 <= banding_pct <= 100:
@@ -223,6 +235,10 @@ def simulate_bag(
         positions = np.stack([camera_path(np.array(u), s.moving) for u, s in zip(us, steps)])
     if auto_exposure_pct:
         steps = [replace(s, exposure_time_s=s.exposure_time_s * float(f)) for s, f in zip(steps, hunt)]
+    if scen.campaign:  # each frame's displacements over its exposure (one unless the vibration has a frequency)
+        paths = (campaign.vibration_during_exposure(np.random.default_rng([seed, 6]),
+                                                    [s.exposure_time_s for s in steps], vibration_px, vibration_hz)
+                 if vibration_hz else list(shakes[:, None, :]))
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
     hw = hardware_id or prof.name
@@ -237,7 +253,7 @@ def simulate_bag(
                                       sensor_temperature_c=step.sensor_temperature_c)
             stated = _stated(true_meta, step)
             if scen.campaign:
-                clean, offset = campaign.render(world, plans[i], vignette, (shakes[i, 0], shakes[i, 1]))
+                clean, offset = campaign.render(world, plans[i], vignette, paths[i])
                 if movers:
                     clean = campaign.paint(clean, movers, i)[0]
             else:
@@ -272,7 +288,9 @@ def simulate_bag(
                 "corrupted": step.corrupted,
                 "brightness": round(step.brightness, 5),
                 "offset_px": list(offset),
-                **({"shake_px": [round(float(v), 4) for v in shakes[i]]} if vibration_px else {}),
+                **({"shake_px": [round(float(v), 4) for v in paths[i].mean(axis=0)]} if vibration_px else {}),
+                **({"blur_px": round(float(np.sqrt(np.mean(np.sum((paths[i] - paths[i].mean(axis=0)) ** 2, axis=1)))),
+                                     4)} if vibration_hz else {}),
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 **({"exposure_factor": round(float(hunt[i]), 6)} if auto_exposure_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
@@ -289,6 +307,7 @@ def simulate_bag(
         **({"images": list(images.names), "images_key": images.key} if images is not None else {}),
         **({"moving_objects": moving_objects} if moving_objects else {}),
         **({"vibration_px": vibration_px} if vibration_px else {}),
+        **({"vibration_hz": vibration_hz} if vibration_hz else {}),
         **({"flicker_pct": flicker_pct} if flicker_pct else {}),
         **({"auto_exposure_pct": auto_exposure_pct} if auto_exposure_pct else {}),
         **({"banding_pct": banding_pct, "mains_hz": mains_hz, "line_time_s": line_time_s} if banding_pct else {}),

@@ -54,6 +54,10 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vibration", type=float, default=0.0, metavar="PX",
                         help="campaign scenarios: the camera vibrates, its view displaced every frame by PX rms per "
                              "axis, independently (a parked robot with its motors running; default 0)")
+    parser.add_argument("--vibration-hz", type=float, default=0.0, metavar="HZ",
+                        help="with --vibration: the camera vibrates sinusoidally at HZ during each exposure, so "
+                             "exposures of about half a period or more smear the view (motion blur changing from "
+                             "frame to frame; default 0: each frame frozen at one displacement)")
     parser.add_argument("--flicker", type=float, default=0.0, metavar="PCT",
                         help="lights that flicker: the scene's brightness scaled every frame by 1 + PCT %% rms, "
                              "independently (default 0)")
@@ -76,9 +80,11 @@ def field_keywords(args: argparse.Namespace) -> FieldConditions:
     without it)."""
     if not args.banding and (args.mains_hz is not None or args.line_us is not None):
         raise ValueError("--mains-hz and --line-us shape the lamps' bands: give --banding PCT too")
+    if args.vibration_hz and not args.vibration:
+        raise ValueError("--vibration-hz is the frequency of a vibration: give --vibration PX too")
     mains_hz = MAINS_HZ if args.mains_hz is None else args.mains_hz
     line_time_s = LINE_TIME_S if args.line_us is None else args.line_us * 1e-6
-    return {"vibration_px": args.vibration, "flicker_pct": args.flicker, "banding_pct": args.banding,
+    return {"vibration_px": args.vibration, "vibration_hz": args.vibration_hz, "flicker_pct": args.flicker, "banding_pct": args.banding,
             "mains_hz": mains_hz, "line_time_s": line_time_s, "auto_exposure_pct": args.auto_exposure}
 
 

@@ -165,6 +165,45 @@ def test_a_vibrating_campaign_camera_shakes_about_its_nominal_pose(tmp_path) -> 
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "campaign", frames=4, vibration_px=9.0)
 
 
+def test_a_camera_vibrating_during_the_exposure_smears_its_view(tmp_path, capsys) -> None:
+    """``--vibration-hz``: the camera oscillates at that frequency during each exposure, so a frame integrates
+    the views along its path: a short exposure freezes one displacement, one of many periods smears it about
+    the pose (truth ``blur_px``, the rms about the mean ``shake_px``). Without a frequency the bag is that of
+    ``--vibration`` alone (one displacement per frame, as before)."""
+    rng = np.random.default_rng(0)
+    short, long_ = campaign.vibration_during_exposure(rng, [1e-4, 0.5], 0.4, 50.0)
+    assert short.shape == (1, 2) and long_.shape == (campaign.MAX_EXPOSURE_SAMPLES, 2)
+    assert np.sqrt(np.mean(long_**2, axis=0)) == pytest.approx([0.4, 0.4], rel=0.05)  # 25 periods: the rms asked
+    paths = campaign.vibration_during_exposure(rng, [1e-4] * 4000, 0.4, 50.0)
+    assert np.std(np.concatenate(paths), axis=0) == pytest.approx([0.4, 0.4], rel=0.05)
+    world = np.random.default_rng(1).uniform(0, 255, (80, 90)).astype(np.float32)
+    plan = campaign.FramePlan(0.3, 0.6, 0.0, 0.01, 30.0, 1.0, False, 0)
+    vignette = np.ones((40, 50), np.float32)
+    one = campaign.render(world, plan, vignette, (0.2, -0.1))[0]
+    assert np.array_equal(one, campaign.render(world, plan, vignette, np.array([[0.2, -0.1]]))[0])
+    mean = np.mean([campaign.render(world, plan, vignette, s)[0] for s in ((0.0, 0.0), (0.5, 0.0))], axis=0)
+    assert campaign.render(world, plan, vignette, np.array([[0.0, 0.0], [0.5, 0.0]]))[0] == pytest.approx(mean, abs=1e-4)
+
+    kw = {"frames": 30, "seed": 3, "vibration_px": 0.5}
+    frozen = load_truth(simulate_bag(tmp_path / "a.mcap", "ev76c661", "campaign_heldout", **kw))
+    smeared = load_truth(simulate_bag(tmp_path / "b.mcap", "ev76c661", "campaign_heldout", vibration_hz=60.0, **kw))
+    assert smeared["vibration_hz"] == 60.0 and "vibration_hz" not in frozen
+    assert "blur_px" not in frozen["frames"][0]
+    exposure = np.array([f["true_metadata"]["exposure_time_s"] for f in smeared["frames"]])
+    blur = np.array([f["blur_px"] for f in smeared["frames"]])
+    periods = exposure * 60.0
+    assert blur[periods > 3] == pytest.approx(0.5 * np.sqrt(2.0), abs=0.03)  # the same smear in every frame
+    half = blur[(periods > 0.4) & (periods < 0.6)]  # half a period: a smear that changes from frame to frame
+    assert half.size >= 10 and 0.3 < half.min() and half.max() < 0.75 and half.std() > 0.05
+    for a, b in zip(frozen["frames"], smeared["frames"]):
+        assert (a["offset_px"], a["hold"], a["true_metadata"]) == (b["offset_px"], b["hold"], b["true_metadata"])
+    with pytest.raises(ValueError, match="vibration_px too"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "campaign", frames=4, vibration_hz=50.0)
+    assert main(["simulate-bag", str(tmp_path / "c.mcap"), "--profile", "ev76c661", "--scenario", "campaign",
+                 "--frames", "4", "--vibration-hz", "50"]) == 2
+    assert "give --vibration PX too" in capsys.readouterr().err
+
+
 def test_mains_lights_band_a_rolling_shutter_image(tmp_path) -> None:
     """``--banding``: lamps on 50 Hz mains modulated by 30 %, each row exposed 30 us after the previous: every
     frame's rows scaled by the light averaged over their exposure (``rolling_shutter_gain`` at the frame's random
