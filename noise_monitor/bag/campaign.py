@@ -227,6 +227,12 @@ def vibration_during_exposure(rng: np.random.Generator, exposures_s: Sequence[fl
     return out
 
 
+def smear_px(path: np.ndarray) -> float:
+    """The rms (px) of a frame's displacements over its exposure (n, 2) about their mean: its motion blur."""
+    d = path - path.mean(axis=0)
+    return math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
+
+
 @dataclass(frozen=True)
 class MovingObject:
     """An object crossing the view (a person or a vehicle passing a parked camera), in view coordinates: its

@@ -251,7 +251,7 @@ def test_a_camera_vibrating_during_the_exposure_keeps_its_hold_and_measures_the_
     a shift (`simulate-bag --vibration-hz`). The hold goes on and the smear stays out of the measured noise."""
     clean = photo()
     paths = campaign.vibration_during_exposure(np.random.default_rng(8), [0.01] * 12, 0.4, 50.0)
-    smear = [float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1)))) for p in paths]
+    smear = [campaign.smear_px(p) for p in paths]
     assert max(smear) - min(smear) > 0.15  # a smear (0.3-0.6 px rms) that changes from frame to frame
     cleans = [np.mean([shifted(clean, dx, dy) for dx, dy in p], axis=0) for p in paths]
     mon, results, noise = run(estimator, cleans, NoiseModel(), seed=5)
