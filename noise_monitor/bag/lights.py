@@ -29,3 +29,27 @@ def rolling_shutter_gain(height: int, exposure_s: float, phase: float, depth: fl
     f = LIGHT_PER_MAINS * mains_hz
     mid = np.arange(height) * line_s + 0.5 * exposure_s
     return 1.0 + banding_depth(depth, exposure_s, mains_hz) * np.sin(2.0 * np.pi * f * mid + phase)
+
+
+def _pwm_on_time(t: np.ndarray, period: float, duty: float) -> np.ndarray:
+    """Time the PWM light has been on from 0 to ``t`` (on for the first ``duty`` of every ``period``)."""
+    n = np.floor(t / period)
+    return n * duty * period + np.minimum(t - n * period, duty * period)
+
+
+def pwm_gain(height: int, exposure_s: float, phase: float, depth: float, hz: float, duty: float,
+             line_s: float) -> np.ndarray:
+    """(height,) relative brightness of each row of one frame under an LED dimmed by pulse-width modulation: full
+    for ``duty`` of each period of 1 / ``hz``, ``1 - depth`` of that otherwise (``phase``: where in the period the
+    first row's exposure starts), averaged over each row's exposure (which starts ``line_s`` after the previous
+    row's) and divided by the light's mean: trapezoidal bands, with sharp edges at exposures short of a period."""
+    period = 1.0 / hz
+    start = np.arange(height) * line_s + phase / (2.0 * np.pi) * period
+    on = (_pwm_on_time(start + exposure_s, period, duty) - _pwm_on_time(start, period, duty)) / exposure_s
+    return ((1.0 - depth) + depth * on) / ((1.0 - depth) + depth * duty)
+
+
+def pwm_depth(depth: float, exposure_s: float, hz: float, duty: float) -> float:
+    """Half the peak-to-peak of :func:`pwm_gain` over the rows: the bands' depth."""
+    g = pwm_gain(1000, exposure_s, 0.0, depth, hz, duty, 1.0 / (hz * 1000))  # one period over 1,000 rows
+    return float(g.max() - g.min()) / 2.0

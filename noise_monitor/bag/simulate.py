@@ -25,7 +25,7 @@ from noise_monitor.physics import CameraMetadata, CameraProfile, NoiseModel, loa
 from noise_monitor.physics.metadata import DYNAMIC_FIELDS
 
 from . import campaign
-from .lights import banding_depth, rolling_shutter_gain
+from .lights import banding_depth, pwm_depth, pwm_gain, rolling_shutter_gain
 from .messages import camera_info_msg, image_msg, metadata_msg
 from .scenarios import SCENARIOS, Step, get_scenario
 from .scenes import camera_path, make_world, view
@@ -79,6 +79,8 @@ MAX_FPS = 10_000.0
 MAX_VIBRATION_PX = 5.0
 #: largest vibration frequency (Hz) during the exposure
 MAX_VIBRATION_HZ = 1000.0
+#: largest PWM frequency (Hz) of a dimmed LED lamp, and the default fraction of its period it is on
+MAX_PWM_HZ, PWM_DUTY = 100_000.0, 0.5
 #: largest rms light flicker (%) of a simulated recording
 MAX_FLICKER_PCT = 20.0
 #: largest rms auto-exposure wander (%) of a simulated recording, and its correlation from frame to frame
@@ -96,6 +98,8 @@ class FieldConditions(TypedDict, total=False):
     banding_pct: float
     mains_hz: float
     line_time_s: float
+    pwm_hz: float
+    pwm_duty: float
     auto_exposure_pct: float
 
 
@@ -124,6 +128,8 @@ def simulate_bag(
     banding_pct: float = 0.0,
     mains_hz: float = MAINS_HZ,
     line_time_s: float = LINE_TIME_S,
+    pwm_hz: float = 0.0,
+    pwm_duty: float = PWM_DUTY,
     auto_exposure_pct: float = 0.0,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
@@ -154,7 +160,9 @@ def simulate_bag(
     is modulated by this depth (%), seen through a rolling shutter of ``line_time_s`` per row
     (:func:`.lights.rolling_shutter_gain`: bands that deepen as the exposure shortens), the frame clock running free
     of the mains (each frame meets the light at a random phase, own generator; truth ``banding_phase`` and the
-    exposure-averaged ``banding_depth``). ``auto_exposure_pct``: a live driver's auto-exposure hunting under steady
+    exposure-averaged ``banding_depth``). ``pwm_hz``: the lamps are LEDs dimmed by pulse-width modulation at this
+    frequency instead, full for ``pwm_duty`` of each period and ``banding_pct`` % dimmer otherwise
+    (:func:`.lights.pwm_gain`: trapezoidal bands, sharp-edged at exposures short of a period). ``auto_exposure_pct``: a live driver's auto-exposure hunting under steady
     light, every frame's exposure (and with it the image's brightness) off the plan's by a smooth wander of this rms
     (%) (:func:`auto_exposure_wander`, own generator; the metadata report it; truth ``exposure_factor``).
     """
@@ -196,6 +204,10 @@ def simulate_bag(
         raise ValueError(f"mains_hz must be in (0, 1000] Hz, got {mains_hz}")
     if not 0 < line_time_s <= 1e-3:
         raise ValueError(f"line_time_s must be in (0, 1e-3] s, got {line_time_s}")
+    if not 0 <= pwm_hz <= MAX_PWM_HZ or not 0 < pwm_duty < 1:
+        raise ValueError(f"pwm_hz must be 0-{MAX_PWM_HZ:g} Hz and pwm_duty in (0, 1), got {pwm_hz}, {pwm_duty}")
+    if pwm_hz and not banding_pct:
+        raise ValueError("pwm_hz dims the lamps whose bands banding_pct sets: give banding_pct too")
     if not 0 <= auto_exposure_pct <= MAX_AUTO_EXPOSURE_PCT:
         raise ValueError(f"auto_exposure_pct must be 0-{MAX_AUTO_EXPOSURE_PCT:g} %, got {auto_exposure_pct}")
     if scen.name == "ptc":
@@ -262,8 +274,10 @@ def simulate_bag(
             if flicker_pct or auto_exposure_pct:  # the light's flicker, the exposure's wander: both scale the scene
                 clean = np.clip(clean * np.float32(flicker[i] * hunt[i]), 0.0, 255.0).astype(np.float32)
             if banding_pct:
-                bands = rolling_shutter_gain(height, true_meta.exposure_time_s, float(band_phase[i]),
-                                             banding_pct / 100.0, mains_hz, line_time_s)
+                bands = (pwm_gain(height, true_meta.exposure_time_s, float(band_phase[i]), banding_pct / 100.0, pwm_hz,
+                                  pwm_duty, line_time_s) if pwm_hz else
+                         rolling_shutter_gain(height, true_meta.exposure_time_s, float(band_phase[i]),
+                                              banding_pct / 100.0, mains_hz, line_time_s))
                 clean = np.clip(clean * bands[:, None].astype(np.float32), 0.0, 255.0).astype(np.float32)
             noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
             if frame_hook is not None:
@@ -293,7 +307,9 @@ def simulate_bag(
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 **({"exposure_factor": round(float(hunt[i]), 6)} if auto_exposure_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
-                    "banding_depth": round(banding_depth(banding_pct / 100.0, true_meta.exposure_time_s, mains_hz), 6)}
+                    "banding_depth": round(pwm_depth(banding_pct / 100.0, true_meta.exposure_time_s, pwm_hz, pwm_duty)
+                                           if pwm_hz else
+                                           banding_depth(banding_pct / 100.0, true_meta.exposure_time_s, mains_hz), 6)}
                    if banding_pct else {}),
                 "moving": prev_offset is not None and offset != prev_offset,
                 **({"hold": plans[i].hold} if scen.campaign else {}),
@@ -309,7 +325,8 @@ def simulate_bag(
         **({"vibration_hz": vibration_hz} if vibration_hz else {}),
         **({"flicker_pct": flicker_pct} if flicker_pct else {}),
         **({"auto_exposure_pct": auto_exposure_pct} if auto_exposure_pct else {}),
-        **({"banding_pct": banding_pct, "mains_hz": mains_hz, "line_time_s": line_time_s} if banding_pct else {}),
+        **({"banding_pct": banding_pct, "line_time_s": line_time_s,
+            **({"pwm_hz": pwm_hz, "pwm_duty": pwm_duty} if pwm_hz else {"mains_hz": mains_hz})} if banding_pct else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
         "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "

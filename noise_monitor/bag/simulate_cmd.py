@@ -11,7 +11,7 @@ from noise_monitor.physics import load_plugin_file
 
 from .campaign import MIN_PHOTO_SIDE
 from .scenarios import SCENARIOS
-from .simulate import LINE_TIME_S, MAINS_HZ, START_NS, FieldConditions, load_truth, simulate_bag, truth_path
+from .simulate import LINE_TIME_S, MAINS_HZ, PWM_DUTY, START_NS, FieldConditions, load_truth, simulate_bag, truth_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,6 +69,11 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"mains frequency of --banding (default {MAINS_HZ:g})")
     parser.add_argument("--line-us", type=float, default=None,
                         help=f"rolling shutter line time of --banding in microseconds (default {LINE_TIME_S * 1e6:g})")
+    parser.add_argument("--pwm-hz", type=float, default=None,
+                        help="with --banding: the lamps are LEDs dimmed by pulse-width modulation at this frequency "
+                             "instead of lamps on the mains (square-wave light: sharp-edged bands at short exposures)")
+    parser.add_argument("--pwm-duty", type=float, default=None,
+                        help=f"fraction of each --pwm-hz period the LEDs are on (default {PWM_DUTY:g})")
     parser.add_argument("--auto-exposure", type=float, default=0.0, metavar="PCT",
                         help="a live driver's auto-exposure hunting under steady light: every frame's exposure, and "
                              "the image's brightness with it, wanders about the scenario's by PCT %% rms (correlated "
@@ -78,14 +83,20 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
 def field_keywords(args: argparse.Namespace) -> FieldConditions:
     """The ``simulate_bag`` keywords of :func:`add_field_arguments`' options (ValueError: options of the banding
     without it)."""
-    if not args.banding and (args.mains_hz is not None or args.line_us is not None):
-        raise ValueError("--mains-hz and --line-us shape the lamps' bands: give --banding PCT too")
+    if not args.banding and (args.mains_hz is not None or args.line_us is not None or args.pwm_hz is not None
+                             or args.pwm_duty is not None):
+        raise ValueError("--mains-hz, --line-us, --pwm-hz and --pwm-duty shape the lamps' bands: give --banding PCT too")
+    if args.pwm_hz is not None and args.mains_hz is not None:
+        raise ValueError("--pwm-hz dims LEDs instead of lamps on the mains: give one of --pwm-hz and --mains-hz")
+    if args.pwm_duty is not None and args.pwm_hz is None:
+        raise ValueError("--pwm-duty is the duty cycle of --pwm-hz: give --pwm-hz HZ too")
     if args.vibration_hz and not args.vibration:
         raise ValueError("--vibration-hz is the frequency of a vibration: give --vibration PX too")
     mains_hz = MAINS_HZ if args.mains_hz is None else args.mains_hz
     line_time_s = LINE_TIME_S if args.line_us is None else args.line_us * 1e-6
     return {"vibration_px": args.vibration, "vibration_hz": args.vibration_hz, "flicker_pct": args.flicker, "banding_pct": args.banding,
-            "mains_hz": mains_hz, "line_time_s": line_time_s, "auto_exposure_pct": args.auto_exposure}
+            "mains_hz": mains_hz, "line_time_s": line_time_s, "auto_exposure_pct": args.auto_exposure,
+            "pwm_hz": args.pwm_hz or 0.0, "pwm_duty": PWM_DUTY if args.pwm_duty is None else args.pwm_duty}
 
 
 def _start_ns(text: str | None) -> int:

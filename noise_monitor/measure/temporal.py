@@ -10,7 +10,9 @@ Three steps, no model and no lab dependencies (the live monitor reuses them for 
 2. :func:`block_temporal` on a static run: first each frame's light change against the run mean (a flicker, a
    rolling shutter's bands under lamps on the mains: :func:`light_change`) is fitted on the blocks' means and
    taken out (:meth:`LightChange.undo`: noise that follows the light is weighed without bias); then per B x B block, each frame's deviation from the run's temporal mean is regressed on what scene changes would put there (a per-frame offset, a brightness
-   scaling ``mean - <mean>``, and sub-pixel motion: the mean image's x and y gradients). For pure noise
+   scaling ``mean - <mean>``, and sub-pixel motion: the mean image's x and y gradients; when the light changed, also a
+   brightness changing along the block's rows: the sharp edges of an LED's pulse-width-modulated bands, which the
+   light's smooth profile does not follow, are no noise). For pure noise
    the explained energy is a small, F-distributed fraction; a block is accepted when its F-test
    p-value exceeds ``p_value`` (residual motion, light changing in part of the view or a moving object reject it).
 3. For accepted blocks, the temporal variance is the per-pixel variance over the run, averaged over the
@@ -230,6 +232,12 @@ def _regression(x: np.ndarray, b: int, use: np.ndarray, deviations: tuple[np.nda
                        blocks_of(gy, b)], axis=2) * use[:, :, None]
     q, _ = np.linalg.qr(design)
     return mb, d, q, np.einsum("knp,npr->knr", d, q, optimize=True)  # batched products: 10x faster than plain einsum
+
+
+def _row_ramp(b: int) -> np.ndarray:
+    """(b*b,) each pixel's row in a b x b block about the block's middle row: with the block's levels, the regressor
+    of a brightness that changes along the rows (a rolling shutter's band edge the light's smooth fit missed)."""
+    return np.repeat(np.arange(b) - (b - 1) / 2.0, b)
 
 
 def blocks_of(img: np.ndarray, b: int) -> np.ndarray:
@@ -539,10 +547,16 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
         raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
     light, x, displacement, blocks = light_and_motion(x, block, view_rows, use)
     mb, d, q, coef = _regression(x, block, use, blocks)
-    explained = np.sum(coef**2, axis=(0, 2))
+    if light is not None:  # what the light's fit left may change the brightness along the block's rows too
+        q_test = np.linalg.qr(np.concatenate([q, (mb * _row_ramp(block) * use)[:, :, None]], axis=2))[0]
+        c_test = np.einsum("knp,npr->knr", d, q_test, optimize=True)
+    else:
+        q_test, c_test = q, coef
+    nreg = q_test.shape[2]
+    explained = np.sum(c_test**2, axis=(0, 2))
     total = np.sum(d * d, axis=(0, 2))
-    m = np.maximum(use.sum(axis=1), N_REGRESSORS + 2)  # pixels used per block
-    d1, d2 = N_REGRESSORS * (k - 1), (k - 1) * (m - N_REGRESSORS)
+    m = np.maximum(use.sum(axis=1), nreg + 2)  # pixels used per block
+    d1, d2 = nreg * (k - 1), (k - 1) * (m - nreg)
     ratio = (explained / d1) / np.maximum((total - explained) / d2, 1e-12)
     p = f_dist.sf(ratio, d1, d2)
     still = p > p_value

@@ -8,7 +8,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from noise_monitor.bag import campaign
-from noise_monitor.bag.lights import rolling_shutter_gain
+from noise_monitor.bag.lights import pwm_depth, pwm_gain, rolling_shutter_gain
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.scenarios import EPISODE, SCENARIOS, get_scenario
 from noise_monitor.bag.scenes import camera_path, make_world, view
@@ -280,6 +280,35 @@ def test_the_ptc_recording_takes_the_camera_id_and_start_and_refuses_field_condi
     for kw in ({"flicker_pct": 2.0}, {"banding_pct": 30.0}, {"auto_exposure_pct": 5.0}):
         with pytest.raises(ValueError, match="photon-transfer recording"):
             simulate_bag(tmp_path / "x.mcap", "generic", "ptc", frames=60, width=32, height=32, **kw)
+
+
+def test_leds_dimmed_by_pwm_band_a_rolling_shutter_image(tmp_path, capsys) -> None:
+    """``--banding PCT --pwm-hz HZ --pwm-duty D``: LEDs dimmed by pulse-width modulation instead of lamps on the
+    mains. Each row averages a square wave over its exposure: at an exposure far short of the period the rows see
+    the light on or off (sharp-edged bands, 0 to 1 / D of the mean at 100 % depth), over whole periods no band;
+    the mean over whole periods is the light's mean. The truth names the LED, not the mains."""
+    short = pwm_gain(4000, 1e-6, 0.7, 1.0, 500.0, 0.3, 30e-6)
+    assert short.min() == pytest.approx(0.0, abs=1e-9) and short.max() == pytest.approx(1 / 0.3)
+    assert np.mean(short[:3000]) == pytest.approx(1.0, abs=0.01)  # 3,000 rows of 30 us: 45 periods
+    assert np.ptp(pwm_gain(500, 0.004, 0.7, 1.0, 500.0, 0.3, 30e-6)) < 1e-9  # two whole periods
+    half = pwm_gain(500, 0.001, 0.7, 0.5, 500.0, 0.3, 30e-6)
+    assert (np.ptp(half) / 2 == pytest.approx(pwm_depth(0.5, 0.001, 500.0, 0.3), rel=0.02)
+            and pwm_depth(0.5, 0.001, 500.0, 0.3) < pwm_depth(1.0, 0.001, 500.0, 0.3))
+    truth = load_truth(simulate_bag(tmp_path / "a.mcap", "ev76c661", "campaign_heldout", frames=12, seed=3,
+                                    banding_pct=100.0, pwm_hz=500.0, pwm_duty=0.3))
+    assert (truth["pwm_hz"], truth["pwm_duty"]) == (500.0, 0.3) and "mains_hz" not in truth
+    for f in truth["frames"]:
+        assert f["banding_depth"] == pytest.approx(pwm_depth(1.0, f["true_metadata"]["exposure_time_s"], 500.0, 0.3),
+                                                   abs=1e-6)
+    from noise_monitor.cli import main as cli_main
+
+    base = ["simulate-bag", str(tmp_path / "x.mcap"), "--profile", "ev76c661", "--scenario", "static", "--frames", "2"]
+    for extra, message in ((["--pwm-hz", "500"], "give --banding PCT too"),
+                           (["--banding", "50", "--pwm-hz", "500", "--mains-hz", "60"], "give one of --pwm-hz"),
+                           (["--banding", "50", "--pwm-duty", "0.3"], "give --pwm-hz HZ too")):
+        assert cli_main(base + extra) == 2 and message in capsys.readouterr().err
+    with pytest.raises(ValueError, match="pwm_duty"):
+        simulate_bag(tmp_path / "y.mcap", "ev76c661", "static", frames=2, banding_pct=50.0, pwm_hz=500.0, pwm_duty=1.0)
 
 
 def test_the_banding_options_without_banding_are_an_error(capsys) -> None:
