@@ -13,6 +13,7 @@ import math
 import numbers
 from collections.abc import Iterable
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any, Protocol, TypedDict
 
@@ -162,9 +163,10 @@ def simulate_bag(
     of the mains (each frame meets the light at a random phase, own generator; truth ``banding_phase`` and the
     exposure-averaged ``banding_depth``). ``pwm_hz``: the lamps are LEDs dimmed by pulse-width modulation at this
     frequency instead, full for ``pwm_duty`` of each period and ``banding_pct`` % dimmer otherwise
-    (:func:`.lights.pwm_gain`: trapezoidal bands, sharp-edged at exposures short of a period). ``auto_exposure_pct``: a live driver's auto-exposure hunting under steady
-    light, every frame's exposure (and with it the image's brightness) off the plan's by a smooth wander of this rms
-    (%) (:func:`auto_exposure_wander`, own generator; the metadata report it; truth ``exposure_factor``).
+    (:func:`.lights.pwm_gain`: trapezoidal bands, sharp-edged at exposures short of a period). ``auto_exposure_pct``:
+    a live driver's auto-exposure hunting under steady light, every frame's exposure (and with it the image's
+    brightness) off the plan's by a smooth wander of this rms (%) (:func:`auto_exposure_wander`, own generator; the
+    metadata report it; truth ``exposure_factor``).
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -251,6 +253,12 @@ def simulate_bag(
         paths = (campaign.vibration_during_exposure(np.random.default_rng([seed, 6]),
                                                     [s.exposure_time_s for s in steps], vibration_px, vibration_hz)
                  if vibration_hz else list(shakes[:, None, :]))
+    # each row's light under the lamps (rows, a frame's exposure and phase) and the bands' depth at an exposure
+    depth = banding_pct / 100.0
+    lamps, lamps_depth = ((partial(pwm_gain, depth=depth, hz=pwm_hz, duty=pwm_duty, line_s=line_time_s),
+                           partial(pwm_depth, depth, hz=pwm_hz, duty=pwm_duty)) if pwm_hz else
+                          (partial(rolling_shutter_gain, depth=depth, mains_hz=mains_hz, line_s=line_time_s),
+                           partial(banding_depth, depth, mains_hz=mains_hz)))
     ns = namespace.rstrip("/")
     topic = {k: f"{ns}/{v}" for k, v in TOPICS.items()}
     hw = hardware_id or prof.name
@@ -274,10 +282,7 @@ def simulate_bag(
             if flicker_pct or auto_exposure_pct:  # the light's flicker, the exposure's wander: both scale the scene
                 clean = np.clip(clean * np.float32(flicker[i] * hunt[i]), 0.0, 255.0).astype(np.float32)
             if banding_pct:
-                bands = (pwm_gain(height, true_meta.exposure_time_s, float(band_phase[i]), banding_pct / 100.0, pwm_hz,
-                                  pwm_duty, line_time_s) if pwm_hz else
-                         rolling_shutter_gain(height, true_meta.exposure_time_s, float(band_phase[i]),
-                                              banding_pct / 100.0, mains_hz, line_time_s))
+                bands = lamps(height, true_meta.exposure_time_s, float(band_phase[i]))
                 clean = np.clip(clean * bands[:, None].astype(np.float32), 0.0, 255.0).astype(np.float32)
             noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
             if frame_hook is not None:
@@ -307,9 +312,7 @@ def simulate_bag(
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 **({"exposure_factor": round(float(hunt[i]), 6)} if auto_exposure_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
-                    "banding_depth": round(pwm_depth(banding_pct / 100.0, true_meta.exposure_time_s, pwm_hz, pwm_duty)
-                                           if pwm_hz else
-                                           banding_depth(banding_pct / 100.0, true_meta.exposure_time_s, mains_hz), 6)}
+                    "banding_depth": round(lamps_depth(true_meta.exposure_time_s), 6)}
                    if banding_pct else {}),
                 "moving": prev_offset is not None and offset != prev_offset,
                 **({"hold": plans[i].hold} if scen.campaign else {}),
