@@ -547,13 +547,14 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
         raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
     light, x, displacement, blocks = light_and_motion(x, block, view_rows, use)
     mb, d, q, coef = _regression(x, block, use, blocks)
+    explained = np.sum(coef**2, axis=(0, 2))
+    nreg = N_REGRESSORS
     if light is not None:  # what the light's fit left may change the brightness along the block's rows too
-        q_test = np.linalg.qr(np.concatenate([q, (mb * _row_ramp(block) * use)[:, :, None]], axis=2))[0]
-        c_test = np.einsum("knp,npr->knr", d, q_test, optimize=True)
-    else:
-        q_test, c_test = q, coef
-    nreg = q_test.shape[2]
-    explained = np.sum(c_test**2, axis=(0, 2))
+        ramp = mb * _row_ramp(block) * use  # made orthonormal to the other regressors (one Gram-Schmidt step)
+        ramp -= np.einsum("npr,nr->np", q, np.einsum("npr,np->nr", q, ramp))
+        ramp /= np.maximum(np.linalg.norm(ramp, axis=1, keepdims=True), 1e-12)
+        explained = explained + np.sum(np.einsum("knp,np->kn", d, ramp) ** 2, axis=0)
+        nreg += 1
     total = np.sum(d * d, axis=(0, 2))
     m = np.maximum(use.sum(axis=1), nreg + 2)  # pixels used per block
     d1, d2 = nreg * (k - 1), (k - 1) * (m - nreg)
