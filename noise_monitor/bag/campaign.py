@@ -194,8 +194,7 @@ def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray,
         cx = min(max(x + dx, 0.0), world.shape[1] - w - 1.0) + (w - 1) / 2.0
         cy = min(max(y + dy, 0.0), world.shape[0] - h - 1.0) + (h - 1) / 2.0
         win += cv2.getRectSubPix(world, (w, h), (cx, cy))
-    if len(path) > 1:
-        win /= np.float32(len(path))
+    win /= np.float32(len(path))  # exact for one displacement
     return np.clip(win * vignette * np.float32(fp.brightness), 0.0, 255.0), (round(x, 4), round(y, 4))
 
 

@@ -94,9 +94,10 @@ def field_keywords(args: argparse.Namespace) -> FieldConditions:
         raise ValueError("--vibration-hz is the frequency of a vibration: give --vibration PX too")
     mains_hz = MAINS_HZ if args.mains_hz is None else args.mains_hz
     line_time_s = LINE_TIME_S if args.line_us is None else args.line_us * 1e-6
-    return {"vibration_px": args.vibration, "vibration_hz": args.vibration_hz, "flicker_pct": args.flicker, "banding_pct": args.banding,
-            "mains_hz": mains_hz, "line_time_s": line_time_s, "auto_exposure_pct": args.auto_exposure,
-            "pwm_hz": args.pwm_hz or 0.0, "pwm_duty": PWM_DUTY if args.pwm_duty is None else args.pwm_duty}
+    return {"vibration_px": args.vibration, "vibration_hz": args.vibration_hz, "flicker_pct": args.flicker,
+            "banding_pct": args.banding, "mains_hz": mains_hz, "line_time_s": line_time_s,
+            "pwm_hz": args.pwm_hz or 0.0, "pwm_duty": PWM_DUTY if args.pwm_duty is None else args.pwm_duty,
+            "auto_exposure_pct": args.auto_exposure}
 
 
 def _start_ns(text: str | None) -> int:

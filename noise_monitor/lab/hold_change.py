@@ -88,7 +88,8 @@ def residuals(frames: Sequence[np.ndarray], still: np.ndarray, b: int) -> tuple[
                                      axis=2))
     d = np.stack([blocks(f - mean) for f in frames])
     light = 1.0 + d.sum(axis=(1, 2)) / max(float(blocks(mean).sum()), 1e-9)
-    return d - np.einsum("mpr,kmr->kmp", basis, np.einsum("mpr,kmp->kmr", basis, d, optimize=True), optimize=True), light
+    coef = np.einsum("mpr,kmp->kmr", basis, d, optimize=True)
+    return d - np.einsum("mpr,kmr->kmp", basis, coef, optimize=True), light
 
 
 def _variances(res: np.ndarray) -> np.ndarray:
