@@ -59,6 +59,11 @@ FLICKER_MIN = 0.001
 LIGHT_BIAS = 0.005
 #: frames from which that regression is quadratic in the displacement (linear from 4 frames, none below)
 QUADRATIC_FRAMES = 8
+#: a rolling shutter's bands that a smooth profile cannot follow (LEDs dimmed by pulse-width modulation: sharp edges)
+#: are fitted row by row (:func:`light_change`) when the light's first-order bias of the noise variance
+#: (:meth:`LightChange.noise_bias`, which :meth:`LightChange.undo` corrects to first order) is at most this: beyond,
+#: the correction errs by 2-6 % in sigma (changes of 70-120 % on 4-7 frames), within it by under 1 %
+ROW_LIGHT_BIAS = 0.2
 #: F-test p-value below which a block's frame differences are not pure noise
 P_VALUE = 1e-4
 #: regressors of the pure-noise test: offset, brightness scaling, x and y motion
@@ -150,6 +155,7 @@ class BlockTemporal:
     still: np.ndarray
     motion_px: float = 0.0  # the frames' rms displacement about their mean (px, :func:`run_displacement`)
     light_pct: float = 0.0  # the light's change from frame to frame taken out (:meth:`LightChange.percent`, %)
+    light_rows: bool = False  # that change fitted row by row (:attr:`LightChange.row_pixels`)
 
     def sigma_dn(self) -> tuple[float, float]:
         """Temporal sigma over all accepted blocks and its standard error (NaN if none)."""
@@ -434,6 +440,13 @@ class LightChange:
 
     offset: np.ndarray  # (k,) DN
     gain: np.ndarray  # (k, H) each frame's relative brightness of every row
+    #: pixels each row's gain was fitted to, one gain per frame and row (0: a smooth profile or one gain per frame)
+    row_pixels: int = 0
+
+    def variance_scale(self) -> float:
+        """What the noise variance left after :meth:`undo` is multiplied by to be unbiased: a gain fitted per frame
+        to each row of W pixels takes 1 / W of the row's noise with it (W / (W - 1); 1 for a smooth profile)."""
+        return self.row_pixels / (self.row_pixels - 1.0) if self.row_pixels > 1 else 1.0
 
     def undo(self, x: np.ndarray) -> np.ndarray:
         """The run ``x`` with the change subtracted (the noise stays each frame's own, not scaled by the gain), each
@@ -477,15 +490,36 @@ class LightChange:
                 (self.offset[:, None] + hi * level[None]).max(axis=0))
 
 
+def _row_light(x: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """(k, H) each frame's gain of every row of the run ``x`` (k x H x W) against the run mean, the frame's
+    ``offset`` (k,) taken off first: least squares over the row's pixels. A rolling shutter exposes a row at one
+    time, so one gain per row follows the light whatever its waveform."""
+    mean = x.mean(axis=0)
+    fitted = np.einsum("khw,hw->kh", x, mean, optimize=True) - offset[:, None] * mean.sum(axis=1)
+    return fitted / np.maximum(np.sum(mean * mean, axis=1), 1e-300)
+
+
+def _follows_rows(residual: np.ndarray, rows: int) -> bool:
+    """Whether ``residual`` (k, H: per-row gains less the smooth profile, views of ``rows`` rows) is correlated
+    from row to row beyond ``MOTION_SIGMAS`` standard errors: the bands' shape the smooth profile missed, not
+    the gains' noise or temporal row noise, which are white from row to row."""
+    r = residual.reshape(residual.shape[0], -1, rows)
+    lag = float(np.sum(r[..., 1:] * r[..., :-1])) / max(float(np.sum(r[..., 1:] ** 2)), 1e-300)
+    return lag * math.sqrt(r[..., 1:].size) > MOTION_SIGMAS
+
+
 def light_change(x: np.ndarray, b: int, view_rows: int | None = None,
-                 motion: np.ndarray | None = None) -> LightChange | None:
+                 motion: np.ndarray | None = None, row_light: bool = False) -> LightChange | None:
     """Each frame's light change against the mean of the run ``x`` (k x H x W), or None under steady light: bands
     that follow the row (a rolling shutter under lamps on the mains, :func:`light_bands` per view of ``view_rows``
     rows, default the whole image), else a global change (one offset and gain per frame for the whole image, its
     standard error from the fit's scatter) when the gains spread by more than ``FLICKER_MIN`` and ``MOTION_SIGMAS``
     standard errors. Both are fitted to the b x b blocks' means (:func:`_gain_fits`). ``motion``: the frames' displacement basis
     (:func:`displacement_basis`) when the camera moved: the scene moving under the blocks changes their means too,
-    and the light is what the displacement does not explain."""
+    and the light is what the displacement does not explain. ``row_light``: bands that the smooth profile cannot
+    follow (:func:`_follows_rows`) are fitted row by row instead (:func:`_row_light`) where that change is within
+    ``ROW_LIGHT_BIAS``; it takes temporal row noise out with the light, so the lab, which reads row noise, keeps the
+    smooth profile."""
     k = x.shape[0]
     rows = x.shape[1] if view_rows is None else view_rows
     if rows < b or x.shape[1] % rows:
@@ -494,7 +528,13 @@ def light_change(x: np.ndarray, b: int, view_rows: int | None = None,
     offset, gains = row_gains(x, b, rows, means)
     bands = light_bands(gains, rows, b, motion)
     if bands is not None:
-        return LightChange(_without_motion(offset, motion), bands[0].reshape(k, x.shape[1]))
+        smooth = bands[0].reshape(k, x.shape[1])
+        if row_light:
+            per_row = LightChange(_without_motion(offset, motion), _without_motion(_row_light(x, offset), motion),
+                                  x.shape[2])
+            if _follows_rows(per_row.gain - smooth, rows) and per_row.noise_bias() <= ROW_LIGHT_BIAS:
+                return per_row
+        return LightChange(_without_motion(offset, motion), smooth)
     offset, slope, scale, information = _gain_fits(means.reshape(k, 1, -1))
     err = float(np.sqrt(np.mean(scale**2 / information[:, 0])))
     offset, flat = _without_motion(offset, motion), _without_motion(1.0 + slope[:, 0], motion)
@@ -504,20 +544,20 @@ def light_change(x: np.ndarray, b: int, view_rows: int | None = None,
     return LightChange(offset, np.repeat(flat[:, None], x.shape[1], axis=1))
 
 
-def light_and_motion(x: np.ndarray, b: int, view_rows: int | None = None, use: np.ndarray | None = None
-                     ) -> tuple[LightChange | None, np.ndarray, tuple[np.ndarray, float],
-                                tuple[np.ndarray, np.ndarray] | None]:
+def light_and_motion(x: np.ndarray, b: int, view_rows: int | None = None, use: np.ndarray | None = None,
+                     row_light: bool = False) -> tuple[LightChange | None, np.ndarray, tuple[np.ndarray, float],
+                                                       tuple[np.ndarray, np.ndarray] | None]:
     """(the light's change (:func:`light_change`), the run ``x`` with it taken out, the frames' displacement and
     its error (:func:`run_displacement` on those frames, over the (N, b*b) pixels ``use``), with ``use`` their
     :func:`_deviations`): when the camera moved, the light is fitted again from what the displacement does not
-    explain (the scene moving under the blocks changes their means too)."""
-    light = light_change(x, b, view_rows)
+    explain (the scene moving under the blocks changes their means too). ``row_light``: see :func:`light_change`."""
+    light = light_change(x, b, view_rows, row_light=row_light)
     steady = x if light is None else light.undo(x)
     blocks = None if use is None else _deviations(steady, b, use)
     displacement = run_displacement(steady, b, None if blocks is None else blocks[1], use)
     motion = displacement_basis(*displacement)
     if light is not None and motion is not None:
-        light = light_change(x, b, view_rows, motion)
+        light = light_change(x, b, view_rows, motion, row_light)
         steady = x if light is None else light.undo(x)
         blocks = None if use is None else _deviations(steady, b, use)
     return light, steady, displacement, blocks
@@ -525,7 +565,7 @@ def light_and_motion(x: np.ndarray, b: int, view_rows: int | None = None, use: n
 
 def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
                    exclude: np.ndarray | None = None, whiteness: bool = False,
-                   view_rows: int | None = None) -> BlockTemporal:
+                   view_rows: int | None = None, row_light: bool = False) -> BlockTemporal:
     """Temporal statistics of a static run ``stack`` (k >= 2 frames, k x H x W, DN).
 
     ``exclude``: (N, block * block) pixels left out of the test and the variance (e.g. blinking pixels,
@@ -534,7 +574,8 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     (:func:`_scene_p`: an object moving under the block; about twice the time, so the lab's, not the live
     monitor's, whose median over patches keeps such blocks from the frame). ``view_rows``: the frames are a
     column of views of this many rows each (the live monitor's patches), whose light is fitted apart
-    (:func:`light_and_motion`)."""
+    (:func:`light_and_motion`). ``row_light``: bands a smooth profile cannot follow fitted row by row
+    (:func:`light_change`; the live monitor's)."""
     x = np.asarray(stack, dtype=np.float64)
     if x.ndim != 3 or x.shape[0] < 2:
         raise ValueError(f"a static run needs k >= 2 frames of one size (k x H x W), got shape {x.shape}")
@@ -545,7 +586,7 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     use = np.ones((n_blocks, block * block), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
     if use.shape != (n_blocks, block * block):
         raise ValueError(f"exclude must have shape {(n_blocks, block * block)} (blocks x pixels), got {use.shape}")
-    light, x, displacement, blocks = light_and_motion(x, block, view_rows, use)
+    light, x, displacement, blocks = light_and_motion(x, block, view_rows, use, row_light)
     mb, d, q, coef = _regression(x, block, use, blocks)
     explained = np.sum(coef**2, axis=(0, 2))
     nreg = N_REGRESSORS
@@ -572,10 +613,11 @@ def block_temporal(stack: np.ndarray, block: int = 8, p_value: float = P_VALUE,
     else:
         r = blocks_of(steady.residual, block) * use[None]
         per_pixel, dof = np.sum(r * r, axis=0) / steady.dof, steady.dof
+    per_pixel = per_pixel * (1.0 if light is None else light.variance_scale())
     var = per_pixel.sum(axis=1) / m
     spread = np.sqrt(np.maximum(np.sum(use * (per_pixel - var[:, None]) ** 2, axis=1) / (m - 1), 0.0))
     gauss = var * np.sqrt(2.0 / (dof * m))
     err = np.maximum(spread / np.sqrt(m), gauss)
     grid = (x.shape[1] // block, x.shape[2] // block)
     return BlockTemporal(block, grid, k, mb.mean(axis=1), var, err, p, p > p_value, still, motion_rms(displacement[0]),
-                         0.0 if light is None else light.percent())
+                         0.0 if light is None else light.percent(), light is not None and light.row_pixels > 0)

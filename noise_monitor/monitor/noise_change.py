@@ -8,7 +8,10 @@ noise, after what the light's change and sub-pixel motion leave there is regress
 brightness and gradients, from the measurement's temporal mean blurred first: the mean holds a share of the
 previous frame's noise, which its unblurred pixels would regress out of the difference, 8 % of the variance for a
 mean of 4 frames), and relative to what the model expects at both frames' metadata (a temperature drifting
-through the hold changes the dark-current noise as the model says it does). The window is cut where the frames'
+through the hold changes the dark-current noise as the model says it does). Where the hold's measurement fitted the
+light row by row (LEDs dimmed by pulse-width modulation: sharp bands rolling from frame to frame), each row of the
+difference is first rid of its projection on the row of the temporal mean (the light's change there, one gain per
+row). The window is cut where the frames'
 levels change most, when the change is significant (``CHANGE_SIGMAS`` standard errors) and large enough to
 matter to the alarm (``change_dn`` in sigma).
 """
@@ -57,12 +60,13 @@ class LevelReference:
     block: int
     model: ModelAt
     frames: int  # of the measurement it was made from
+    rows: np.ndarray | None = None  # (K, s, s) the temporal mean when the light changes row by row, else None
 
     @classmethod
     def of(cls, mean_patches: np.ndarray, accepted: np.ndarray, frames: int, block: int,
-           model: ModelAt) -> LevelReference | None:
-        """From a measurement of ``frames`` frames: its temporal mean (K, s, s) and accepted blocks (K, N); None
-        without accepted blocks."""
+           model: ModelAt, light_rows: bool = False) -> LevelReference | None:
+        """From a measurement of ``frames`` frames: its temporal mean (K, s, s) and accepted blocks (K, N), and
+        whether it fitted the light row by row; None without accepted blocks."""
         if not accepted.any():
             return None
         size = (BASIS_BLUR, BASIS_BLUR)
@@ -77,17 +81,25 @@ class LevelReference:
         design = np.stack([np.ones_like(mb), mb - mb.mean(axis=1, keepdims=True), accepted_blocks(gx),
                            accepted_blocks(gy)], axis=2)
         basis, _ = np.linalg.qr(design)
-        return cls(basis, selected, accepted.shape, block, model, frames)
+        rows = np.asarray(mean_patches, dtype=np.float32) if light_rows else None
+        return cls(basis, selected, accepted.shape, block, model, frames, rows)
 
     def level(self, patches: np.ndarray, previous: np.ndarray, meta: CameraMetadata,
               previous_meta: CameraMetadata) -> Level:
         """The temporal noise of ``patches`` (K, s, s) in their difference with the ``previous`` frame's, over
         the model's at both frames' metadata."""
-        d = blocks_of(np.asarray(patches, np.float32) - previous, self.block).reshape(-1, self.block**2)[self.selected]
+        diff = np.asarray(patches, np.float32) - previous
+        per_block = float(self.block**2 - N_BASIS)
+        if self.rows is not None:  # each row's gain taken out: 1 / s of its noise with it
+            m = self.rows
+            gain = np.einsum("ksw,ksw->ks", diff, m) / np.maximum(np.einsum("ksw,ksw->ks", m, m), 1e-12)
+            diff = diff - gain[..., None] * m
+            per_block -= self.block**2 / m.shape[2]
+        d = blocks_of(diff, self.block).reshape(-1, self.block**2)[self.selected]
         c = (d[:, None, :] @ self.basis)[:, 0, :]
         energy = np.zeros(self.selected.size)
         energy[self.selected] = np.einsum("mn,mn->m", d, d) - np.einsum("mr,mr->m", c, c)
-        dof = self.selected.reshape(self.shape).sum(axis=1) * (self.block**2 - N_BASIS)
+        dof = self.selected.reshape(self.shape).sum(axis=1) * per_block
         model_dn = self.model(meta)
         now = model_dn**2
         expected = now + (now if previous_meta == meta else self.model(previous_meta) ** 2)

@@ -71,6 +71,7 @@ class TemporalMeasurement:
     meta: CameraMetadata  # the measured frames' mean metadata (what the model is evaluated at)
     light_pct: float = 0.0  # the light's change from frame to frame taken out (rms over frames and rows, %)
     latest_patches: np.ndarray | None = None  # (K, size, size) the newest frame's patches
+    light_rows: bool = False  # that change fitted row by row (LEDs dimmed by pulse-width modulation)
 
 
 def _same_conditions(a: CameraMetadata, b: CameraMetadata, temperature_tol_c: float = TEMPERATURE_TOL_C,
@@ -225,7 +226,7 @@ class TemporalNoise:
                                        or self._reference_age >= self.max_frames):
             tm, first = self._last, self._reference is None
             self._reference = LevelReference.of(tm.mean_patches, tm.accepted, k, BLOCK,
-                                                self.model(tm.mean_patches, tm.accepted))
+                                                self.model(tm.mean_patches, tm.accepted), tm.light_rows)
             self._reference_age = 0
             if first and self._reference is not None:  # the hold's frames so far: a change right after them shows
                 self._read_levels(self._reference)
@@ -245,7 +246,7 @@ class TemporalNoise:
         size = self._size
         n_patches = len(self._corners)
         frames = np.stack([f.patches for f in self._frames])  # (k, K, s, s)
-        stats = block_temporal(frames.reshape(k, n_patches * size, size), BLOCK, view_rows=size)
+        stats = block_temporal(frames.reshape(k, n_patches * size, size), BLOCK, view_rows=size, row_light=True)
         per_patch = (size // BLOCK) ** 2
         acc = stats.accepted.reshape(n_patches, per_patch)
         var = stats.variance_dn2.reshape(n_patches, per_patch)
@@ -258,7 +259,7 @@ class TemporalNoise:
             sigma_err = v_err / (2.0 * np.maximum(sigma, 1e-6))
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
                                    float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(f.meta for f in self._frames),
-                                   stats.light_pct, frames[-1])
+                                   stats.light_pct, frames[-1], light_rows=stats.light_rows)
 
 
 def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:
