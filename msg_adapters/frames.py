@@ -4,6 +4,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from noise_monitor.monitor.frame import Frame
 from noise_monitor.monitor.runtime import FrameOptions
 from noise_monitor.physics import MetadataError
@@ -40,6 +42,10 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
         if is_compressed(image_msg):  # lossless formats decoded, lossy ones refused with the reason
             image_msg = decompress(image_msg)
         frame.image_dn = image_to_gray_dn(image_msg, bit_depth=options.bit_depth, color=options.color)
+        black = options.profile.black_level_dn if options.profile is not None else 0.0
+        if black:  # the model reads signal: the camera's pedestal comes off first
+            frame.image_dn = frame.image_dn - np.float32(black)
+            frame.black_level_dn = black
         if geometry is not None:
             geometry.check_image(int(image_msg.height), int(image_msg.width))
     except AdapterError as exc:

@@ -289,6 +289,8 @@ def simulate_bag(
                 noisy = np.clip(frame_hook(i, clean, noisy, true_meta), 0.0, 255.0).astype(np.float32)
             if step.image_noise_dn:
                 noisy = np.clip(noisy + rng.normal(0.0, step.image_noise_dn, noisy.shape).astype(np.float32), 0, 255)
+            if prof.black_level_dn:  # the camera's pedestal: its ADC clips at 255 above it
+                noisy = np.clip(noisy + np.float32(prof.black_level_dn), 0.0, 255.0)
             img = np.rint(noisy).astype(np.uint8)
             sigma_image = float(np.std(img.astype(np.float64) - clean))
             sigma_model = float(paper_model.predict(clean, stated)["total"])
@@ -331,7 +333,8 @@ def simulate_bag(
         **({"banding_pct": banding_pct, "line_time_s": line_time_s,
             **({"pwm_hz": pwm_hz, "pwm_duty": pwm_duty} if pwm_hz else {"mains_hz": mains_hz})} if banding_pct else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
-        "bit_depth": bit_depth, "storage": storage, "topics": topic, "simulation_mode": "joint",
+        "bit_depth": bit_depth, **({"black_level_dn": prof.black_level_dn} if prof.black_level_dn else {}),
+        "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "
                       "sigma_image: std(mono8 image - clean); sigma_model: paper model (pn, dcsn, rn, joint, "
                       "clip-aware) for the stated metadata; xi = sigma_model - sigma_image",

@@ -408,8 +408,9 @@ class _SegmentAccumulator:
     """Running sums over the frames of one segment."""
 
     def __init__(self, index: int, meta: CameraMetadata, stamp_ns: int, b: int,
-                 plane: tuple[np.ndarray, np.ndarray]) -> None:
+                 plane: tuple[np.ndarray, np.ndarray], black_level: float = 0.0) -> None:
         self.index, self.meta, self.stamp_ns, self.b = index, meta, stamp_ns, b
+        self.black_level = black_level  # taken off the images: the ADC clips at -black_level and 255 - black_level
         self.proj, self.slopes = plane
         self.frames: list[int] = []
         self.metas: list[CameraMetadata] = []
@@ -509,7 +510,8 @@ class _SegmentAccumulator:
 
     def _part(self, lo: int, hi: int) -> _SegmentAccumulator:
         """The hold's frames lo..hi-1, to be measured on their own."""
-        part = _SegmentAccumulator(self.index, self.metas[lo], self.stamps[lo], self.b, (self.proj, self.slopes))
+        part = _SegmentAccumulator(self.index, self.metas[lo], self.stamps[lo], self.b, (self.proj, self.slopes),
+                                   self.black_level)
         part.pose = self.pose.copy()
         for j in range(lo, hi):
             part.add(self.frames[j], self.images[j], self.metas[j], self.stamps[j])
@@ -580,7 +582,8 @@ class _SegmentAccumulator:
         span = (b - 1) * np.abs(self.slope / k).sum(axis=1)
         reach = CLIP_SIGMAS * np.sqrt(np.maximum(_typical(white, bins, in_range & ~tex), 0.0))
         lowest, highest = (v, v) if self.light is None else self.light.block_levels(v, b, grid[1])
-        keep = in_range & (lowest - span / 2 - reach >= 0.0) & (highest + span / 2 + reach <= 255.0)
+        keep = (in_range & (lowest - span / 2 - reach >= -self.black_level)
+                & (highest + span / 2 + reach <= 255.0 - self.black_level))
         excluded["near_clipping"] = int(np.sum(~keep))
         tex &= keep
         excluded["texture"] = int(np.sum(tex))
@@ -929,18 +932,19 @@ def measure_frames(
             skipped[reason] = skipped.get(reason, 0) + 1
             continue
         img = np.asarray(fr.image_dn, dtype=np.float64)
+        raw = img + fr.black_level_dn  # the camera's output codes (its black level was taken off)
         if shape is None:
             if img.shape[0] < block or img.shape[1] < block:
                 raise ValueError(f"images of {img.shape[1]}x{img.shape[0]} pixels are smaller than one {block}x{block} block")
             shape = (img.shape[0], img.shape[1])
             grid = (img.shape[0] // block, img.shape[1] // block)
-            hist_bin = 1.0 if np.all(img == np.rint(img)) else 1.0 / 64.0
+            hist_bin = 1.0 if np.all(raw == np.rint(raw)) else 1.0 / 64.0
             hist = np.zeros(int(round(255.0 / hist_bin)) + 1)
         elif img.shape != shape:
             skipped["image size changed"] = skipped.get("image size changed", 0) + 1
             continue
         used += 1
-        idx = np.clip(np.rint(img / hist_bin).astype(np.int64), 0, hist.size - 1)
+        idx = np.clip(np.rint(raw / hist_bin).astype(np.int64), 0, hist.size - 1)
         hist += np.bincount(idx.ravel(), minlength=hist.size)
         meta = fr.metadata
         assert meta is not None  # skip_reason checked it
@@ -955,7 +959,7 @@ def measure_frames(
                 or not tolerance.same(acc.metas[0], meta)):
             if acc is not None:
                 segments.extend(acc.finish(grid, shape))
-            acc = _SegmentAccumulator(len(segments), meta, stamp_ns, block, plane)
+            acc = _SegmentAccumulator(len(segments), meta, stamp_ns, block, plane, fr.black_level_dn)
             acc.pose = pose.copy()
         acc.add(i, img, meta, stamp_ns)
     if acc is not None:

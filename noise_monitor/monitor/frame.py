@@ -14,7 +14,8 @@ class Frame:
     """One image with the metadata resolved for it, or the reasons it cannot be evaluated.
 
     ``image_dn`` is the gray image in DN (None with ``image_error`` when the message could not be
-    converted); ``metadata`` is None with ``missing`` (fields nobody provided) or ``metadata_error``
+    converted), the camera's black level ``black_level_dn`` taken off (its ADC clips at ``-black_level_dn`` and
+    ``255 - black_level_dn``); ``metadata`` is None with ``missing`` (fields nobody provided) or ``metadata_error``
     (present but invalid). ``index`` and ``log_time_ns`` place a bag frame in its recording.
     """
 
@@ -29,6 +30,7 @@ class Frame:
     log_time_ns: int | None = None  # when the recorder received the image (bags)
     raw_metadata: dict[str, Any] = field(default_factory=dict)
     frame_id: str = ""  # the image header's frame_id (the per-frame outputs carry it)
+    black_level_dn: float = 0.0  # the camera's black level, subtracted from the image (8-bit DN scale)
 
     @property
     def skip_reason(self) -> str | None:

@@ -78,10 +78,11 @@ def _patch_sums(a: np.ndarray, lay: _Layout, scale: int = 1) -> np.ndarray:
     return (table[y1 + d, x1 + d] - table[y1, x1 + d] - table[y1 + d, x1] + table[y1, x1]).astype(np.float64)
 
 
-def _candidate_stats(image: np.ndarray, lay: _Layout) -> dict[str, np.ndarray]:
-    """Per candidate: mean, fractions at 0 / 255 DN, fraction of equal right/lower neighbours (pairs
-    leaving the patch count at their inner pixel) and texture (mean gradient of the image averaged
-    over f x f blocks, f = 4 when the grid allows: noise averages out, structure stays)."""
+def _candidate_stats(image: np.ndarray, lay: _Layout, black_level: float = 0.0) -> dict[str, np.ndarray]:
+    """Per candidate: mean, fractions at the ADC's 0 / 255 DN (``-black_level`` / ``255 - black_level`` in an image
+    with the camera's black level taken off), fraction of equal right/lower neighbours (pairs leaving the patch
+    count at their inner pixel) and texture (mean gradient of the image averaged over f x f blocks, f = 4 when the
+    grid allows: noise averages out, structure stays)."""
     img = np.ascontiguousarray(image, dtype=np.float32)
     n = float(lay.size * lay.size)
     equal = np.zeros(img.shape, dtype=np.uint8)
@@ -95,17 +96,18 @@ def _candidate_stats(image: np.ndarray, lay: _Layout) -> dict[str, np.ndarray]:
     grad[:-1] += np.abs(np.diff(small, axis=0))
     return {
         "mean": _patch_sums(img, lay) / n,
-        "low": _patch_sums((img <= _LOW).view(np.uint8), lay) / n,
-        "high": _patch_sums((img >= _HIGH).view(np.uint8), lay) / n,
+        "low": _patch_sums((img <= _LOW - black_level).view(np.uint8), lay) / n,
+        "high": _patch_sums((img >= _HIGH - black_level).view(np.uint8), lay) / n,
         "equal": _patch_sums(equal, lay) / (2.0 * n),
         "texture": _patch_sums(grad, lay, f) / (n / (f * f)),
     }
 
 
-def _reject_reasons(st: dict[str, np.ndarray], cfg: MonitorConfig) -> np.ndarray:
-    """Per candidate: index into REJECT_REASONS, or -1 when usable."""
+def _reject_reasons(st: dict[str, np.ndarray], cfg: MonitorConfig, black_level: float = 0.0) -> np.ndarray:
+    """Per candidate: index into REJECT_REASONS, or -1 when usable (means: the signal above the black level, the
+    saturation limit the ADC's)."""
     black = (st["mean"] < cfg.min_patch_mean_dn) | (st["low"] > cfg.max_clipped_fraction)
-    saturated = (st["mean"] > cfg.max_patch_mean_dn) | (st["high"] > cfg.max_clipped_fraction)
+    saturated = (st["mean"] > cfg.max_patch_mean_dn - black_level) | (st["high"] > cfg.max_clipped_fraction)
     flat = st["equal"] > cfg.max_flat_fraction
     return np.select([black, saturated, flat], [0, 1, 2], default=-1)
 
@@ -121,15 +123,16 @@ def _spread(points: np.ndarray, k: int) -> list[int]:
     return chosen
 
 
-def select_patches(image: np.ndarray, size: int, cfg: MonitorConfig) -> PatchSelection:
-    """Choose up to ``cfg.patches_per_frame`` usable patches of ``size`` pixels from a gray DN image."""
+def select_patches(image: np.ndarray, size: int, cfg: MonitorConfig, black_level: float = 0.0) -> PatchSelection:
+    """Choose up to ``cfg.patches_per_frame`` usable patches of ``size`` pixels from a gray DN image (the camera's
+    ``black_level`` taken off: :attr:`..monitor.frame.Frame.black_level_dn`)."""
     k = cfg.patches_per_frame
     lay = _layout(image.shape[0], image.shape[1], size, k)
     corners = lay.corners()
     if not corners:
         return PatchSelection(size=size, corners=[], candidates=0, rejected=dict.fromkeys(REJECT_REASONS, 0))
-    stats = _candidate_stats(image, lay)
-    reasons = _reject_reasons(stats, cfg).ravel()
+    stats = _candidate_stats(image, lay, black_level)
+    reasons = _reject_reasons(stats, cfg, black_level).ravel()
     rejected = {r: int(np.count_nonzero(reasons == i)) for i, r in enumerate(REJECT_REASONS)}
     ok = np.flatnonzero(reasons < 0)
     usable = [corners[i] for i in ok]

@@ -274,7 +274,7 @@ class Monitor:
         cfg = self.config
         meta = frame.metadata
         assert meta is not None and frame.image_dn is not None  # skip_reason checked both
-        selection = select_patches(frame.image_dn, self.patch_size, cfg)
+        selection = select_patches(frame.image_dn, self.patch_size, cfg, frame.black_level_dn)
         if len(selection.corners) < cfg.min_patches:
             return self._skip(frame, f"{len(selection.corners)} usable patches (need {cfg.min_patches}): "
                                      f"{selection.describe_rejections()}")

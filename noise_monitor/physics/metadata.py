@@ -71,6 +71,8 @@ UNITS = {
 
 #: Longest camera profile name (it is echoed in statuses and reports).
 MAX_NAME_CHARS = 200
+#: a profile's black level stays below half the 8-bit range
+BLACK_LEVEL_MAX_DN = 128.0
 
 #: Order of the normalised metadata vector fed to the networks (sensor_type: CCD = 1, CMOS = 0).
 NORMALIZED_ORDER = NUMERIC_FIELDS + ("sensor_type",)
@@ -232,6 +234,9 @@ class CameraProfile:
     gain_range_db: tuple[float, float] | None = None
     #: the range of such a driver's relative gain number (default 0..1), mapped linearly onto gain_range_db
     driver_gain_range: tuple[float, float] | None = None
+    #: the camera's black level (pedestal) on the 8-bit DN scale: what it outputs without light or dark signal,
+    #: taken off every image before the model reads it (a 10-bit sensor's 64 codes: 64 x 255 / 1023 = 15.95)
+    black_level_dn: float = 0.0
 
     def metadata(self, **dynamic: Any) -> CameraMetadata:
         """CameraMetadata from the profile, with dynamic (or any) fields overridden by ``dynamic``."""
@@ -249,6 +254,8 @@ class CameraProfile:
         for key in ("gain_range_db", "driver_gain_range"):
             if getattr(self, key) is not None:
                 doc[key] = list(getattr(self, key))
+        if self.black_level_dn:
+            doc["black_level_dn"] = self.black_level_dn
         return yaml.safe_dump(doc, sort_keys=False)
 
 
@@ -275,11 +282,12 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
                             f"{clip(repr(name), 80)}")
     effects_spec = doc.pop("effects", None) or {}
     ranges = {key: _range(source, key, doc.pop(key)) for key in ("gain_range_db", "driver_gain_range") if key in doc}
+    black = _black_level(source, doc.pop("black_level_dn", 0.0))
     known = set(NUMERIC_FIELDS) | {"sensor_type", "bit_depth"}
     unknown = sorted(set(doc) - known)
     if unknown:
         raise MetadataError(f"{source}: unknown key(s) {', '.join(unknown)}; allowed: name, effects, gain_range_db, "
-                            f"driver_gain_range, {', '.join(sorted(known))}")
+                            f"driver_gain_range, black_level_dn, {', '.join(sorted(known))}")
     # validate present values by building a metadata object with placeholder values for missing fields
     placeholder: dict[str, Any] = {n: PAPER_RANGES[n][0] if n != "pixel_clock_hz" else 1e7 for n in NUMERIC_FIELDS}
     placeholder["sensor_type"] = "ccd"
@@ -288,7 +296,16 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
     except MetadataError as exc:
         raise MetadataError(f"{source}: {exc}") from exc
     doc = {k: getattr(checked, k) for k in doc}  # typed values (YAML may give '90.0e6' as a string)
-    return CameraProfile(name=name, values=doc, effects=_effects_spec(effects_spec, source), **ranges)
+    return CameraProfile(name=name, values=doc, effects=_effects_spec(effects_spec, source), black_level_dn=black,
+                         **ranges)
+
+
+def _black_level(source: str, value: Any) -> float:
+    """A black level in DN on the 8-bit scale: a number in [0, BLACK_LEVEL_MAX_DN)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < BLACK_LEVEL_MAX_DN:
+        raise MetadataError(f"{source}: black_level_dn must be a number of DN (8-bit scale) in [0, "
+                            f"{BLACK_LEVEL_MAX_DN:g}), got {clip(repr(value), 80)}")
+    return float(value)
 
 
 def _range(source: str, key: str, value: Any) -> tuple[float, float]:

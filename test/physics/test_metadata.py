@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 
 from noise_monitor.physics import (
     NORMALIZED_ORDER,
@@ -94,6 +95,18 @@ def test_profile_errors_name_the_keys() -> None:
     assert p.effects == {"prnu": {}}
     with pytest.raises(MetadataError, match="missing metadata field.*full_well_e"):
         p.metadata(gain_db=0.0)
+
+
+def test_profile_black_level_round_trips_and_is_checked() -> None:
+    """A camera's black level (pedestal, 8-bit DN scale) is a profile key; it survives to_yaml and is a number in
+    [0, 128)."""
+    p = profile_from_mapping({"name": "x", "black_level_dn": 15.95})
+    assert p.black_level_dn == 15.95
+    assert profile_from_mapping(yaml.safe_load(p.to_yaml())).black_level_dn == 15.95
+    assert profile_from_mapping({"name": "x"}).black_level_dn == 0.0 and "black" not in load_profile("icx285").to_yaml()
+    for bad in (-1, 128, "16", True):
+        with pytest.raises(MetadataError, match="black_level_dn must be a number"):
+            profile_from_mapping({"name": "x", "black_level_dn": bad})
 
 
 def test_samplers_are_seeded_and_cover_the_paper_ranges() -> None:
