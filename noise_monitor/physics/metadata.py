@@ -71,8 +71,8 @@ UNITS = {
 
 #: Longest camera profile name (it is echoed in statuses and reports).
 MAX_NAME_CHARS = 200
-#: a profile's black level stays below half the 8-bit range
-BLACK_LEVEL_MAX_DN = 128.0
+#: a profile's black level stays below the 8-bit range's top
+BLACK_LEVEL_MAX_DN = 255.0
 
 #: Order of the normalised metadata vector fed to the networks (sensor_type: CCD = 1, CMOS = 0).
 NORMALIZED_ORDER = NUMERIC_FIELDS + ("sensor_type",)

@@ -240,7 +240,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     if len(unclipped) < 3:
         raise CharacterizeError(f"only {len(unclipped)} flat-field set(s) without saturated pixels (of {len(flats)}): "
                                 "the photon transfer curve (K) cannot be determined")
-    dark_mean_fit, _ = _fit_line(dark_t, np.array([s.mean for s in darks]))
+    dark_mean_fit, dark_mean_se = _fit_line(dark_t, np.array([s.mean for s in darks]))
     dark_var_fit, dark_var_se = _fit_line(dark_t, np.array([s.temporal_var for s in darks]))
 
     def dark_at(s: FrameSet) -> tuple[float, float, float]:
@@ -366,6 +366,9 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         "doubling_temperature_k": doubling,
         "dsnu_e": _value(dsnu, dsnu_se, "e-"),
         "prnu_pct": prnu,
+        # the dark mean at zero exposure: the camera's black level (offset), which the node takes off every image
+        "black_level_dn": _value(float(dark_mean_fit[1]) * adc / 255.0, float(dark_mean_se[1]) * adc / 255.0,
+                                 f"DN ({rec.bit_depth} bit)"),
         "linearity_error_pct": le,
         "quantum_efficiency": _value(None, None, "%"),
     }
@@ -439,5 +442,6 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
                          "doubling_temperature_k": td},
         "dsnu_e": f["dsnu_e"]["value"], "prnu_pct": f["prnu_pct"]["value"],
         "measurement": {"exposure_time_s": cond["dsnu_exposure_s"], "temperature_c": temp},
+        "dark_offset_dn": max(f["black_level_dn"]["value"], 0.0),
     }
     return datasheet_from_mapping(doc, source=name), notes

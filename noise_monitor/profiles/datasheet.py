@@ -16,6 +16,7 @@ Format (config/datasheets/example_cmos_emva.yaml is a worked example)::
     dsnu_e: 3.1                    # DSNU1288 (optional)
     prnu_pct: 0.6                  # PRNU1288 (optional)
     measurement: {exposure_time_s: 0.01, temperature_c: 25.0}  # conditions of sigma_d and DSNU
+    dark_offset_dn: 48             # optional: mu_y.dark at zero exposure (the black level), native DN
     # optional model fields a datasheet rarely gives (not identifiable from the EMVA figures):
     pixel_clock_hz: 74.25e6
     sense_node_gain_v_per_e: 5.0e-6
@@ -57,12 +58,13 @@ RANGES: dict[str, tuple[float, float]] = {
     "measurement.temperature_c": (-80.0, 150.0),
     "pixel_clock_hz": VALID_RANGES["pixel_clock_hz"],
     "sense_node_gain_v_per_e": VALID_RANGES["sense_node_gain_v_per_e"],
+    "dark_offset_dn": (0.0, 65534.0),  # and below the ADC range's top (checked with the bit depth)
 }
 REQUIRED = ("sensor_type", "bit_depth", "pixel_size_um", "system_gain_dn_per_e", "temporal_dark_noise_e",
             "saturation_capacity_e", "dark_current")
 _TOP = {"name", "sensor_type", "bit_depth", "pixel_size_um", "quantum_efficiency", "system_gain_dn_per_e", "gains",
         "temporal_dark_noise_e", "saturation_capacity_e", "dark_current", "dsnu_e", "prnu_pct", "measurement",
-        "pixel_clock_hz", "sense_node_gain_v_per_e"}
+        "pixel_clock_hz", "sense_node_gain_v_per_e", "dark_offset_dn"}
 _SUB = {"quantum_efficiency": {"percent", "wavelength_nm"},
         "dark_current": {"e_per_s", "temperature_c", "doubling_temperature_k"},
         "measurement": {"exposure_time_s", "temperature_c"}}
@@ -91,6 +93,7 @@ class Datasheet:
     gains: tuple[tuple[float, float], ...] = ()  # (gain_db, K in native DN/e-)
     pixel_clock_hz: float | None = None
     sense_node_gain_v_per_e: float | None = None
+    dark_offset_dn: float | None = None  # mu_y.dark at zero exposure: the black level (native DN)
     extras: Mapping[str, Any] = field(default_factory=dict)
 
     @property
@@ -150,8 +153,12 @@ def datasheet_from_mapping(doc: Mapping[str, Any], source: str = "datasheet") ->
             raise DatasheetError(f"{source}: gains[{i}] must be a mapping {{gain_db, system_gain_dn_per_e}}")
         gains.append((_number("gains.gain_db", g["gain_db"], source),
                       _number("gains.system_gain_dn_per_e", g["system_gain_dn_per_e"], source)))
-    opt = {k: _number(k, doc[k], source) for k in ("dsnu_e", "prnu_pct", "pixel_clock_hz", "sense_node_gain_v_per_e")
+    opt = {k: _number(k, doc[k], source)
+           for k in ("dsnu_e", "prnu_pct", "pixel_clock_hz", "sense_node_gain_v_per_e", "dark_offset_dn")
            if doc.get(k) is not None}
+    if opt.get("dark_offset_dn", 0.0) >= 2**bits - 1:
+        raise DatasheetError(f"{source}: dark_offset_dn = {opt['dark_offset_dn']:g} is not below the top of the "
+                             f"{int(bits)}-bit ADC range")
     qe, meas = sub["quantum_efficiency"], sub["measurement"]
     return Datasheet(
         name=str(doc.get("name") or Path(source).stem),
@@ -173,6 +180,7 @@ def datasheet_from_mapping(doc: Mapping[str, Any], source: str = "datasheet") ->
         prnu_pct=opt.get("prnu_pct"),
         pixel_clock_hz=opt.get("pixel_clock_hz"),
         sense_node_gain_v_per_e=opt.get("sense_node_gain_v_per_e"),
+        dark_offset_dn=opt.get("dark_offset_dn"),
     )
 
 

@@ -86,13 +86,16 @@ def _profile_model(prof: CameraProfile, effects: Iterable[str]) -> NoiseModel:
 
 
 def black_level_dn(model: NoiseModel, prof: CameraProfile, bits: int) -> float:
-    """Black level on the 8-bit scale, a whole native code: no dark frame clips at 0."""
+    """Black level on the 8-bit scale, a whole native code: the profile's when it states one, else one at which no
+    dark frame clips at 0."""
+    lsb = 255.0 / (2**bits - 1)
+    if prof.black_level_dn:
+        return round(prof.black_level_dn / lsb) * lsb
     worst = prof.metadata(gain_db=GAIN_DB, exposure_time_s=MAX_EXPOSURE_S,
                           sensor_temperature_c=max(EXTRA_TEMPERATURES_C))
     cond = model.conditions(worst)
     var = sum(float(e.variance_dn2(0.0, cond)) for e in model.noise_effects if e.distribution != "quantization")
     level = max(BLACK_LEVEL_FRACTION * 255.0, 6.0 * math.sqrt(var) + cond.dark_e * cond.dn_per_e)
-    lsb = 255.0 / (2**bits - 1)
     return math.ceil(level / lsb) * lsb
 
 

@@ -99,12 +99,12 @@ def test_profile_errors_name_the_keys() -> None:
 
 def test_profile_black_level_round_trips_and_is_checked() -> None:
     """A camera's black level (pedestal, 8-bit DN scale) is a profile key; it survives to_yaml and is a number in
-    [0, 128)."""
+    [0, 255)."""
     p = profile_from_mapping({"name": "x", "black_level_dn": 15.95})
     assert p.black_level_dn == 15.95
     assert profile_from_mapping(yaml.safe_load(p.to_yaml())).black_level_dn == 15.95
     assert profile_from_mapping({"name": "x"}).black_level_dn == 0.0 and "black" not in load_profile("icx285").to_yaml()
-    for bad in (-1, 128, "16", True):
+    for bad in (-1, 255, "16", True):
         with pytest.raises(MetadataError, match="black_level_dn must be a number"):
             profile_from_mapping({"name": "x", "black_level_dn": bad})
 

@@ -73,7 +73,8 @@ def test_report_and_profile_for_the_node(recording):
         assert (out / png).stat().st_size > 10_000 and png in html
     prof = load_profile(out / "profile.yaml")
     rows = {r["field"]: r for r in recording["result"]["profile"]["round_trip"]}
-    # every figure but the saturation (the recording's black level is not in the model) is reproduced within 2 %
+    # every figure but the saturation (the model's EMVA figures saturate at the ADC's top, not the black level below it)
+    # is reproduced within 2 %
     bad = [f for f, r in rows.items() if not r["ok"] and f != "saturation_capacity_e"]
     assert bad == []
     for temp in ("30", "40", "50", "60"):  # the dark-current law fitted over all temperatures
@@ -82,6 +83,21 @@ def test_report_and_profile_for_the_node(recording):
     model = NoiseModel(extra=prof.effects)
     meta = prof.metadata(gain_db=0.0, exposure_time_s=0.01, sensor_temperature_c=30.0)
     assert model.predict(100.0, meta)["total"] > 0
+
+
+def test_the_black_level_is_measured_and_goes_into_the_profile(recording, tmp_path):
+    """The dark mean at zero exposure is the recording's black level (the simulator's within 0.1 DN on the 8-bit
+    scale); the profile for the node states it, so replays and the lab take it off every image, and a camera
+    simulated from that profile records it again."""
+    got = recording["result"]["figures"]["black_level_dn"]
+    want8 = load_truth(recording["bag"])["black_level_dn8"]
+    assert got["value"] * 255 / 4095 == pytest.approx(want8, abs=0.1) and got["stderr"] < 0.5
+    prof = load_profile(recording["out"] / "profile.yaml")
+    assert prof.black_level_dn == pytest.approx(want8, abs=0.1)
+    bag = tmp_path / "again.mcap"
+    assert main(["simulate-bag", str(bag), "--profile", str(recording["out"] / "profile.yaml"), "--scenario", "ptc",
+                 "--frames", str(MIN_FRAMES), "--width", "64", "--height", "64"]) == 0
+    assert load_truth(bag)["black_level_dn8"] == pytest.approx(prof.black_level_dn, abs=255 / 4095 / 2)
 
 
 def test_profile_runs_in_replay_and_lab(recording, tmp_path):
