@@ -167,9 +167,11 @@ class NoiseMonitorNode(Node):
         self.create_timer(SYNC_POLL_S, self._on_sync_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
         est, cfg = self.runtime.estimator, self.runtime.config
+        black = self.runtime.profile.black_level_dn if self.runtime.profile is not None else 0.0
         self.get_logger().info(
             f"monitoring {self._image_sub.topic_name} with {est.name} (patch {self.monitor.patch_size}, "
-            f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}); outputs /diagnostics at "
+            f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}"
+            f"{f', black level {black:g} DN taken off every image' if black else ''}); outputs /diagnostics at "
             f"{p['diagnostics_rate_hz']:g} Hz, per frame {ns}/frame and {ns}/<sigma_*|xi*>"
         )
 
