@@ -262,9 +262,11 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
         raise DatasheetError(f"system gain {k:g} DN/e- at {ds.bit_depth} bit means {fw:.4g} e- over the ADC range, "
                              f"outside the model's full-well range [{lo:g}, {hi:g}] e-")
     sat_dn = ds.saturation_capacity_e * k
-    if sat_dn > adc * (1.0 + TOLERANCE):
+    offset = ds.dark_offset_dn or 0.0
+    if sat_dn + offset > adc * (1.0 + TOLERANCE):
+        above = f" above the dark offset {offset:g} DN ({adc - offset:.0f} DN)" if offset else f" ({adc} DN)"
         raise DatasheetError(f"contradictory: saturation capacity {ds.saturation_capacity_e:g} e- x K {k:g} DN/e- = "
-                             f"{sat_dn:.0f} DN exceeds the {ds.bit_depth}-bit ADC range ({adc} DN) at base gain")
+                             f"{sat_dn:.0f} DN exceeds the {ds.bit_depth}-bit ADC range{above} at base gain")
     t_meas = ds.measurement_exposure_s
     temp_meas = ds.measurement_temperature_c if ds.measurement_temperature_c is not None else ds.dark_current_temperature_c
     a_sn = ds.sense_node_gain_v_per_e or DEFAULT_SENSE_NODE_GAIN_V_PER_E

@@ -113,8 +113,18 @@ def test_saturation_below_the_adc_range_is_stated():
     assert row["rel_error"] > 0.3
 
 
+def test_a_dark_offset_becomes_the_profiles_black_level():
+    """EMVA's dark offset (mu_y.dark at zero exposure, native DN) is the camera's black level: on the 8-bit scale
+    in the profile, which the node takes off every image."""
+    result = profile_from_datasheet(datasheet_from_mapping(_doc(dark_offset_dn=64, saturation_capacity_e=10000)))
+    assert result.profile.black_level_dn == pytest.approx(64 * 255 / 4095)
+    assert profile_from_datasheet(datasheet_from_mapping(_doc())).profile.black_level_dn == 0.0
+
+
 @pytest.mark.parametrize("changes, message", [
     ({"saturation_capacity_e": 20000}, "exceeds the 12-bit ADC range"),
+    ({"dark_offset_dn": 240}, "exceeds the 12-bit ADC range above the dark offset 240 DN"),
+    ({"dark_offset_dn": 4095}, "dark_offset_dn = 4095 is not below the top"),
     ({"temporal_dark_noise_e": 0.5}, "not above the dark-current shot noise"),
     ({"system_gain_dn_per_e": -0.3}, "system_gain_dn_per_e"),
     ({"prnu_pct": 50}, "prnu_pct"),
