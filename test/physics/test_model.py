@@ -125,6 +125,18 @@ def test_predict_shapes_and_map_aggregation() -> None:
         model.predict(1.0, meta, mode="parallel")
 
 
+def test_a_black_level_effect_reads_the_signal_below_the_output() -> None:
+    """The ``black_level`` response: an output level is the signal plus the pedestal, so the photon shot noise is the
+    signal's (that at the level less the offset) and the rest of the noise is unchanged."""
+    meta = load_profile("ev76c661").metadata(gain_db=12.0, exposure_time_s=0.02, sensor_temperature_c=40.0)
+    plain, raised = NoiseModel(), NoiseModel(extra={"black_level": {"offset_dn": 16.0}})
+    levels = np.array([40.0, 100.0, 200.0])
+    got, want = raised.predict(levels, meta), plain.predict(levels - 16.0, meta)
+    np.testing.assert_allclose(got["pn"], want["pn"], rtol=1e-3)
+    np.testing.assert_allclose(got["rn"], plain.predict(levels, meta)["rn"], rtol=1e-3)
+    assert np.all(got["total"] < plain.predict(levels, meta)["total"])
+
+
 def test_simulation_is_seeded_and_overrides_change_only_that_source() -> None:
     model = NoiseModel()
     meta = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.05, sensor_temperature_c=30.0)

@@ -239,6 +239,24 @@ class TemperatureError(Effect):
         return cond.replace(temperature_k=cond.temperature_k + self.offset_c)
 
 
+class BlackLevel(Effect):
+    name = "black_level"
+    distribution = Distribution.RESPONSE
+    params = (Param("offset_dn", "DN", 16.0, (0.0, 64.0), description="the camera's black level (pedestal), 8-bit DN"),)
+    description = ("A black level (pedestal) the profile does not state: output levels sit this far above the signal, "
+                   "which the model otherwise reads as signal with shot noise that is not there.")
+    signature = (
+        "residual variance independent of the intensity and proportional to the gain, below the model: an unstated "
+        "black level of {offset_dn:.1f} DN (state it as the profile's black_level_dn)"
+    )
+
+    def linear(self, signal_dn, cond: Conditions):
+        return np.maximum(np.asarray(signal_dn, dtype=float) - self.offset_dn, 0.0)
+
+    def slope(self, signal_dn, cond: Conditions):
+        return np.ones(np.shape(signal_dn))
+
+
 BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     PhotonShotNoise,
     DarkCurrentShotNoise,
@@ -254,4 +272,5 @@ BUILTIN_EFFECTS: tuple[type[Effect], ...] = (
     GainError,
     ExposureError,
     TemperatureError,
+    BlackLevel,
 )
