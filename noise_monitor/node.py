@@ -167,7 +167,7 @@ class NoiseMonitorNode(Node):
         self.create_timer(SYNC_POLL_S, self._on_sync_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
         est, cfg = self.runtime.estimator, self.runtime.config
-        black = self.runtime.profile.black_level_dn if self.runtime.profile is not None else 0.0
+        black = self.runtime.frame_options.black_level
         self.get_logger().info(
             f"monitoring {self._image_sub.topic_name} with {est.name} (patch {self.monitor.patch_size}, "
             f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}"

@@ -279,7 +279,8 @@ def test_bad_arguments_are_exit_2_with_one_line(tmp_path, small_bag, capsys, arg
 
 
 @pytest.mark.parametrize("bad", [{"bit_depth": 99}, {"diagnostics_rate_hz": 0.0}, {"diagnostics_rate_hz": 1e-320},
-                                 {"diagnostics_rate_hz": 1e12}, {"color": "x" * 10**6}, {"threads": -1}])
+                                 {"diagnostics_rate_hz": 1e12}, {"color": "x" * 10**6}, {"threads": -1},
+                                 {"black_level_dn": -2.0}, {"black_level_dn": 255.0}])
 def test_node_and_replay_parameters_have_one_validation(bad):
     """The node declares and the replay reads the same parameters, checked by one function."""
     with pytest.raises(ValueError, match=f"parameter {next(iter(bad))}") as err:

@@ -264,7 +264,7 @@ class BagReader:
     # --- frames ----------------------------------------------------------------------------------
     def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None,
                sync_tolerance_s: float = 0.01, color: str = "luma",
-               metadata_keymap: Sequence[str] | None = None) -> Iterator[Frame]:
+               metadata_keymap: Sequence[str] | None = None, black_level_dn: float | None = None) -> Iterator[Frame]:
         """Yield every image as a :class:`Frame` in log-time order, prepared as the node prepares it
         (``msg_adapters.prepare_frame``).
 
@@ -275,10 +275,11 @@ class BagReader:
         evaluated (``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``). Driver
         metadata messages (:mod:`msg_adapters.vendor`) are converted with the profile (relative gains);
         ``metadata_keymap`` (``STATUS|KEY|FIELD|UNIT[|SCALE]`` entries) reads a DiagnosticArray of a
-        driver's own key names (:mod:`msg_adapters.keymap`; a bad entry is a ValueError).
+        driver's own key names (:mod:`msg_adapters.keymap`; a bad entry is a ValueError). ``black_level_dn``: the
+        black level taken off every image (default: the profile's).
         """
         prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
-        options = FrameOptions(prof, bit_depth or (prof.bit_depth if prof else None), color)
+        options = FrameOptions(prof, bit_depth or (prof.bit_depth if prof else None), color, black_level_dn)
         keymap = parse_keymap(metadata_keymap) if metadata_keymap else None
         meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap))
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)

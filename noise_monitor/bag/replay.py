@@ -242,7 +242,8 @@ def run_replay(
             ("camera_info", reader.camera_info_topic), ("temperature", reader.temperature_topic))}
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
-                               color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None)
+                               color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None,
+                               black_level_dn=opts.black_level_dn)
         periods: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
         next_report = last_stamp = 0
         last_log = 0

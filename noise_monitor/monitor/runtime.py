@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from noise_monitor.physics import CameraProfile, NoiseModel, load_profile
+from noise_monitor.physics.metadata import BLACK_LEVEL_MAX_DN
 from noise_monitor.physics.table_grid import GridSpec
 from noise_monitor.text import clip
 
@@ -50,6 +51,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
                         "serial), else '<profile name>/<camera_name>'"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
+    "black_level_dn": (-1.0, "the camera's black level (pedestal, 8-bit DN scale) taken off every image before the "
+                             "model reads it; -1 = the profile's black_level_dn (0 without)"),
     "color": ("luma", "reduction of colour images to gray: luma or green"),
     "model": ("full_meta", "estimator variant (noise_monitor.estimator.load)"),
     "weights": ("", "estimator checkpoint (.pt written by `noise-monitor train`); '' = the bundled weights"),
@@ -105,6 +108,9 @@ def check_parameters(p: Mapping[str, Any]) -> None:
             raise ValueError(f"parameter {name} must be a finite number >= 0, got {p[name]}")
     if p["bit_depth"] > 16:
         raise ValueError(f"parameter bit_depth must be in 0..16, got {p['bit_depth']}")
+    if not (p["black_level_dn"] == -1.0 or 0.0 <= p["black_level_dn"] < BLACK_LEVEL_MAX_DN):
+        raise ValueError(f"parameter black_level_dn must be -1 (the profile's) or in [0, {BLACK_LEVEL_MAX_DN:g}) DN, "
+                         f"got {p['black_level_dn']}")
     if not MIN_DIAGNOSTICS_RATE_HZ <= p["diagnostics_rate_hz"] <= MAX_DIAGNOSTICS_RATE_HZ:
         raise ValueError(f"parameter diagnostics_rate_hz must be in [{MIN_DIAGNOSTICS_RATE_HZ:g}, "
                          f"{MAX_DIAGNOSTICS_RATE_HZ:g}] Hz, got {p['diagnostics_rate_hz']}")
@@ -149,6 +155,14 @@ class FrameOptions:
     profile: CameraProfile | None = None
     bit_depth: int | None = None
     color: str = "luma"
+    black_level_dn: float | None = None  # taken off every image; None: the profile's
+
+    @property
+    def black_level(self) -> float:
+        """The black level (8-bit DN) taken off every image: this one, else the profile's, else 0."""
+        if self.black_level_dn is not None:
+            return self.black_level_dn
+        return self.profile.black_level_dn if self.profile is not None else 0.0
 
 
 class MonitorRuntime:
@@ -186,7 +200,8 @@ class MonitorRuntime:
         self.hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
         self.monitor = Monitor(self.config, estimator, self.model, p["camera_name"], self.hardware_id)
         depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
-        self.frame_options = FrameOptions(self.profile, depth, p["color"])
+        self.frame_options = FrameOptions(self.profile, depth, p["color"],
+                                          None if p["black_level_dn"] == -1.0 else float(p["black_level_dn"]))
 
     @classmethod
     def from_params_file(cls, path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import yaml
 
 from noise_monitor.bag.reader import BagReader
 from noise_monitor.bag.replay import replay
@@ -16,6 +17,7 @@ from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.cli import main as cli_main
 from noise_monitor.monitor import MonitorConfig
 from noise_monitor.monitor.patches import select_patches
+from noise_monitor.paths import share_dir
 from noise_monitor.physics import CameraProfile, load_profile
 
 torch.set_num_threads(1)
@@ -69,6 +71,21 @@ def test_a_stated_black_level_keeps_xi_unbiased(tmp_path: Path, pedestal: Camera
     stated, unstated = replay(bag, pedestal, None, **kw), replay(bag, "ev76c661", None, **kw)
     assert stated["frames_processed"] == unstated["frames_processed"] == 40
     assert abs(stated["xi"]["mean"]) <= 0.05 and unstated["xi"]["mean"] >= 0.1
+
+
+def test_the_black_level_as_a_node_parameter(tmp_path: Path, pedestal: CameraProfile, estimator) -> None:
+    """The node parameter ``black_level_dn`` (a driver's setting; -1 = the profile's) does what the profile's key
+    does: the pedestal camera replayed with the plain profile and the parameter reads as with the pedestal profile."""
+    bag = simulate_bag(tmp_path / "ped.mcap", pedestal, "campaign_heldout", frames=12, width=192, height=128,
+                       fps=10.0, seed=33)
+    params = yaml.safe_load((share_dir() / "config" / "node.yaml").read_text())
+    params["/**"]["ros__parameters"]["black_level_dn"] = BLACK
+    (tmp_path / "node.yaml").write_text(yaml.safe_dump(params))
+    kw = {"estimator": estimator, "progress": False, "plot": False}
+    by_param = replay(bag, "ev76c661", None, config=tmp_path / "node.yaml", **kw)
+    by_profile = replay(bag, pedestal, None, **kw)
+    assert by_param["frames_processed"] == by_profile["frames_processed"] == 12
+    assert by_param["xi"] == by_profile["xi"] and by_param["sigma_model"] == by_profile["sigma_model"]
 
 
 def test_the_lab_finds_a_hidden_effect_only_with_the_black_level_stated(tmp_path: Path,
