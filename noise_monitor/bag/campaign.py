@@ -184,12 +184,23 @@ def render(world: np.ndarray, fp: FramePlan, vignette: np.ndarray,
     """The clean view (DN, float32) of a frame: bilinear sub-pixel crop of the world, times the
     brightness and the vignetting, clipped to 0..255; and its nominal top-left corner in world pixels.
     ``shake``: the view's displacement (dx, dy, px) from that corner by vibration, or (n, 2) displacements over
-    the exposure (:func:`vibration_during_exposure`), whose views the sensor integrates (their mean)."""
+    the exposure (:func:`vibration_during_exposure`), whose views the sensor integrates (their mean), or
+    (rows, n, 2) those of each row of a rolling shutter (rolling-shutter wobble)."""
     h, w = vignette.shape
     x = fp.x * (world.shape[1] - w - 1)
     y = fp.y * (world.shape[0] - h - 1)
     win = np.zeros((h, w), dtype=np.float32)
-    path = np.asarray(shake, dtype=np.float64).reshape(-1, 2)
+    shake = np.asarray(shake, dtype=np.float64)
+    if shake.ndim == 3:  # (rows, n, 2): a rolling shutter's rows, each displaced along its own stretch of the path
+        gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+        for j in range(shake.shape[1]):
+            d = shake[:, j, :].astype(np.float32)
+            mx = np.clip(gx + np.float32(x) + d[:, :1], 0.0, world.shape[1] - 1.0)
+            my = np.clip(gy + np.float32(y) + d[:, 1:], 0.0, world.shape[0] - 1.0)
+            win += cv2.remap(world, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        win /= np.float32(shake.shape[1])
+        return np.clip(win * vignette * np.float32(fp.brightness), 0.0, 255.0), (round(x, 4), round(y, 4))
+    path = shake.reshape(-1, 2)
     for dx, dy in path:
         cx = min(max(x + dx, 0.0), world.shape[1] - w - 1.0) + (w - 1) / 2.0
         cy = min(max(y + dy, 0.0), world.shape[0] - h - 1.0) + (h - 1) / 2.0
@@ -210,20 +221,39 @@ SAMPLES_PER_PERIOD, MAX_EXPOSURE_SAMPLES = 16, 64
 
 
 def vibration_during_exposure(rng: np.random.Generator, exposures_s: Sequence[float], rms_px: float,
-                              hz: float) -> list[np.ndarray]:
+                              hz: float, rows: int = 0, line_s: float = 0.0) -> list[np.ndarray]:
     """Per frame, (n, 2) displacements (dx, dy, px) of a camera vibrating at ``hz`` over the frame's exposure: a
     sinusoid per axis of ``rms_px`` rms, its phases random per frame and axis (the frame clock runs free of the
     vibration), sampled at n evenly spaced instants (``SAMPLES_PER_PERIOD`` per period, at least one). A short
     exposure freezes one displacement; one of about half a period or more smears the view along the path (motion
-    blur that changes from frame to frame); over many periods every frame sees the same blur about the pose."""
+    blur that changes from frame to frame); over many periods every frame sees the same blur about the pose.
+    ``rows`` > 0: a rolling shutter starts each row's exposure ``line_s`` after the previous one's, so each row
+    sees the path that much later: per frame (rows, n, 2), row 0 the path above (rolling-shutter wobble)."""
     amplitude = math.sqrt(2.0) * rms_px
+    delays = np.arange(max(rows, 1)) * line_s
     out = []
     for t_exp in exposures_s:
         n = int(min(MAX_EXPOSURE_SAMPLES, max(1, math.ceil(SAMPLES_PER_PERIOD * hz * t_exp))))
         phase = rng.uniform(0.0, 2.0 * math.pi, 2)
         t = (np.arange(n) + 0.5) / n * t_exp
-        out.append(amplitude * np.sin(2.0 * math.pi * hz * t[:, None] + phase[None, :]))
+        path = amplitude * np.sin(2.0 * math.pi * hz * (delays[:, None, None] + t[None, :, None]) + phase[None, None, :])
+        out.append(path if rows else path[0])
     return out
+
+
+def first_row(path: np.ndarray) -> np.ndarray:
+    """(n, 2) a frame's displacements over its exposure: its first row's of a rolling shutter's (rows, n, 2)."""
+    return path[0] if path.ndim == 3 else path
+
+
+def wobble_px(path: np.ndarray) -> float:
+    """The rms (px) over a frame's rows (rows, n, 2) of each row's mean displacement about the frame's: the
+    distortion a rolling shutter reads into a vibrating view (0 for a whole-frame path)."""
+    if path.ndim != 3:
+        return 0.0
+    rows = path.mean(axis=1)
+    d = rows - rows.mean(axis=0)
+    return math.sqrt(float(np.mean(np.sum(d * d, axis=1))))
 
 
 def smear_px(path: np.ndarray) -> float:

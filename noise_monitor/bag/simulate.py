@@ -102,6 +102,7 @@ class FieldConditions(TypedDict, total=False):
     pwm_hz: float
     pwm_duty: float
     auto_exposure_pct: float
+    wobble: bool
 
 
 def simulate_bag(
@@ -132,6 +133,7 @@ def simulate_bag(
     pwm_hz: float = 0.0,
     pwm_duty: float = PWM_DUTY,
     auto_exposure_pct: float = 0.0,
+    wobble: bool = False,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -198,6 +200,8 @@ def simulate_bag(
         raise ValueError(f"vibration_hz must be 0-{MAX_VIBRATION_HZ:g} Hz, got {vibration_hz}")
     if vibration_hz and not vibration_px:
         raise ValueError("vibration_hz is the frequency of a vibration: give vibration_px too")
+    if wobble and not vibration_hz:
+        raise ValueError("wobble is a rolling shutter's reading of a vibration at a frequency: give vibration_hz too")
     if not 0 <= flicker_pct <= MAX_FLICKER_PCT:
         raise ValueError(f"flicker_pct must be 0-{MAX_FLICKER_PCT:g} %, got {flicker_pct}")
     if not 0 <= banding_pct <= 100:
@@ -251,7 +255,8 @@ def simulate_bag(
         steps = [replace(s, exposure_time_s=s.exposure_time_s * float(f)) for s, f in zip(steps, hunt)]
     if scen.campaign:  # each frame's displacements over its exposure (one unless the vibration has a frequency)
         paths = (campaign.vibration_during_exposure(np.random.default_rng([seed, 6]),
-                                                    [s.exposure_time_s for s in steps], vibration_px, vibration_hz)
+                                                    [s.exposure_time_s for s in steps], vibration_px, vibration_hz,
+                                                    height if wobble else 0, line_time_s)
                  if vibration_hz else list(shakes[:, None, :]))
     # each row's light under the lamps (rows, a frame's exposure and phase) and the bands' depth at an exposure
     depth = banding_pct / 100.0
@@ -309,8 +314,9 @@ def simulate_bag(
                 "corrupted": step.corrupted,
                 "brightness": round(step.brightness, 5),
                 "offset_px": list(offset),
-                **({"shake_px": [round(float(v), 4) for v in paths[i].mean(axis=0)]} if vibration_px else {}),
-                **({"blur_px": round(campaign.smear_px(paths[i]), 4)} if vibration_hz else {}),
+                **({"shake_px": [round(float(v), 4) for v in campaign.first_row(paths[i]).mean(axis=0)]} if vibration_px else {}),
+                **({"blur_px": round(campaign.smear_px(campaign.first_row(paths[i])), 4)} if vibration_hz else {}),
+                **({"wobble_px": round(campaign.wobble_px(paths[i]), 4)} if wobble else {}),
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 **({"exposure_factor": round(float(hunt[i]), 6)} if auto_exposure_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
@@ -328,6 +334,7 @@ def simulate_bag(
         **({"moving_objects": moving_objects} if moving_objects else {}),
         **({"vibration_px": vibration_px} if vibration_px else {}),
         **({"vibration_hz": vibration_hz} if vibration_hz else {}),
+        **({"wobble": True, "line_time_s": line_time_s} if wobble else {}),
         **({"flicker_pct": flicker_pct} if flicker_pct else {}),
         **({"auto_exposure_pct": auto_exposure_pct} if auto_exposure_pct else {}),
         **({"banding_pct": banding_pct, "line_time_s": line_time_s,

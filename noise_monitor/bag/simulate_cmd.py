@@ -58,6 +58,9 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --vibration: the camera vibrates sinusoidally at HZ during each exposure, so "
                              "exposures of about half a period or more smear the view (motion blur changing from "
                              "frame to frame; default 0: each frame frozen at one displacement)")
+    parser.add_argument("--wobble", action="store_true",
+                        help="with --vibration-hz: a rolling shutter (--line-us per row) reads the vibrating view row "
+                             "by row, each row displaced along its own stretch of the path (rolling-shutter wobble)")
     parser.add_argument("--flicker", type=float, default=0.0, metavar="PCT",
                         help="lights that flicker: the scene's brightness scaled every frame by 1 + PCT %% rms, "
                              "independently (default 0)")
@@ -68,7 +71,8 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mains-hz", type=float, default=None,
                         help=f"mains frequency of --banding (default {MAINS_HZ:g})")
     parser.add_argument("--line-us", type=float, default=None,
-                        help=f"rolling shutter line time of --banding in microseconds (default {LINE_TIME_S * 1e6:g})")
+                        help=f"rolling shutter line time of --banding and --wobble in microseconds (default "
+                             f"{LINE_TIME_S * 1e6:g})")
     parser.add_argument("--pwm-hz", type=float, default=None,
                         help="with --banding: the lamps are LEDs dimmed by pulse-width modulation at this frequency "
                              "instead of lamps on the mains (square-wave light: sharp-edged bands at short exposures)")
@@ -83,9 +87,12 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
 def field_keywords(args: argparse.Namespace) -> FieldConditions:
     """The ``simulate_bag`` keywords of :func:`add_field_arguments`' options (ValueError: options of the banding
     without it)."""
-    if not args.banding and (args.mains_hz is not None or args.line_us is not None or args.pwm_hz is not None
-                             or args.pwm_duty is not None):
-        raise ValueError("--mains-hz, --line-us, --pwm-hz and --pwm-duty shape the lamps' bands: give --banding PCT too")
+    if not args.banding and (args.mains_hz is not None or args.pwm_hz is not None or args.pwm_duty is not None):
+        raise ValueError("--mains-hz, --pwm-hz and --pwm-duty shape the lamps' bands: give --banding PCT too")
+    if args.line_us is not None and not (args.banding or args.wobble):
+        raise ValueError("--line-us is the rolling shutter's line time of --banding or --wobble: give one of them too")
+    if args.wobble and not args.vibration_hz:
+        raise ValueError("--wobble reads a vibration at a frequency row by row: give --vibration PX --vibration-hz HZ")
     if args.pwm_hz is not None and args.mains_hz is not None:
         raise ValueError("--pwm-hz dims LEDs instead of lamps on the mains: give one of --pwm-hz and --mains-hz")
     if args.pwm_duty is not None and args.pwm_hz is None:
@@ -97,7 +104,7 @@ def field_keywords(args: argparse.Namespace) -> FieldConditions:
     return {"vibration_px": args.vibration, "vibration_hz": args.vibration_hz, "flicker_pct": args.flicker,
             "banding_pct": args.banding, "mains_hz": mains_hz, "line_time_s": line_time_s,
             "pwm_hz": args.pwm_hz or 0.0, "pwm_duty": PWM_DUTY if args.pwm_duty is None else args.pwm_duty,
-            "auto_exposure_pct": args.auto_exposure}
+            "auto_exposure_pct": args.auto_exposure, "wobble": args.wobble}
 
 
 def _start_ns(text: str | None) -> int:

@@ -312,10 +312,36 @@ def test_leds_dimmed_by_pwm_band_a_rolling_shutter_image(tmp_path, capsys) -> No
 
 
 def test_the_banding_options_without_banding_are_an_error(capsys) -> None:
-    """Before, ``--mains-hz`` or ``--line-us`` without ``--banding`` were accepted and had no effect."""
+    """Before, ``--mains-hz`` or ``--line-us`` without ``--banding`` were accepted and had no effect (``--line-us``
+    also sets the line time of ``--wobble``, which needs a vibration's frequency)."""
     from noise_monitor.cli import main as cli_main
 
-    for extra in (["--mains-hz", "60"], ["--line-us", "20"]):
+    for extra, message in ((["--mains-hz", "60"], "give --banding PCT too"),
+                           (["--line-us", "20"], "--banding or --wobble: give one of them too"),
+                           (["--wobble"], "give --vibration PX --vibration-hz HZ"),
+                           (["--vibration", "0.3", "--wobble"], "give --vibration PX --vibration-hz HZ")):
         args = ["simulate-bag", "x.mcap", "--profile", "ev76c661", "--scenario", "static", "--frames", "2", *extra]
-        assert cli_main(args) == 2 and "give --banding PCT too" in capsys.readouterr().err
+        assert cli_main(args) == 2 and message in capsys.readouterr().err
+
+
+def test_a_rolling_shutter_reads_a_vibrating_view_row_by_row() -> None:
+    """``--wobble``: each row of a rolling shutter starts its exposure one line time after the previous one, so
+    under a vibration each row is displaced along its own stretch of the path: on a horizontal ramp a row's level
+    moves by the ramp's slope times its own displacement (to the bilinear interpolation's rounding); the first row
+    sees the frame's path, and the truth's wobble is the rms of the rows' displacements about their mean."""
+    h, w = 64, 48
+    world = np.tile(np.arange(w + 40, dtype=np.float32) * 2.0, (h + 40, 1))  # 2 DN per px along x
+    plan = campaign.FramePlan(x=0.5, y=0.5, gain_db=0.0, exposure_time_s=1e-4, sensor_temperature_c=30.0,
+                              brightness=1.0, hold=0, moving=False)
+    rows = campaign.vibration_during_exposure(np.random.default_rng(3), [1e-4], 1.0, 200.0, h, 100e-6)[0]
+    whole = campaign.vibration_during_exposure(np.random.default_rng(3), [1e-4], 1.0, 200.0)[0]
+    assert rows.shape == (h, 1, 2) and np.array_equal(rows[0], whole)
+    flat, _ = campaign.render(world, plan, np.ones((h, w), np.float32))
+    wobbled, _ = campaign.render(world, plan, np.ones((h, w), np.float32), rows)
+    shift = (wobbled - flat).mean(axis=1) / 2.0  # each row's x displacement read off the ramp
+    np.testing.assert_allclose(shift, rows[:, 0, 0], atol=0.01)
+    assert campaign.wobble_px(rows) == pytest.approx(float(np.sqrt(np.mean(np.sum(
+        (rows.mean(axis=1) - rows.mean(axis=(0, 1))) ** 2, axis=1)))))
+    assert campaign.wobble_px(whole) == 0.0
+    assert np.array_equal(campaign.first_row(rows), whole) and campaign.first_row(whole) is whole
 
