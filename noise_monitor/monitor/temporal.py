@@ -121,7 +121,7 @@ class StillCamera:
         h, w = image.shape
         self._scale = max(1.0, max(h, w) / MOTION_SIZE_PX)
         size = (max(8, round(w / self._scale)), max(8, round(h / self._scale)))
-        return cv2.resize(image.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+        return cv2.resize(np.asarray(image, dtype=np.float32), size, interpolation=cv2.INTER_AREA)  # no copy
 
     def continues(self, image: np.ndarray, meta: CameraMetadata) -> bool:
         """Whether this frame continues the current hold; one that does not starts the next hold."""
