@@ -326,6 +326,9 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
         effects["quantization"] = {"bits": ds.bit_depth}
     profile = CameraProfile(name=ds.name, values=values, effects=effects,
                             black_level_dn=(ds.dark_offset_dn or 0.0) * 255.0 / ds.adc_max_dn)
+    if profile.black_level_dn:
+        notes.append(f"black level {profile.black_level_dn:.4g} DN on the 8-bit scale (the dark offset "
+                     f"{ds.dark_offset_dn:g} DN): the node takes it off every image")
     profile.metadata(gain_db=0.0, exposure_time_s=1.0, sensor_temperature_c=25.0)  # validates every field
     result = ProfileResult(profile, notes=notes, derived={
         "full_well_e": fw, "read_noise_e": math.sqrt(read_var), "dark_shot_noise_at_measurement_e": math.sqrt(mu_meas),

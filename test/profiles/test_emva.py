@@ -118,6 +118,7 @@ def test_a_dark_offset_becomes_the_profiles_black_level():
     in the profile, which the node takes off every image."""
     result = profile_from_datasheet(datasheet_from_mapping(_doc(dark_offset_dn=64, saturation_capacity_e=10000)))
     assert result.profile.black_level_dn == pytest.approx(64 * 255 / 4095)
+    assert any("black level 3.985 DN" in n for n in result.notes)
     assert profile_from_datasheet(datasheet_from_mapping(_doc())).profile.black_level_dn == 0.0
 
 
