@@ -932,7 +932,7 @@ def measure_frames(
             skipped[reason] = skipped.get(reason, 0) + 1
             continue
         img = np.asarray(fr.image_dn, dtype=np.float64)
-        raw = img + fr.black_level_dn  # the camera's output codes (its black level was taken off)
+        raw = img + fr.black_level_dn if fr.black_level_dn else img  # the camera's output codes
         if shape is None:
             if img.shape[0] < block or img.shape[1] < block:
                 raise ValueError(f"images of {img.shape[1]}x{img.shape[0]} pixels are smaller than one {block}x{block} block")

@@ -490,13 +490,18 @@ class LightChange:
                 (self.offset[:, None] + hi * level[None]).max(axis=0))
 
 
+def row_gain(a: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(..., H) each row's least-squares gain of ``a`` (..., H, W) on the same row of ``ref`` (broadcast to it; 0
+    where that row of ``ref`` is 0). A rolling shutter exposes a row at one time, so one gain per row follows the
+    light whatever its waveform."""
+    norm = np.einsum("...hw,...hw->...h", ref, ref)
+    return np.einsum("...hw,...hw->...h", a, ref) / np.maximum(norm, np.finfo(norm.dtype).tiny)
+
+
 def _row_light(x: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """(k, H) each frame's gain of every row of the run ``x`` (k x H x W) against the run mean, the frame's
-    ``offset`` (k,) taken off first: least squares over the row's pixels. A rolling shutter exposes a row at one
-    time, so one gain per row follows the light whatever its waveform."""
-    mean = x.mean(axis=0)
-    fitted = np.einsum("khw,hw->kh", x, mean, optimize=True) - offset[:, None] * mean.sum(axis=1)
-    return fitted / np.maximum(np.sum(mean * mean, axis=1), 1e-300)
+    ``offset`` (k,) taken off first (:func:`row_gain`)."""
+    return row_gain(x - offset[:, None, None], x.mean(axis=0))
 
 
 def _follows_rows(residual: np.ndarray, rows: int) -> bool:

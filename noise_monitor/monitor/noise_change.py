@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from noise_monitor.measure.temporal import blocks_of
+from noise_monitor.measure.temporal import blocks_of, row_gain
 from noise_monitor.physics import CameraMetadata
 
 #: standard errors by which the frames after a cut must differ from those before it
@@ -91,10 +91,8 @@ class LevelReference:
         diff = np.asarray(patches, np.float32) - previous
         per_block = float(self.block**2 - N_BASIS)
         if self.rows is not None:  # each row's gain taken out: 1 / s of its noise with it
-            m = self.rows
-            gain = np.einsum("ksw,ksw->ks", diff, m) / np.maximum(np.einsum("ksw,ksw->ks", m, m), 1e-12)
-            diff = diff - gain[..., None] * m
-            per_block -= self.block**2 / m.shape[2]
+            diff = diff - row_gain(diff, self.rows)[..., None] * self.rows
+            per_block -= self.block**2 / self.rows.shape[2]
         d = blocks_of(diff, self.block).reshape(-1, self.block**2)[self.selected]
         c = (d[:, None, :] @ self.basis)[:, 0, :]
         energy = np.zeros(self.selected.size)
