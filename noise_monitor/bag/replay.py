@@ -248,6 +248,7 @@ def run_replay(
         next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
+        black_bounds: list[float] = []  # frames contradicting the stated black level: the camera's is at most
         gaps = GapCounter(expected_rate_hz=float(rt.params["expected_rate_hz"]))  # frames the recording lacks
         constants: dict[str, dict[str, Any]] = {}  # camera constants the bag's metadata set over the profile's
 
@@ -278,6 +279,8 @@ def run_replay(
             implausible = gaps.implausible
             monitor.count_lost(gaps.observe(bf.stamp_ns), gaps.implausible - implausible)  # as the node counts them
             res = rt.process(bf)
+            if res.black_level is not None and res.black_level.upper_dn is not None:
+                black_bounds.append(res.black_level.upper_dn)
             _record(table, bf, res)
             periods.add(res)
             if writer is not None:
@@ -328,6 +331,8 @@ def run_replay(
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
         "idle_gaps_capped": capped_gaps,
         "metadata_overrides": constants,
+        "black_level_contradicted": ({"frames": len(black_bounds), "stated_dn": opts.black_level,
+                                      "camera_at_most_dn": round(min(black_bounds), 2)} if black_bounds else None),
     }
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)

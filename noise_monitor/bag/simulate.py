@@ -269,6 +269,7 @@ def simulate_bag(
     hw = hardware_id or prof.name
     records: list[dict[str, Any]] = []
     bit_depth = prof.bit_depth
+    black = float(prof.black_level_dn)
     prev_offset: tuple[float, float] | None = None
     with BagWriter(out, storage=storage) as writer:
         for i, (u, step) in enumerate(tqdm(list(zip(us, steps)), desc=f"simulate {out.name}", unit="frame",
@@ -289,15 +290,21 @@ def simulate_bag(
             if banding_pct:
                 bands = lamps(height, true_meta.exposure_time_s, float(band_phase[i]))
                 clean = np.clip(clean * bands[:, None].astype(np.float32), 0.0, 255.0).astype(np.float32)
-            noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint")
+            # the camera's pedestal b keeps the noise down to -b below black; its ADC saturates at 255 - b
+            noisy, sigmas = sim_model.simulate(clean, true_meta, rng, mode="joint", black_level_dn=black)
             if frame_hook is not None:
-                noisy = np.clip(frame_hook(i, clean, noisy, true_meta), 0.0, 255.0).astype(np.float32)
+                noisy = np.clip(frame_hook(i, clean, noisy, true_meta), -black, 255.0).astype(np.float32)
             if step.image_noise_dn:
-                noisy = np.clip(noisy + rng.normal(0.0, step.image_noise_dn, noisy.shape).astype(np.float32), 0, 255)
-            if prof.black_level_dn:  # the camera's pedestal: its ADC clips at 255 above it
-                noisy = np.clip(noisy + np.float32(prof.black_level_dn), 0.0, 255.0)
-            img = np.rint(noisy).astype(np.uint8)
-            sigma_image = float(np.std(img.astype(np.float64) - clean))
+                noisy = np.clip(noisy + rng.normal(0.0, step.image_noise_dn, noisy.shape).astype(np.float32),
+                                -black, 255)
+            if black:
+                img = np.rint(np.clip(noisy + np.float32(black), 0.0, 255.0)).astype(np.uint8)
+                # the truth reads the noise as the monitor does (clipped at black) and without the saturation the
+                # pedestal brings (the monitor's patches avoid it)
+                sigma_image = float(np.std(np.clip(np.rint(noisy), 0.0, 255.0) - clean))
+            else:
+                img = np.rint(noisy).astype(np.uint8)
+                sigma_image = float(np.std(img.astype(np.float64) - clean))
             sigma_model = float(paper_model.predict(clean, stated)["total"])
             writer.write(topic["camera_info"], camera_info_msg(height, width, stamp), stamp)
             writer.write(topic["metadata"], metadata_msg(stated, stamp, hw), stamp)
@@ -343,8 +350,9 @@ def simulate_bag(
         "bit_depth": bit_depth, **({"black_level_dn": prof.black_level_dn} if prof.black_level_dn else {}),
         "storage": storage, "topics": topic, "simulation_mode": "joint",
         "sigma_note": "sigma: per-source std of each source's clipped noise map on the whole frame (DN); "
-                      "sigma_image: std(mono8 image - clean); sigma_model: paper model (pn, dcsn, rn, joint, "
-                      "clip-aware) for the stated metadata; xi = sigma_model - sigma_image",
+                      "sigma_image: std(mono8 image - clean) (a black level off, clipped at 0 and 255); "
+                      "sigma_model: paper model (pn, dcsn, rn, joint, clip-aware) for the stated metadata; "
+                      "xi = sigma_model - sigma_image",
         "episodes": _episodes(records),
         "frames": records,
     }

@@ -24,6 +24,7 @@ from noise_monitor.physics.constants import PAPER_EFFECTS as SOURCES
 from noise_monitor.physics.constants import SMOOTH_KERNEL
 
 from .alarm import EmaFilter, XiAlarm
+from .black_level import BlackLevelCheck, check_black_level
 from .config import MonitorConfig
 from .frame import Frame
 from .frame import skip_reason as frame_skip_reason
@@ -111,6 +112,7 @@ class FrameResult:
     patch_xi: list[float] = field(default_factory=list)  # this frame's xi per patch (same source as ``xi``)
     patches_measurable: int | None = None  # patches the estimator could measure (None: no confidence output)
     processing_ms: float = 0.0
+    black_level: BlackLevelCheck | None = None  # the stated black level against the image (None: none stated)
     counters: dict[str, int] = field(default_factory=dict)
     xi_threshold: float = 0.0  # the alarm threshold in force for this frame (DN; dashboards draw +-it around xi)
 
@@ -151,6 +153,8 @@ class FrameResult:
         if self.patches_measurable is not None:
             out["patches_measurable"] = float(self.patches_measurable)
         out["processing_ms"] = self.processing_ms
+        if self.black_level is not None:
+            out["pixels_below_black_pct"] = self.black_level.below_pct
         return out
 
     def values(self) -> dict[str, str]:
@@ -279,6 +283,8 @@ class Monitor:
             return self._skip(frame, f"{len(selection.corners)} usable patches (need {cfg.min_patches}): "
                                      f"{selection.describe_rejections()}")
         patches = selection.extract(frame.image_dn)
+        if frame.black_level_dn:  # the noise a pedestal keeps below black: read clipped, as the model clips it
+            np.maximum(patches, 0.0, out=patches)
         est = self.estimator.predict(patches, meta)
         per_patch = {k: np.asarray(est[k], dtype=np.float64).reshape(-1) for k in ESTIMATOR_KEYS}
         bad = [k for k, v in per_patch.items() if not np.all(np.isfinite(v))]
@@ -333,6 +339,11 @@ class Monitor:
         state = self.alarm.update(xi_f, xi, xi_err)
         self.counters["frames_processed"] += 1
         level, message = self._status(xi, xi_f, meta)
+        # every source but the signal's shot noise: what the image shows at black
+        dark = math.sqrt(max(model["total"] ** 2 - model.get("pn", 0.0) ** 2, 0.0))
+        black = check_black_level(frame.image_dn, frame.black_level_dn, dark)
+        if black is not None and black.contradicted:
+            level, message = max(level, WARN), f"{message}; {black.message()}"
         if bounded and weight < 0.5:
             message += f"; no patch measurable (texture hides the noise): the image proves only xi >= {xi_bound:+.2f} DN"
         if changed:
@@ -344,7 +355,7 @@ class Monitor:
             xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],
-            patches_measurable=int(ok.sum()) if "measurable" in est else None,
+            patches_measurable=int(ok.sum()) if "measurable" in est else None, black_level=black,
             processing_ms=(time.perf_counter() - t0) * 1e3,
         )
 

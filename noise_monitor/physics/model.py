@@ -292,6 +292,7 @@ class NoiseModel:
         mode: str = "joint",
         overrides: Mapping[str, CameraMetadata] | None = None,
         per_source: bool = True,
+        black_level_dn: float = 0.0,
     ) -> tuple[np.ndarray, dict[str, float]]:
         """Corrupt a clean image (DN, 0..255); returns (noisy float32 image, sigma per effect and total).
 
@@ -304,6 +305,8 @@ class NoiseModel:
         is below 100 electrons) and only the total sigma is returned. The image is the whole sensor:
         position-dependent effects see its pixel grid (``cond.where``); response effects scale the
         noise by their slope at the clean value (at the previous output in sequential mode).
+        ``black_level_dn``: the camera's pedestal, which keeps the noise down to ``-black_level_dn`` below black (the
+        image returned is without the pedestal; its ADC's saturation at ``DN_MAX - black_level_dn`` is the caller's).
         """
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -313,6 +316,7 @@ class NoiseModel:
         if not np.all(np.isfinite(clean)):
             raise ValueError("clean_dn contains NaN or inf")
         overrides = overrides or {}
+        lo, hi = -float(black_level_dn), DN_MAX
         where = Pixels.frame(clean.shape)
         cond = self.conditions(meta).replace(where=where)
         conds = {e.name: (self.conditions(overrides[e.name]).replace(where=where) if e.name in overrides else cond)
@@ -328,7 +332,7 @@ class NoiseModel:
             if slope is not None:
                 noisy *= slope
             noisy += clean
-            np.clip(noisy, 0.0, DN_MAX, out=noisy)
+            np.clip(noisy, lo, hi, out=noisy)
         elif mode == "joint":
             total = np.zeros_like(clean)
             for e in adders:
@@ -336,8 +340,8 @@ class NoiseModel:
                 if slope is not None:
                     n = n * slope
                 total += n
-                sigmas[e.name] = _std(np.clip(clean + n, 0.0, DN_MAX) - clean)
-            noisy = np.clip(clean + total, 0.0, DN_MAX)
+                sigmas[e.name] = _std(np.clip(clean + n, lo, hi) - clean)
+            noisy = np.clip(clean + total, lo, hi)
         else:
             noisy = clean
             for e in adders:
@@ -346,7 +350,7 @@ class NoiseModel:
                 else:
                     n = _checked_sample(e, self.linear_signal(noisy, cond).astype(np.float32), conds[e.name], rng)
                     n = n * np.asarray(self.slope(noisy, cond), dtype=np.float32)
-                nxt = np.clip(noisy + n, 0.0, DN_MAX)
+                nxt = np.clip(noisy + n, lo, hi)
                 sigmas[e.name] = _std(nxt - noisy)
                 noisy = nxt
         for e in quant:

@@ -2,6 +2,7 @@
 model reads it (node, replay, lab), and the simulator's camera of that profile adds it."""
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 from pathlib import Path
@@ -44,10 +45,14 @@ def test_the_simulated_camera_adds_its_black_level(tmp_path: Path, pedestal: Cam
     assert load_truth(raised)["black_level_dn"] == BLACK and "black_level_dn" not in load_truth(plain)
     a = [f.image_dn for f in BagReader(plain).frames(load_profile("ev76c661"))]
     b = [f for f in BagReader(raised).frames(pedestal)]
+    below = 0
     for x, f in zip(a, b):
         assert f.black_level_dn == BLACK
-        unclipped = x < 255.0 - BLACK - 0.5
+        unclipped = (x > 0.5) & (x < 255.0 - BLACK - 0.5)
         np.testing.assert_array_equal(f.image_dn[unclipped], x[unclipped])
+        assert np.all(f.image_dn[x < 0.5] <= 0.0)  # the noise the camera without a pedestal clips at black ...
+        below += int(np.sum(f.image_dn < 0.0))  # ... the pedestal keeps
+    assert below > 0
 
 
 def test_patches_clip_at_the_adcs_limits_above_the_black_level() -> None:
@@ -64,7 +69,8 @@ def test_patches_clip_at_the_adcs_limits_above_the_black_level() -> None:
 def test_a_stated_black_level_keeps_xi_unbiased(tmp_path: Path, pedestal: CameraProfile, estimator) -> None:
     """A held-out campaign of that camera: replayed with its profile, xi is as without a pedestal (mean -0.01 DN);
     with a profile that does not state it, the pedestal is read as signal with shot noise that is not there
-    (mean xi +0.15 DN on 100 frames, 2026-11-29)."""
+    (mean xi +0.15 DN on 100 frames, 2026-11-29). The noise the pedestal keeps below black is read clipped at black,
+    as the model clips it (before, such patches stopped the replay with a ValueError of the estimator)."""
     bag = simulate_bag(tmp_path / "ped.mcap", pedestal, "campaign_heldout", frames=40, width=320, height=256,
                        fps=10.0, seed=33)
     kw = {"estimator": estimator, "progress": False, "plot": False}
@@ -86,6 +92,27 @@ def test_the_black_level_as_a_node_parameter(tmp_path: Path, pedestal: CameraPro
     by_profile = replay(bag, pedestal, None, **kw)
     assert by_param["frames_processed"] == by_profile["frames_processed"] == 12
     assert by_param["xi"] == by_profile["xi"] and by_param["sigma_model"] == by_profile["sigma_model"]
+    assert by_param["black_level_contradicted"] is None and by_profile["black_level_contradicted"] is None
+
+
+def test_a_black_level_stated_above_the_cameras_is_reported(tmp_path: Path, estimator) -> None:
+    """A camera without a pedestal replayed with a stated black level of 16 DN: its dark pixels read 16 DN below
+    zero, far beyond its dark noise; such frames are processed and report it (WARN, the share of pixels below, the
+    bound the image puts on the camera's black level: 8.1 DN over 60 frames of seed 3, 2026-11-29), and the summary
+    names it. Before, the patches below zero stopped the replay with a ValueError of the estimator."""
+    bag = simulate_bag(tmp_path / "plain.mcap", "ev76c661", "campaign_heldout", frames=20, width=320, height=256,
+                       fps=10.0, seed=3)
+    params = yaml.safe_load((share_dir() / "config" / "node.yaml").read_text())
+    params["/**"]["ros__parameters"]["black_level_dn"] = BLACK
+    (tmp_path / "node.yaml").write_text(yaml.safe_dump(params))
+    out = replay(bag, "ev76c661", tmp_path / "out", config=tmp_path / "node.yaml", estimator=estimator,
+                 progress=False, plot=False)
+    assert out["frames_processed"] == 20
+    black = out["black_level_contradicted"]
+    assert black["frames"] >= 5 and black["stated_dn"] == BLACK and 0.0 <= black["camera_at_most_dn"] < 10.0
+    rows = list(csv.DictReader((tmp_path / "out" / "replay.csv").open()))
+    below = [r for r in rows if float(r["pixels_below_black_pct"]) > 0.2]
+    assert len(below) == black["frames"] and all(int(r["level"]) >= 1 for r in below)
 
 
 def test_the_lab_finds_a_hidden_effect_only_with_the_black_level_stated(tmp_path: Path,

@@ -137,6 +137,20 @@ def test_a_black_level_effect_reads_the_signal_below_the_output() -> None:
     assert np.all(got["total"] < plain.predict(levels, meta)["total"])
 
 
+def test_a_pedestal_keeps_the_noise_below_black() -> None:
+    """A camera with a black level b records its dark noise unclipped down to -b (the image returned is without the
+    pedestal): at black the noise is the model's unclipped one, and the same draws clip at 0 without it."""
+    meta = load_profile("ev76c661").metadata(gain_db=12.0, exposure_time_s=0.02, sensor_temperature_c=40.0)
+    black = np.zeros((128, 128), np.float32)
+    plain, _ = NoiseModel().simulate(black, meta, np.random.default_rng(5))
+    kept, sigmas = NoiseModel().simulate(black, meta, np.random.default_rng(5), black_level_dn=16.0)
+    assert plain.min() == 0.0 and kept.min() < -5.0 and kept.min() >= -16.0
+    np.testing.assert_array_equal(np.maximum(kept, 0.0), plain)
+    dark = float(np.hypot(NoiseModel().predict(100.0, meta)["rn"], NoiseModel().predict(100.0, meta)["dcsn"]))
+    assert float(np.std(kept)) == pytest.approx(dark, rel=0.05) and sigmas["total"] == pytest.approx(dark, rel=0.05)
+    assert float(np.std(plain)) < 0.7 * dark
+
+
 def test_simulation_is_seeded_and_overrides_change_only_that_source() -> None:
     model = NoiseModel()
     meta = load_profile("icx285").metadata(gain_db=6.0, exposure_time_s=0.05, sensor_temperature_c=30.0)
