@@ -285,6 +285,26 @@ def test_missing_metadata_is_a_warning_naming_the_fields(rig_factory):
     assert report.hardware_id == "unknown/no_profile"
 
 
+def test_a_black_level_the_image_contradicts_is_a_warning_with_the_cameras_bound(rig_factory):
+    """The node with ``black_level_dn`` 16 over a camera whose dark quarter reads 0 DN (no pedestal): its frames
+    are evaluated and WARN that the pixels read far below the stated black level, with the bound the image puts on
+    the camera's (a few DN); the same camera adding its 16 DN pedestal is OK (its noise below black is read clipped)."""
+    clean = scene()
+    clean[:128, :128] = 0.0
+    meta = PROFILE.metadata(**DYNAMIC)
+    rig = rig_factory("pedestal", black_level_dn=16.0)
+    for i, pedestal in enumerate((0.0, 0.0, 16.0, 16.0)):
+        noisy, _ = MODEL.simulate(clean, meta, rig.rng, black_level_dn=pedestal)
+        report, _ = rig.step(i, pixels=np.clip(np.rint(noisy + pedestal), 0, 255).astype(np.uint8))
+        if pedestal:
+            assert report.level == OK and float(report.values["pixels_below_black_pct"]) == 0.0
+            continue
+        assert report.level == WARN and "below the stated black level of 16 DN" in report.message
+        assert 5.0 < float(report.values["pixels_below_black_pct"]) <= 25.0  # of the dark quarter, past 8 sigma
+        bound = float(report.message.split("at most ")[1].split(" DN")[0])
+        assert 0.0 <= bound < 8.0
+
+
 def test_frames_arriving_while_busy_are_dropped_and_counted(rig_factory):
     rig = rig_factory("burst")
     stamps = [rig.publish(i)[0] for i in range(12)]  # faster than the worker evaluates them
