@@ -54,14 +54,18 @@ refitted jointly: the refit then changes only the candidate, so the components i
 position pattern and a contradiction are its own (refitted jointly, a temperature or exposure error on
 top of a DSNU shifts the DSNU to make up for the dark signal it changes in the fixed-pattern noise and
 passes the own-component cut, where it is read noise that is missing), and it is one fit of the
-candidate's own parameters. Claims can only be withdrawn by this rule, never added: every claim is
-significant alone and the first is today's.
+candidate's own parameters. Claims can only be withdrawn by this rule, never added, with one exception: when
+nothing is claimed, two missing effects that partly cancel (an unstated pedestal's phantom shot noise against extra
+read noise) may leave a residual neither reproduces alone. The best candidate whose fit alone passed the F-test and
+the explained fraction is then fitted jointly with each other one (:func:`_pair`); the pair leaving the smallest
+chi-square with each member significant beyond the other's joint fit (all the tests above) is claimed, partners
+that fit as well named as alternatives, and the forward selection goes on beyond the two.
 """
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,6 +94,19 @@ MAX_STEP_Z = 5.0
 #: masks alone) only if its own fit found something at this p-value (the F-test's): one that found nothing
 #: alone would find nothing on top of them either, and each refit costs a fit
 MASKED_P = 0.05
+#: when nothing is claimed, the best candidate whose fit alone found something (F-test and explained fraction) is fitted
+#: jointly with each other candidate (from this many rounds of fitting each beyond the other) and the two are claimed
+#: together when each is significant beyond the other's joint fit: two missing effects that partly cancel (an unstated
+#: pedestal's phantom shot noise against extra read noise) leave a residual neither reproduces alone
+PAIR_ROUNDS = 2
+#: ... and the two must leave at most this share of the camera's model's rms error (net of the measurement's scatter):
+#: a pair that cancels explains the residual; a wrong lead with a second effect bent to make up for it does not
+#: (a cubic compression read as a gain error of 0.36 with 70 e- of extra read noise: 1.04 -> 0.60 DN)
+MAX_PAIR_ERROR = 0.2
+#: ... and a partner passing the screen (F-test and explained fraction beyond the lead's own fit, least squares from
+#: its defaults) is refitted jointly only if its full fit beyond the lead leaves at most this share (on the pedestal
+#: camera: 0 with extra read noise; the cubic compression's gain error with read noise: 0.57)
+PAIR_SCREEN = 0.5
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
 #: smallest total sigma (DN) a component's variance mismatch is scaled by (8-bit rounding alone: 0.29)
@@ -222,10 +239,12 @@ def _decades(lo: float, hi: float) -> int:
     return max(1, int(np.ceil(np.log10(hi / lo))))
 
 
-def fit(comp: Comparison, specs: Iterable[EffectSpec], given: Sequence[Effect] = ()) -> FitResult:
+def fit(comp: Comparison, specs: Iterable[EffectSpec], given: Sequence[Effect] = (),
+        start: Sequence[Effect] | None = None) -> FitResult:
     """Jointly fit the free parameters of ``specs`` (continuous: coarse log scan, then bounded least
     squares from the best scan points; integer: grid scan), with the ``given`` effects in the model at
-    their values (the result holds the effects of ``specs`` only)."""
+    their values (the result holds the effects of ``specs`` only). ``start``: one instance per spec whose values
+    replace the scan (least squares from them, integers held)."""
     specs = list(specs)
     given = list(given)
     cont: list[tuple[int, Param]] = []
@@ -266,6 +285,8 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec], given: Sequence[Effect] =
     grids: list[tuple[float, ...]] = [()]
     for _, p in grid:
         grids = [g + (float(v),) for g in grids for v in range(int(p.bounds[0]), int(p.bounds[1]) + 1)]
+    if start is not None:
+        grids = [tuple(float(start[i].values[p.name]) for i, p in grid)]
     best: tuple[float, np.ndarray, tuple, Any] | None = None
     for xg in grids:
         if not cont:
@@ -276,7 +297,8 @@ def fit(comp: Comparison, specs: Iterable[EffectSpec], given: Sequence[Effect] =
             continue
         lo = to_internal(np.array([p.bounds[0] for _, p in cont]))
         hi = to_internal(np.array([p.bounds[1] for _, p in cont]))
-        scan = [to_internal(np.asarray(x)) for x in itertools.product(*[_scan_values(p) for _, p in cont])]
+        scan = ([to_internal(np.array([start[i].values[p.name] for i, p in cont], dtype=float))] if start is not None
+                else [to_internal(np.asarray(x)) for x in itertools.product(*[_scan_values(p) for _, p in cont])])
         chi = [float(np.sum(resid(x, xg) ** 2)) for x in scan]
         for j in np.argsort(chi)[:N_STARTS]:
             x0 = np.clip(scan[j], lo, hi)
@@ -487,6 +509,16 @@ class Assessment:
         return not self.failed
 
 
+def _drop(given: Given, res: FitResult) -> tuple[float, float, float]:
+    """(F-test p-value, explained fraction, chi-square drop) of a fit beyond the ``given`` model."""
+    k = res.n_free
+    chi1 = min(res.chi2, given.chi2)
+    drop = given.chi2 - chi1
+    dof = max(given.n_obs - given.n_params - k, 1)
+    p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
+    return p, (drop / given.chi2 if given.chi2 > 0 else 0.0), drop
+
+
 def assess(comp: Comparison, given: Given, spec: EffectSpec) -> Assessment:
     """Fit ``spec`` with the ``given`` model's effects at their values and test whether it is significant
     beyond that model (module docstring): F-test of the chi-square drop, the fraction of the given model's
@@ -495,11 +527,7 @@ def assess(comp: Comparison, given: Given, spec: EffectSpec) -> Assessment:
     res = fit(comp, [spec], given.effects)
     after = [*given.effects, res.effects[0]]
     k = res.n_free
-    chi1 = min(res.chi2, given.chi2)
-    drop = given.chi2 - chi1
-    dof = max(given.n_obs - given.n_params - k, 1)
-    p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
-    explained = drop / given.chi2 if given.chi2 > 0 else 0.0
+    p, explained, drop = _drop(given, res)
     rows = comp.cell_table(extra=after)
     cut, comps = cuts_error(given.rows, rows)
     shaped, left = shapes_position(comp, given.patterns, after, comps)
@@ -559,15 +587,37 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     observation contradicts (``contradicted``: refitted beyond a model with a
     sparse fixed pattern of its own, a Gaussian pattern would escape the shape test and take up the part of
     the sparse pattern that model does not describe, e.g. PRNU beside telegraph pixels)."""
+    for c in ranked:
+        c.significant_alone = c.significant
     model: list[Effect] = []
     claimed: list[Candidate] = []  # the best member of each claimed group
-    n_params = 0
+    _forward(comp, ranked, model, claimed)
+    if not model:
+        pair = _pair(comp, ranked)
+        if pair is not None:
+            (first, a), (second, b), alternatives = pair
+            for lead, fitted, beyond in ((first, a.effect, _together(second, a)),
+                                         (second, b.effect, _together(first, b, alternatives))):
+                for c in ranked:
+                    if c.rank == lead.rank:
+                        c.significant, c.beyond = True, beyond
+                model.append(fitted)
+                claimed.append(lead)
+            _forward(comp, ranked, model, claimed, done={first.rank, second.rank})
+    return ranked
+
+
+def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate],
+             done: Collection[int] = ()) -> None:
+    """:func:`claim`'s forward selection over the groups not in ``done``, on top of ``model`` (the fits of the
+    ``claimed`` candidates), both extended in place."""
+    n_params = sum(len(c.params) for c in claimed)
     given: Given | None = None
-    for _, members in itertools.groupby(ranked, key=lambda c: c.rank):
+    for rank, members in itertools.groupby(ranked, key=lambda c: c.rank):
         group = list(members)
         lead = group[0]
-        for c in group:
-            c.significant_alone = c.significant
+        if rank in done:
+            continue
         masked = bool(model) and not lead.contradicted and lead.p_value < MASKED_P
         if lead.fitted is None or not (lead.significant or masked):
             continue  # a fit that found nothing alone, or one a direct observation contradicts, is not refitted
@@ -591,7 +641,68 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
         claimed.append(lead)
         n_params += len(lead.params)
         given = None
-    return ranked
+
+
+def _pair(comp: Comparison, ranked: list[Candidate]) -> tuple[tuple[Candidate, Assessment],
+                                                             tuple[Candidate, Assessment], list[Assessment]] | None:
+    """Two candidates claimed together when nothing is claimed alone: the best group lead whose fit alone passed the
+    F-test and the explained fraction, and the other group lead that (past :data:`PAIR_SCREEN`), fitted jointly with it
+    (from :data:`PAIR_ROUNDS` rounds of each beyond the other), leaves the smallest chi-square with each significant
+    beyond the other's joint fit and the two leaving at most :data:`MAX_PAIR_ERROR` of the model's rms error; each with
+    that assessment, then the partners that fit as well (within ``EQUIVALENT_CHI2``, scaled like the equivalence
+    test) as the alternatives these data cannot tell from it. None without such a pair."""
+    leads = [next(g) for _, g in itertools.groupby(ranked, key=lambda c: c.rank)]
+    usable = [(c, c.fitted) for c in leads if c.fitted is not None and not c.contradicted]
+    found = [(c, f) for c, f in usable if c.p_value < SIGNIFICANCE_P and c.explained_fraction >= MIN_EXPLAINED_FRACTION]
+    if not found:
+        return None
+    first, fitted = found[0]
+    spec = EffectSpec.fit_all(type(fitted))
+    on_first = Given.of(comp, [fitted], len(first.params))
+    error = rms_error(comp.cell_table())
+    pairs: list[tuple[float, tuple[Candidate, Assessment], tuple[Candidate, Assessment]]] = []
+    for other, other_fit in usable:
+        if other is first:
+            continue
+        other_spec = EffectSpec.fit_all(type(other_fit))
+        # a screen, least squares from its defaults: the F-test and the explained fraction beyond the first's own fit
+        p, explained, _ = _drop(on_first, fit(comp, [other_spec], [fitted], start=[type(other_fit)()]))
+        if p >= SIGNIFICANCE_P or explained < MIN_EXPLAINED_FRACTION:
+            continue
+        b = assess(comp, on_first, other_spec)
+        if rms_error(b.rows) > PAIR_SCREEN * error:
+            continue
+        for _ in range(PAIR_ROUNDS):  # alternately, to start the joint fit near its optimum
+            a = assess(comp, Given.of(comp, [b.effect], len(other.params)), spec)
+            b = assess(comp, Given.of(comp, [a.effect], len(first.params)), other_spec)
+        joint = fit(comp, [spec, other_spec], start=[a.effect, b.effect])
+        a = assess(comp, Given.of(comp, [joint.effects[1]], len(other.params)), spec)
+        b = assess(comp, Given.of(comp, [joint.effects[0]], len(first.params)), other_spec)
+        if a.significant and b.significant and rms_error(b.rows) <= MAX_PAIR_ERROR * error:
+            pairs.append((joint.chi2, (first, a), (other, b)))
+    if not pairs:
+        return None
+    pairs.sort(key=lambda p: p[0])
+    best = pairs[0][0]
+    limit = best + EQUIVALENT_CHI2 * max(1.0, best / max(on_first.n_obs - len(first.params), 1))
+    return pairs[0][1], pairs[0][2], [p[2][1] for p in pairs[1:] if p[0] <= limit]
+
+
+def _together(other: Candidate, a: Assessment, alternatives: Sequence[Assessment] = ()) -> dict[str, Any]:
+    """:attr:`Candidate.beyond` of a candidate claimed with ``other`` (:func:`_pair`): its fit beyond the other's,
+    and the ``alternatives`` to it that fit as well beside the other."""
+    figures = (f"fitted jointly with it: chi-square {a.chi2_given:.1f} -> {min(a.fit.chi2, a.chi2_given):.1f} "
+               f"beyond it, p = {a.p_value:.2g}, {a.explained_fraction:.1%} of what it leaves")
+    alt = [b.effect.name for b in alternatives]
+    return {"given": [other.effect], "significant": True, "together": True, "chi2_given": round(a.chi2_given, 3),
+            "chi2": round(a.fit.chi2, 3), "p_value": a.p_value, "explained_fraction": round(a.explained_fraction, 6),
+            "params": a.fit.values[a.effect.name], "components": a.components, "contradicted": a.contradicted,
+            "failed": a.failed, "fitted_reading": a.effect.reading(),
+            "alternatives": [{"effect": b.effect.name, "params": b.fit.values[b.effect.name],
+                              "fitted_reading": b.effect.reading()} for b in alternatives],
+            "reading": f"claimed together with {other.effect}, not alone (the two partly cancel): significant beyond it "
+                       f"({figures})" + (f"; {', '.join(alt)} would fit as well in its place"
+                                         if alt else "")}
 
 
 def _beyond(claimed: Sequence[Candidate], a: Assessment, alone: bool = True) -> dict[str, Any]:
@@ -682,12 +793,20 @@ def diagnosis_line(candidates: Sequence[Mapping[str, Any]]) -> str:
     if not claimed:
         return "no candidate effect is significant"
     best = claimed[0]
-    if not best.get("equivalent_to"):
+    seen = {best["rank"]}
+    together = (best.get("beyond") or {}).get("together")
+    if together:  # two effects that each mask the other alone (:func:`_pair`)
+        partner = next(c for c in claimed if c["effect"] == best["beyond"]["given"][0])
+        seen.add(partner["rank"])
+        others = [x["effect"] for x in partner["beyond"]["alternatives"]]
+        line = (f"most likely missing effects, together (alone, each is masked by the other): "
+                f"{best['beyond']['fitted_reading']}; and {partner['beyond']['fitted_reading']}"
+                + (f" (or {', '.join(others)} in its place: these data cannot tell them apart)" if others else ""))
+    elif not best.get("equivalent_to"):
         line = f"most likely missing effect: {best['reading']}"
     else:
         n = len(best["equivalent_to"]) + 1
         line = f"most likely missing effect, one of {n} alternatives these data cannot tell apart: {best['indistinguishable']}"
-    seen = {best["rank"]}
     for c in claimed:
         if c["rank"] in seen:
             continue

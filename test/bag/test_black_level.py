@@ -115,22 +115,30 @@ def test_a_black_level_stated_above_the_cameras_is_reported(tmp_path: Path, esti
     assert len(below) == black["frames"] and all(int(r["level"]) >= 1 for r in below)
 
 
-def test_the_lab_finds_a_hidden_effect_only_with_the_black_level_stated(tmp_path: Path,
-                                                                         pedestal: CameraProfile) -> None:
+def test_the_lab_finds_a_hidden_effect_beside_an_unstated_black_level(tmp_path: Path, pedestal: CameraProfile) -> None:
     """Extra read noise of 8 e- on the pedestal camera: with its black level stated the lab claims it (8.1 e-);
-    without, the pedestal's phantom shot noise hides it and nothing is claimed (the two partly cancel: the
-    ``black_level`` candidate ranks first at 13 DN, not significant; one missing effect is fitted at a time)."""
+    without, the pedestal's phantom shot noise and the extra read noise partly cancel, neither is significant alone
+    (``black_level`` first at 13.0 DN fails the own-component cut), and the two are claimed together, fitted jointly:
+    16.0 DN and 8.1 e- (truth 16 and 8; before 2026-11-29 nothing was claimed)."""
     bag = simulate_bag(tmp_path / "ped.mcap", pedestal, "campaign_heldout", effects=["extra_read_noise=8"],
                        frames=120, width=320, height=256, fps=10.0, seed=34)
     (tmp_path / "ped.yaml").write_text(pedestal.to_yaml())
-    found = {}
+    labs = {}
     for name, prof in (("stated", str(tmp_path / "ped.yaml")), ("unstated", "ev76c661")):
         out = tmp_path / f"{name}.json"
         assert cli_main(["analyze", str(bag), "--profile", prof, "--no-estimator", "--quiet", "--json", str(out),
                          "--add-effect", "extra_read_noise=fit"]) == 0
-        found[name] = {c["effect"]: c["params"] for c in json.loads(out.read_text())["candidates"] if c["significant"]}
-    assert found["stated"]["extra_read_noise"]["sigma_e"] == pytest.approx(8.0, abs=1.0)
-    assert "extra_read_noise" not in found["unstated"]
+        labs[name] = json.loads(out.read_text())
+    stated = {c["effect"]: c for c in labs["stated"]["candidates"] if c["significant"]}
+    assert list(stated) == ["extra_read_noise"] and stated["extra_read_noise"]["params"]["sigma_e"] == pytest.approx(
+        8.0, abs=1.0)
+    unstated = {c["effect"]: c for c in labs["unstated"]["candidates"] if c["significant"]}
+    assert set(unstated) == {"black_level", "extra_read_noise"}
+    assert not any(c["significant_alone"] for c in unstated.values())
+    assert all(c["beyond"]["together"] and not c["beyond"]["alternatives"] for c in unstated.values())
+    assert unstated["black_level"]["beyond"]["params"]["offset_dn"] == pytest.approx(BLACK, abs=0.5)
+    assert unstated["extra_read_noise"]["beyond"]["params"]["sigma_e"] == pytest.approx(8.0, abs=0.5)
+    assert labs["unstated"]["diagnosis"].startswith("most likely missing effects, together")
 
 
 def test_the_lab_finds_an_unstated_black_level(tmp_path: Path, pedestal: CameraProfile) -> None:
