@@ -54,12 +54,14 @@ refitted jointly: the refit then changes only the candidate, so the components i
 position pattern and a contradiction are its own (refitted jointly, a temperature or exposure error on
 top of a DSNU shifts the DSNU to make up for the dark signal it changes in the fixed-pattern noise and
 passes the own-component cut, where it is read noise that is missing), and it is one fit of the
-candidate's own parameters. Claims can only be withdrawn by this rule, never added, with one exception: when
-nothing is claimed, two missing effects that partly cancel (an unstated pedestal's phantom shot noise against extra
-read noise) may leave a residual neither reproduces alone. The best candidate whose fit alone passed the F-test and
-the explained fraction is then fitted jointly with each other one (:func:`_pair`); the pair leaving the smallest
-chi-square with each member significant beyond the other's joint fit (all the tests above) is claimed, partners
-that fit as well named as alternatives, and the forward selection goes on beyond the two.
+candidate's own parameters. Claims can only be withdrawn by this rule, never added, with one exception: two missing
+effects that partly cancel (an unstated pedestal's phantom shot noise against extra read noise) may leave a residual
+neither reproduces alone. When the best candidate whose fit alone passed the F-test and the explained fraction is
+not claimed (nothing is, or something ranked below it), it is fitted jointly with each other one (:func:`_pair`);
+the pair leaving the smallest chi-square with each member significant beyond the other's joint fit (all the tests
+above) and most of the model's error explained is claimed if it fits better than what the forward selection
+claimed by the BIC, partners that fit as well named as alternatives, and the forward selection goes on beyond the
+two (what it claimed before is tested beyond them).
 """
 from __future__ import annotations
 
@@ -94,7 +96,7 @@ MAX_STEP_Z = 5.0
 #: masks alone) only if its own fit found something at this p-value (the F-test's): one that found nothing
 #: alone would find nothing on top of them either, and each refit costs a fit
 MASKED_P = 0.05
-#: when nothing is claimed, the best candidate whose fit alone found something (F-test and explained fraction) is fitted
+#: when the best candidate whose fit alone found something (F-test and explained fraction) is not claimed, it is fitted
 #: jointly with each other candidate (from this many rounds of fitting each beyond the other) and the two are claimed
 #: together when each is significant beyond the other's joint fit: two missing effects that partly cancel (an unstated
 #: pedestal's phantom shot noise against extra read noise) leave a residual neither reproduces alone
@@ -592,18 +594,21 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     model: list[Effect] = []
     claimed: list[Candidate] = []  # the best member of each claimed group
     _forward(comp, ranked, model, claimed)
-    if not model:
-        pair = _pair(comp, ranked)
-        if pair is not None:
-            (first, a), (second, b), alternatives = pair
-            for lead, fitted, beyond in ((first, a.effect, _together(second, a)),
-                                         (second, b.effect, _together(first, b, alternatives))):
-                for c in ranked:
-                    if c.rank == lead.rank:
-                        c.significant, c.beyond = True, beyond
-                model.append(fitted)
-                claimed.append(lead)
-            _forward(comp, ranked, model, claimed, done={first.rank, second.rank})
+    pair = _pair(comp, ranked, model, sum(len(c.params) for c in claimed))
+    if pair is not None:  # the pair replaces what the forward selection claimed, which is then tested beyond it
+        (first, a), (second, b), alternatives = pair
+        model.clear()
+        claimed.clear()
+        for c in ranked:
+            c.significant, c.beyond, c.explained_by = c.significant_alone, None, []
+        for lead, fitted, beyond in ((first, a.effect, _together(second, a)),
+                                     (second, b.effect, _together(first, b, alternatives))):
+            for c in ranked:
+                if c.rank == lead.rank:
+                    c.significant, c.beyond = True, beyond
+            model.append(fitted)
+            claimed.append(lead)
+        _forward(comp, ranked, model, claimed, done={first.rank, second.rank})
     return ranked
 
 
@@ -643,20 +648,24 @@ def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], cla
         given = None
 
 
-def _pair(comp: Comparison, ranked: list[Candidate]) -> tuple[tuple[Candidate, Assessment],
-                                                             tuple[Candidate, Assessment], list[Assessment]] | None:
-    """Two candidates claimed together when nothing is claimed alone: the best group lead whose fit alone passed the
-    F-test and the explained fraction, and the other group lead that (past :data:`PAIR_SCREEN`), fitted jointly with it
+def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (), n_params: int = 0
+          ) -> tuple[tuple[Candidate, Assessment], tuple[Candidate, Assessment], list[Assessment]] | None:
+    """Two candidates claimed together where the best group lead whose fit alone passed the F-test and the explained
+    fraction is not claimed (the forward selection's ``model``, ``n_params`` fitted, claimed nothing or something
+    ranked below it), and the other group lead that (past :data:`PAIR_SCREEN`), fitted jointly with it
     (from :data:`PAIR_ROUNDS` rounds of each beyond the other), leaves the smallest chi-square with each significant
     beyond the other's joint fit and the two leaving at most :data:`MAX_PAIR_ERROR` of the model's rms error; each with
     that assessment, then the partners that fit as well (within ``EQUIVALENT_CHI2``, scaled like the equivalence
-    test) as the alternatives these data cannot tell from it. None without such a pair."""
+    test) as the alternatives these data cannot tell from it. None without such a pair, or when it does not fit
+    better than ``model`` by the BIC."""
     leads = [next(g) for _, g in itertools.groupby(ranked, key=lambda c: c.rank)]
     usable = [(c, c.fitted) for c in leads if c.fitted is not None and not c.contradicted]
     found = [(c, f) for c, f in usable if c.p_value < SIGNIFICANCE_P and c.explained_fraction >= MIN_EXPLAINED_FRACTION]
     if not found:
         return None
     first, fitted = found[0]
+    if first.significant:
+        return None  # claimed: the forward selection's
     spec = EffectSpec.fit_all(type(fitted))
     on_first = Given.of(comp, [fitted], len(first.params))
     error = rms_error(comp.cell_table())
@@ -684,6 +693,11 @@ def _pair(comp: Comparison, ranked: list[Candidate]) -> tuple[tuple[Candidate, A
         return None
     pairs.sort(key=lambda p: p[0])
     best = pairs[0][0]
+    if model:
+        r = comp.residuals(list(model))
+        k = pairs[0][1][1].fit.n_free + pairs[0][2][1].fit.n_free
+        if best + (k - n_params) * math.log(r.size) >= float(r @ r):
+            return None  # no better than what the forward selection claimed
     limit = best + EQUIVALENT_CHI2 * max(1.0, best / max(on_first.n_obs - len(first.params), 1))
     return pairs[0][1], pairs[0][2], [p[2][1] for p in pairs[1:] if p[0] <= limit]
 
