@@ -297,14 +297,10 @@ def simulate_bag(
             if step.image_noise_dn:
                 noisy = np.clip(noisy + rng.normal(0.0, step.image_noise_dn, noisy.shape).astype(np.float32),
                                 -black, 255)
-            if black:
-                img = np.rint(np.clip(noisy + np.float32(black), 0.0, 255.0)).astype(np.uint8)
-                # the truth reads the noise as the monitor does (clipped at black) and without the saturation the
-                # pedestal brings (the monitor's patches avoid it)
-                sigma_image = float(np.std(np.clip(np.rint(noisy), 0.0, 255.0) - clean))
-            else:
-                img = np.rint(noisy).astype(np.uint8)
-                sigma_image = float(np.std(img.astype(np.float64) - clean))
+            img = np.rint(np.clip(noisy + np.float32(black), 0.0, 255.0)).astype(np.uint8)
+            # the truth reads the noise as the monitor does (clipped at black) and without the saturation a pedestal
+            # brings (the monitor's patches avoid it)
+            sigma_image = float(np.std(np.clip(np.rint(noisy), 0.0, 255.0).astype(np.float64) - clean))
             sigma_model = float(paper_model.predict(clean, stated)["total"])
             writer.write(topic["camera_info"], camera_info_msg(height, width, stamp), stamp)
             writer.write(topic["metadata"], metadata_msg(stated, stamp, hw), stamp)

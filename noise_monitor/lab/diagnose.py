@@ -708,15 +708,19 @@ def _together(other: Candidate, a: Assessment, alternatives: Sequence[Assessment
     figures = (f"fitted jointly with it: chi-square {a.chi2_given:.1f} -> {min(a.fit.chi2, a.chi2_given):.1f} "
                f"beyond it, p = {a.p_value:.2g}, {a.explained_fraction:.1%} of what it leaves")
     alt = [b.effect.name for b in alternatives]
-    return {"given": [other.effect], "significant": True, "together": True, "chi2_given": round(a.chi2_given, 3),
+    reading = (f"claimed together with {other.effect}, not alone (the two partly cancel): significant beyond it "
+               f"({figures})" + (f"; {', '.join(alt)} would fit as well in its place" if alt else ""))
+    return {**_refit(a, [other.effect], reading), "together": True,
+            "alternatives": [{"effect": b.effect.name, "params": b.fit.values[b.effect.name],
+                              "fitted_reading": b.effect.reading()} for b in alternatives]}
+
+
+def _refit(a: Assessment, given: list[str], reading: str) -> dict[str, Any]:
+    """A refit beyond the ``given`` explanations as :attr:`Candidate.beyond` records it, with its plain ``reading``."""
+    return {"given": given, "significant": a.significant, "chi2_given": round(a.chi2_given, 3),
             "chi2": round(a.fit.chi2, 3), "p_value": a.p_value, "explained_fraction": round(a.explained_fraction, 6),
             "params": a.fit.values[a.effect.name], "components": a.components, "contradicted": a.contradicted,
-            "failed": a.failed, "fitted_reading": a.effect.reading(),
-            "alternatives": [{"effect": b.effect.name, "params": b.fit.values[b.effect.name],
-                              "fitted_reading": b.effect.reading()} for b in alternatives],
-            "reading": f"claimed together with {other.effect}, not alone (the two partly cancel): significant beyond it "
-                       f"({figures})" + (f"; {', '.join(alt)} would fit as well in its place"
-                                         if alt else "")}
+            "failed": a.failed, "reading": reading, "fitted_reading": a.effect.reading()}
 
 
 def _beyond(claimed: Sequence[Candidate], a: Assessment, alone: bool = True) -> dict[str, Any]:
@@ -746,10 +750,7 @@ def _beyond(claimed: Sequence[Candidate], a: Assessment, alone: bool = True) -> 
         reading = (f"significant alone; beyond {listed} it lowers the chi-square ({figures}) but fails the "
                    f"{', '.join(a.failed)} test{'s' if len(a.failed) > 1 else ''} ({'; '.join(why)}): not an effect "
                    f"of its own beyond {them}")
-    return {"given": list(names), "significant": a.significant, "chi2_given": round(a.chi2_given, 3),
-            "chi2": round(a.fit.chi2, 3), "p_value": a.p_value, "explained_fraction": round(a.explained_fraction, 6),
-            "params": a.fit.values[a.effect.name], "components": a.components, "contradicted": a.contradicted,
-            "failed": a.failed, "reading": reading, "fitted_reading": a.effect.reading()}
+    return _refit(a, list(names), reading)
 
 
 def group_equivalent(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
