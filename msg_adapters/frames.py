@@ -15,7 +15,7 @@ from .camera_info import CameraGeometry
 from .compressed import decompress, is_compressed
 from .errors import AdapterError
 from .image import image_to_gray_dn
-from .metadata import resolve_metadata
+from .metadata import BLACK_LEVEL, black_level_value, resolve_metadata
 
 
 def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
@@ -36,13 +36,16 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
     frame = Frame(stamp_ns, None, None, index=index, log_time_ns=log_time_ns, raw_metadata=dict(raw),
                   frame_id=clip(str(getattr(header, "frame_id", "") or ""), 200),
                   metadata_age_s=None if metadata_stamp_ns is None else (stamp_ns - metadata_stamp_ns) / 1e9)
+    try:  # a reported black level that is no number of DN makes the frame's metadata unusable (below)
+        black, frame.black_level_source = black_level(options, raw)
+    except AdapterError as exc:
+        black, metadata = 0.0, exc
     try:
         if image_error:
             raise AdapterError(image_error)
         if is_compressed(image_msg):  # lossless formats decoded, lossy ones refused with the reason
             image_msg = decompress(image_msg)
         frame.image_dn = image_to_gray_dn(image_msg, bit_depth=options.bit_depth, color=options.color)
-        black = options.black_level
         if black:  # the model reads signal: the camera's pedestal comes off first
             frame.image_dn = frame.image_dn - np.float32(black)
             frame.black_level_dn = black
@@ -60,3 +63,16 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
     except (MetadataError, AdapterError) as exc:
         frame.metadata_error = str(exc)
     return frame
+
+
+def black_level(options: FrameOptions, raw: Mapping[str, Any]) -> tuple[float, str]:
+    """The black level (8-bit DN) to take off a frame and where it comes from: the ``black_level_dn`` parameter
+    when set, else the driver's per-frame value (``raw``), else the profile's ("parameter" / "metadata" / "profile")."""
+    if options.black_level_dn is not None:
+        return options.black_level_dn, "parameter"
+    if raw.get(BLACK_LEVEL) is not None:
+        try:
+            return black_level_value(BLACK_LEVEL, float(raw[BLACK_LEVEL])), "metadata"
+        except (TypeError, ValueError):
+            raise AdapterError(f"metadata {BLACK_LEVEL} = {raw[BLACK_LEVEL]!r} is not a number") from None
+    return options.black_level, "profile"

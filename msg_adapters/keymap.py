@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .errors import AdapterError
+from .metadata import BLACK_LEVEL, black_level_value
 from .vendor import map_gain
 
 #: field -> unit -> (factor, offset) to the field's unit; ``factor`` / ``relative`` gains are special
@@ -20,6 +21,9 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "exposure_time_s": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "us": (1e-6, 0.0), "100us": (1e-4, 0.0), "ns": (1e-9, 0.0)},
     "gain_db": {"db": (1.0, 0.0), "factor": (1.0, 0.0), "relative": (1.0, 0.0)},
     "sensor_temperature_c": {"degc": (1.0, 0.0), "k": (1.0, -273.15)},
+    # a black level in codes of the image's ADC depth -> the 8-bit DN scale
+    "black_level_dn": {"dn": (1.0, 0.0), "dn10": (255.0 / 1023.0, 0.0), "dn12": (255.0 / 4095.0, 0.0),
+                       "dn16": (255.0 / 65535.0, 0.0)},
 }
 
 
@@ -47,6 +51,8 @@ class KeyMapEntry:
             return map_gain(where, x, getattr(profile, "gain_range_db", None),
                             getattr(profile, "driver_gain_range", None) or (0.0, 1.0))
         factor, offset = UNITS[self.field][self.unit]
+        if self.field == BLACK_LEVEL:
+            return black_level_value(where, x * factor)
         return x * factor + offset
 
 

@@ -11,13 +11,15 @@ from collections.abc import Mapping
 from typing import Any
 
 from noise_monitor.physics import CameraMetadata, CameraProfile
-from noise_monitor.physics.metadata import NUMERIC_FIELDS
+from noise_monitor.physics.metadata import BLACK_LEVEL_MAX_DN, NUMERIC_FIELDS
 from noise_monitor.text import clip
 
 from .errors import AdapterError
 
 REQUIRED_FIELDS: tuple[str, ...] = NUMERIC_FIELDS + ("sensor_type",)
-KNOWN_FIELDS: frozenset[str] = frozenset(REQUIRED_FIELDS + ("bit_depth",))
+#: the camera's black level (8-bit DN) as a driver reports it per frame: taken off the image, not a model input
+BLACK_LEVEL = "black_level_dn"
+KNOWN_FIELDS: frozenset[str] = frozenset(REQUIRED_FIELDS + ("bit_depth", BLACK_LEVEL))
 #: Other common spellings with their conversion to the CameraMetadata field (SI units).
 ALIASES: dict[str, tuple[str, float, float]] = {  # key -> (field, scale, offset)
     "exposure_time_us": ("exposure_time_s", 1e-6, 0.0),
@@ -58,12 +60,22 @@ def metadata_from_mapping(values: Mapping[str, Any]) -> dict[str, float | str]:
             if not bits.is_integer():
                 raise AdapterError(f"metadata value {clip(str(key), 80)}={clip(repr(value), 80)} is not an integer")
             out[key] = int(bits)
+        elif key == BLACK_LEVEL:
+            out[key] = black_level_value(key, _number(key, value))
         elif key in KNOWN_FIELDS:
             out[key] = _number(key, value)
         elif key in ALIASES:
             name, scale, offset = ALIASES[key]
             out.setdefault(name, _number(key, value) * scale + offset)
     return out
+
+
+def black_level_value(where: str, dn: float) -> float:
+    """A reported black level on the 8-bit DN scale, checked to lie in [0, BLACK_LEVEL_MAX_DN)."""
+    if not 0.0 <= dn < BLACK_LEVEL_MAX_DN:
+        raise AdapterError(f"metadata value {clip(where, 80)} = {dn:g} DN is not a black level on the 8-bit scale "
+                           f"(must be in [0, {BLACK_LEVEL_MAX_DN:g}))")
+    return dn
 
 
 def metadata_from_diagnostics(msg: Any) -> dict[str, float | str]:
@@ -102,7 +114,9 @@ def resolve_metadata(
     merged = metadata_from_mapping(base)
     if temperature_c is not None:
         merged["sensor_temperature_c"] = _number("temperature", temperature_c)
-    merged.update(metadata_from_mapping(dynamic))
+    reported = metadata_from_mapping(dynamic)
+    reported.pop(BLACK_LEVEL, None)  # the image's, taken off it before (msg_adapters.frames)
+    merged.update(reported)
     missing = [name for name in REQUIRED_FIELDS if name not in merged]
     if missing:
         return None, missing

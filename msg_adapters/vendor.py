@@ -9,7 +9,10 @@ that rosbags can deserialise bags recorded with these drivers without their pack
 - Basler ``pylon_ros2_camera`` (basler/pylon-ros-camera): ``pylon_ros2_camera_interfaces/msg/CurrentParams``,
   no header (stamped by arrival / bag log time), exposure in microseconds, gain normalised 0..1 over the
   camera's gain range (mapped to dB through the profile's ``gain_range_db``), temperature in degC
-  (0.0 = not available); -10000/-20000 mean "not available"/"error".
+  (0.0 = not available); -10000/-20000 mean "not available"/"error". ``black_level`` is the camera's
+  BlackLevelRaw (ace GigE) or BlackLevel truncated to an integer (USB, ace 2), in units that depend on the model
+  and pixel format: converted by the profile's ``driver_black_level_dn`` (8-bit DN per unit); without it, or at -10000 (the
+  camera has none), the profile's black level applies.
 - Intel RealSense (IntelRealSense/realsense-ros): ``realsense2_camera_msgs/msg/Metadata``, a JSON object
   with librealsense's frame metadata: ``actual_exposure`` in microseconds, ``gain_level`` in the sensor's
   relative gain units (mapped to dB through the profile's ``gain_range_db`` over ``driver_gain_range``).
@@ -25,6 +28,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from .errors import AdapterError
+from .metadata import BLACK_LEVEL, black_level_value
 
 FLIR_IMAGE_METADATA = """\
 std_msgs/Header header
@@ -154,7 +158,25 @@ def _basler(msg: Any, profile: Any) -> dict[str, float | str]:
     out["gain_db"] = map_gain("gain", msg.gain, _gain_range(profile))
     if float(msg.temperature) != 0.0:  # 0.0: the camera does not report it
         out["sensor_temperature_c"] = _num("temperature", msg.temperature, "degC")
+    black = _basler_black_level(_num("black_level", msg.black_level, "driver units"), profile)
+    if black is not None:
+        out[BLACK_LEVEL] = black
     return out
+
+
+def _basler_black_level(value: float, profile: Any) -> float | None:
+    """The driver's black level on the 8-bit DN scale; None where the camera has none (the profile's applies)."""
+    if value in _BASLER_UNAVAILABLE:
+        return None
+    per_unit = getattr(profile, "driver_black_level_dn", None)
+    if per_unit is None:  # not convertible: the profile's black level applies (zero is zero in any unit)
+        stated: float = getattr(profile, "black_level_dn", None) or 0.0
+        if value == 0.0 or stated:
+            return None
+        raise AdapterError(f"driver metadata black_level = {value:g} is in the camera's units: the camera profile "
+                           "needs driver_black_level_dn (8-bit DN per unit; ace GigE BlackLevelRaw at Mono8: 0.0625 "
+                           "on most models) or black_level_dn")
+    return black_level_value("black_level", value * per_unit)
 
 
 def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:

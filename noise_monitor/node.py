@@ -167,11 +167,13 @@ class NoiseMonitorNode(Node):
         self.create_timer(SYNC_POLL_S, self._on_sync_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
         est, cfg = self.runtime.estimator, self.runtime.config
-        black = self.runtime.frame_options.black_level
+        opts = self.runtime.frame_options
+        black = (f", black level {opts.black_level_dn:g} DN taken off every image" if opts.black_level_dn is not None
+                 else f", black level: the metadata's per frame, else {opts.black_level:g} DN (profile)")
         self.get_logger().info(
             f"monitoring {self._image_sub.topic_name} with {est.name} (patch {self.monitor.patch_size}, "
             f"K={cfg.patches_per_frame}, xi from {self.monitor.xi_source}"
-            f"{f', black level {black:g} DN taken off every image' if black else ''}); outputs /diagnostics at "
+            f"{black}); outputs /diagnostics at "
             f"{p['diagnostics_rate_hz']:g} Hz, per frame {ns}/frame and {ns}/<sigma_*|xi*>"
         )
 

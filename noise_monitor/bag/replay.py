@@ -35,6 +35,7 @@ from msg_adapters.outputs import (
     rosbags_messages,
 )
 from noise_monitor.monitor import Frame, FrameResult, GapCounter, MonitorConfig
+from noise_monitor.monitor.black_level import BlackLevelCheck
 from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.monitor.status import LEVEL_NAMES
@@ -120,6 +121,16 @@ def _record(table: FrameTable, bf: Frame, res: FrameResult) -> None:
                  skip_reason=res.skip_reason, numbers=res.numeric(),
                  conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {},
                  xi_measurement=res.xi_measurement if res.processed else None)
+
+
+def _black_level_summary(contradicted: list[BlackLevelCheck]) -> dict[str, Any] | None:
+    """The frames whose stated black level the image contradicts: how many, and the tightest bound with the black
+    level stated there and by whom."""
+    if not contradicted:
+        return None
+    tightest = min(contradicted, key=lambda c: c.upper_dn if c.upper_dn is not None else math.inf)
+    return {"frames": len(contradicted), "stated_dn": tightest.black_level_dn, "stated_by": tightest.source,
+            "camera_at_most_dn": round(float(tightest.upper_dn or 0.0), 2)}
 
 
 def _truth_episodes(bag: str | Path) -> list[dict[str, Any]] | None:
@@ -248,7 +259,7 @@ def run_replay(
         next_report = last_stamp = 0
         last_log = 0
         capped_gaps = 0
-        black_bounds: list[float] = []  # frames contradicting the stated black level: the camera's is at most
+        black_bounds: list[BlackLevelCheck] = []  # frames contradicting the stated black level (the camera's is lower)
         gaps = GapCounter(expected_rate_hz=float(rt.params["expected_rate_hz"]))  # frames the recording lacks
         constants: dict[str, dict[str, Any]] = {}  # camera constants the bag's metadata set over the profile's
 
@@ -280,7 +291,7 @@ def run_replay(
             monitor.count_lost(gaps.observe(bf.stamp_ns), gaps.implausible - implausible)  # as the node counts them
             res = rt.process(bf)
             if res.black_level is not None and res.black_level.upper_dn is not None:
-                black_bounds.append(res.black_level.upper_dn)
+                black_bounds.append(res.black_level)
             _record(table, bf, res)
             periods.add(res)
             if writer is not None:
@@ -331,8 +342,7 @@ def run_replay(
         "config": {k: getattr(cfg, k) for k in cfg.field_names()},
         "idle_gaps_capped": capped_gaps,
         "metadata_overrides": constants,
-        "black_level_contradicted": ({"frames": len(black_bounds), "stated_dn": opts.black_level,
-                                      "camera_at_most_dn": round(min(black_bounds), 2)} if black_bounds else None),
+        "black_level_contradicted": _black_level_summary(black_bounds),
     }
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)

@@ -63,9 +63,11 @@ def print_summary(s: dict[str, Any]) -> None:
             f"{k} {v['bag']} (profile {v['profile']})" for k, v in s["metadata_overrides"].items()))
     black = s.get("black_level_contradicted")
     if black:
-        print(f"  black level: {black['frames']} frame(s) read pixels far below the stated {black['stated_dn']:g} DN: "
-              f"the camera's is at most {black['camera_at_most_dn']:g} DN (state it: profile or node parameter "
-              "black_level_dn)")
+        by = {"metadata": "the camera's metadata", "parameter": "the black_level_dn parameter"}.get(
+            black["stated_by"], "the profile")
+        print(f"  black level: {black['frames']} frame(s) read pixels far below the {black['stated_dn']:g} DN stated "
+              f"by {by}: the camera's is at most {black['camera_at_most_dn']:g} DN (state it: profile or node "
+              "parameter black_level_dn; a driver's value: its conversion, profile driver_black_level_dn)")
     print(f"\n  {'source':12s} {'mean':>6s} {'p5':>6s} {'p95':>6s}   [DN]")
     for key, label in (("sigma_pn", "PN"), ("sigma_dcsn", "DCSN"), ("sigma_rn", "RN"), ("sigma_total", "total"),
                        ("sigma_model", "model"), ("sigma_image", "image"), ("xi", "xi")):

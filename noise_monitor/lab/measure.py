@@ -950,13 +950,14 @@ def measure_frames(
         assert meta is not None  # skip_reason checked it
         stamp_ns = int(getattr(fr, "stamp_ns", i))
         # a segment is a static hold: the camera stays within HOLD_SHIFT_PX of the hold's first frame (global
-        # shifts accumulated: a vibrating camera returns about one pose) and the metadata agree
+        # shifts accumulated: a vibrating camera returns about one pose), the metadata agree and so does the black
+        # level (the ADC's clip limits)
         shift = np.asarray(camera_shift(prev, img)) if prev is not None else np.zeros(2)
         pose = pose + shift
         moved = acc is not None and math.hypot(*(pose - acc.pose)) > HOLD_SHIFT_PX
         prev = img
         if (acc is None or moved or len(acc.frames) >= tolerance.max_frames
-                or not tolerance.same(acc.metas[0], meta)):
+                or not tolerance.same(acc.metas[0], meta) or fr.black_level_dn != acc.black_level):
             if acc is not None:
                 segments.extend(acc.finish(grid, shape))
             acc = _SegmentAccumulator(len(segments), meta, stamp_ns, block, plane, fr.black_level_dn)

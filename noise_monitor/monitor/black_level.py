@@ -22,6 +22,14 @@ DARK_QUANTILE = 0.001
 BOUND_SIGMAS = 3.5
 
 
+_STATED_BY = {"parameter": "node parameter black_level_dn", "metadata": "the camera's metadata",
+              "profile": "camera profile"}
+_FIX = {"parameter": "set the parameter to the camera's",
+        "metadata": "check the conversion of the driver's value (profile driver_black_level_dn) or override it "
+                    "(node parameter black_level_dn)",
+        "profile": "state the camera's (profile black_level_dn, node parameter black_level_dn)"}
+
+
 @dataclass(frozen=True)
 class BlackLevelCheck:
     """Pixels below the stated black level: their share (%) beyond noise, and what the image bounds the camera's
@@ -31,6 +39,7 @@ class BlackLevelCheck:
     below_pct: float
     limit_dn: float  # how far below the stated black level a pixel counts (DN)
     upper_dn: float | None  # the camera's black level is at most this (None: not contradicted)
+    source: str = "profile"  # who stated it: "parameter", "metadata" (per frame) or "profile"
 
     @property
     def contradicted(self) -> bool:
@@ -38,13 +47,14 @@ class BlackLevelCheck:
 
     def message(self) -> str:
         return (f"{self.below_pct:.2g} % of the pixels read more than {self.limit_dn:.1f} DN below the stated black "
-                f"level of {self.black_level_dn:g} DN: the camera's is lower (at most {self.upper_dn:.1f} DN); "
-                "state it (profile black_level_dn, node parameter black_level_dn)")
+                f"level of {self.black_level_dn:g} DN ({_STATED_BY[self.source]}): the camera's is lower (at most "
+                f"{self.upper_dn:.1f} DN); {_FIX[self.source]}")
 
 
-def check_black_level(image_dn: np.ndarray, black_level_dn: float, sigma_dark_dn: float) -> BlackLevelCheck | None:
+def check_black_level(image_dn: np.ndarray, black_level_dn: float, sigma_dark_dn: float,
+                      source: str = "profile") -> BlackLevelCheck | None:
     """The check of a frame (``image_dn`` with the stated ``black_level_dn`` taken off) given the model's dark noise
-    (DN: every source but the signal's shot noise); None without a stated black level."""
+    (DN: every source but the signal's shot noise) and who stated it; None without a stated black level."""
     if black_level_dn <= 0.0:
         return None
     limit = BLACK_SIGMAS * sigma_dark_dn + 1.0
@@ -56,4 +66,4 @@ def check_black_level(image_dn: np.ndarray, black_level_dn: float, sigma_dark_dn
         k = int(DARK_QUANTILE * flat.size)
         dark = float(np.partition(flat, k)[k])
         upper = min(max(black_level_dn + dark + BOUND_SIGMAS * sigma_dark_dn + 0.5, 0.0), black_level_dn)
-    return BlackLevelCheck(black_level_dn, 100.0 * share, limit, upper)
+    return BlackLevelCheck(black_level_dn, 100.0 * share, limit, upper, source)

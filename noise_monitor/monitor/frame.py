@@ -31,6 +31,7 @@ class Frame:
     raw_metadata: dict[str, Any] = field(default_factory=dict)
     frame_id: str = ""  # the image header's frame_id (the per-frame outputs carry it)
     black_level_dn: float = 0.0  # the camera's black level, subtracted from the image (8-bit DN scale)
+    black_level_source: str = "profile"  # where it comes from: "parameter", "metadata" (per frame) or "profile"
 
     @property
     def skip_reason(self) -> str | None:

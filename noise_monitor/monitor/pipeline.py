@@ -154,6 +154,7 @@ class FrameResult:
             out["patches_measurable"] = float(self.patches_measurable)
         out["processing_ms"] = self.processing_ms
         if self.black_level is not None:
+            out["black_level_dn"] = self.black_level.black_level_dn
             out["pixels_below_black_pct"] = self.black_level.below_pct
         return out
 
@@ -341,7 +342,7 @@ class Monitor:
         level, message = self._status(xi, xi_f, meta)
         # every source but the signal's shot noise: what the image shows at black
         dark = math.sqrt(max(model["total"] ** 2 - model.get("pn", 0.0) ** 2, 0.0))
-        black = check_black_level(frame.image_dn, frame.black_level_dn, dark)
+        black = check_black_level(frame.image_dn, frame.black_level_dn, dark, frame.black_level_source)
         if black is not None and black.contradicted:
             level, message = max(level, WARN), f"{message}; {black.message()}"
         if bounded and weight < 0.5:

@@ -52,7 +52,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
     "black_level_dn": (-1.0, "the camera's black level (pedestal, 8-bit DN scale) taken off every image before the "
-                             "model reads it; -1 = the profile's black_level_dn (0 without)"),
+                             "model reads it (overrides the metadata's per frame); -1 = the frame's metadata "
+                             "black_level_dn, else the profile's (0 without)"),
     "color": ("luma", "reduction of colour images to gray: luma or green"),
     "model": ("full_meta", "estimator variant (noise_monitor.estimator.load)"),
     "weights": ("", "estimator checkpoint (.pt written by `noise-monitor train`); '' = the bundled weights"),
@@ -155,11 +156,12 @@ class FrameOptions:
     profile: CameraProfile | None = None
     bit_depth: int | None = None
     color: str = "luma"
-    black_level_dn: float | None = None  # taken off every image; None: the profile's
+    black_level_dn: float | None = None  # taken off every image; None: the frame's metadata's, else the profile's
 
     @property
     def black_level(self) -> float:
-        """The black level (8-bit DN) taken off every image: this one, else the profile's, else 0."""
+        """The configured black level (8-bit DN): this one, else the profile's, else 0 (a frame's metadata may report
+        its own: :func:`msg_adapters.frames.black_level`)."""
         if self.black_level_dn is not None:
             return self.black_level_dn
         return self.profile.black_level_dn if self.profile is not None else 0.0

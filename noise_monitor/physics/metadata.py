@@ -237,6 +237,9 @@ class CameraProfile:
     #: the camera's black level (pedestal) on the 8-bit DN scale: what it outputs without light or dark signal,
     #: taken off every image before the model reads it (a 10-bit sensor's 64 codes: 64 x 255 / 1023 = 15.95)
     black_level_dn: float = 0.0
+    #: 8-bit DN per unit of a driver's reported black level (Basler CurrentParams.black_level: BlackLevelRaw on ace
+    #: GigE, 1/16 at Mono8 on most models; BlackLevel in the pixel format's DN on USB / ace 2); None: not converted
+    driver_black_level_dn: float | None = None
 
     def metadata(self, **dynamic: Any) -> CameraMetadata:
         """CameraMetadata from the profile, with dynamic (or any) fields overridden by ``dynamic``."""
@@ -256,6 +259,8 @@ class CameraProfile:
                 doc[key] = list(getattr(self, key))
         if self.black_level_dn:
             doc["black_level_dn"] = self.black_level_dn
+        if self.driver_black_level_dn is not None:
+            doc["driver_black_level_dn"] = self.driver_black_level_dn
         return yaml.safe_dump(doc, sort_keys=False)
 
 
@@ -283,11 +288,12 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
     effects_spec = doc.pop("effects", None) or {}
     ranges = {key: _range(source, key, doc.pop(key)) for key in ("gain_range_db", "driver_gain_range") if key in doc}
     black = _black_level(source, doc.pop("black_level_dn", 0.0))
+    per_unit = _positive(source, "driver_black_level_dn", doc.pop("driver_black_level_dn", None))
     known = set(NUMERIC_FIELDS) | {"sensor_type", "bit_depth"}
     unknown = sorted(set(doc) - known)
     if unknown:
         raise MetadataError(f"{source}: unknown key(s) {', '.join(unknown)}; allowed: name, effects, gain_range_db, "
-                            f"driver_gain_range, black_level_dn, {', '.join(sorted(known))}")
+                            f"driver_gain_range, black_level_dn, driver_black_level_dn, {', '.join(sorted(known))}")
     # validate present values by building a metadata object with placeholder values for missing fields
     placeholder: dict[str, Any] = {n: PAPER_RANGES[n][0] if n != "pixel_clock_hz" else 1e7 for n in NUMERIC_FIELDS}
     placeholder["sensor_type"] = "ccd"
@@ -297,7 +303,7 @@ def profile_from_mapping(doc: Mapping[str, Any], source: str = "profile") -> Cam
         raise MetadataError(f"{source}: {exc}") from exc
     doc = {k: getattr(checked, k) for k in doc}  # typed values (YAML may give '90.0e6' as a string)
     return CameraProfile(name=name, values=doc, effects=_effects_spec(effects_spec, source), black_level_dn=black,
-                         **ranges)
+                         driver_black_level_dn=per_unit, **ranges)
 
 
 def _black_level(source: str, value: Any) -> float:
@@ -305,6 +311,15 @@ def _black_level(source: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < BLACK_LEVEL_MAX_DN:
         raise MetadataError(f"{source}: black_level_dn must be a number of DN (8-bit scale) in [0, "
                             f"{BLACK_LEVEL_MAX_DN:g}), got {clip(repr(value), 80)}")
+    return float(value)
+
+
+def _positive(source: str, key: str, value: Any) -> float | None:
+    """An optional finite number > 0."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+        raise MetadataError(f"{source}: {key} must be a number > 0, got {clip(repr(value), 80)}")
     return float(value)
 
 

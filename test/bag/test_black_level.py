@@ -109,7 +109,8 @@ def test_a_black_level_stated_above_the_cameras_is_reported(tmp_path: Path, esti
                  progress=False, plot=False)
     assert out["frames_processed"] == 20
     black = out["black_level_contradicted"]
-    assert black["frames"] >= 5 and black["stated_dn"] == BLACK and 0.0 <= black["camera_at_most_dn"] < 10.0
+    assert black["frames"] >= 5 and black["stated_dn"] == BLACK and black["stated_by"] == "parameter"
+    assert 0.0 <= black["camera_at_most_dn"] < 10.0
     rows = list(csv.DictReader((tmp_path / "out" / "replay.csv").open()))
     below = [r for r in rows if float(r["pixels_below_black_pct"]) > 0.2]
     assert len(below) == black["frames"] and all(int(r["level"]) >= 1 for r in below)

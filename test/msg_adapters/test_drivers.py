@@ -2,7 +2,10 @@
 a generic DiagnosticArray key map and parameter events (v4l2_camera / usb_cam)."""
 from __future__ import annotations
 
+import csv
+import dataclasses
 import json
+from collections.abc import Callable
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,9 +25,12 @@ PROFILE = profile_from_mapping({**load_profile("ev76c661").values, "name": "ev76
                                 "gain_range_db": [0.0, 24.0], "driver_gain_range": [0.0, 1.0]})
 
 
-def _driver_bag(tmp_path, kind: str) -> tuple:
-    """A simulated 4-frame campaign whose metadata topic is re-written as the driver publishes it."""
-    src = simulate_bag(tmp_path / "src.mcap", "ev76c661", "gain_sweep", seed=4, frames=4, width=48, height=32)
+def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] = lambda i: 0.0,
+                black_units: Callable[[int], int] = lambda i: 0) -> tuple:
+    """A simulated campaign (default: 4 frames) whose metadata topic is re-written as the driver publishes it;
+    ``raise_dn(i)``: DN added to image i (a pedestal raised by the operator), ``black_units(i)``: the black level
+    the Basler driver reports for it."""
+    src = src or simulate_bag(tmp_path / "src.mcap", "ev76c661", "gain_sweep", seed=4, frames=4, width=48, height=32)
     truth = load_truth(src)["frames"]
     store = typestore()
     from msg_adapters.vendor import register_vendor_types
@@ -34,11 +40,18 @@ def _driver_bag(tmp_path, kind: str) -> tuple:
     dst = tmp_path / f"{kind}.mcap"
     with open_bag(src) as reader, BagWriter(dst, store=store) as w:  # the bag stores the drivers' definitions
         stated = iter(r["true_metadata"] for r in truth)
+        frame = meta_i = 0
         for topic, log_time, msg in reader.messages(sorted(reader.topics)):
+            if topic == reader.image_topic:
+                img = np.frombuffer(msg.data, np.uint8).reshape(msg.height, msg.width)
+                raised = np.clip(img + np.float32(raise_dn(frame)), 0, 255).astype(np.uint8)
+                w.write(topic, dataclasses.replace(msg, data=raised.ravel()), log_time)
+                frame += 1
+                continue
             if topic != reader.metadata_topic:
                 w.write(topic, msg, log_time)
                 continue
-            m = next(stated)
+            m, meta_i = next(stated), meta_i + 1
             exp_us, gain_db, temp = m["exposure_time_s"] * 1e6, m["gain_db"], m["sensor_temperature_c"]
             if kind in ("flir", "realsense"):  # these report no temperature: a sensor_msgs/Temperature does
                 w.write("/camera/temperature", t["sensor_msgs/msg/Temperature"](
@@ -50,6 +63,7 @@ def _driver_bag(tmp_path, kind: str) -> tuple:
             elif kind == "basler":
                 kw = {name: 0 for name, _ in store.fielddefs[BASLER][1]}
                 kw.update(reverse_x=False, reverse_y=False, is_sleeping=False, success=True, message="",
+                          black_level=black_units(meta_i - 1),
                           exposure=np.float32(exp_us), gain=np.float32(gain_db / 24.0), temperature=np.float32(temp),
                           roi=t["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
                                                                     do_rectify=False),
@@ -99,7 +113,8 @@ def test_driver_messages_with_bad_fields_name_them():
     flir = type("ImageMetaData", (), {"__msgtype__": FLIR})
     with pytest.raises(AdapterError, match="exposure_time = 0 us is not a valid exposure"):
         metadata_from_vendor(ns(__msgtype__=FLIR, exposure_time=0, gain=3.0))
-    basler = dict(__msgtype__=BASLER, exposure=1000.0, gain=0.5, temperature=40.0, success=True, message="")
+    basler = dict(__msgtype__=BASLER, exposure=1000.0, gain=0.5, temperature=40.0, success=True, message="",
+                  black_level=0)
     with pytest.raises(AdapterError, match="gain_range_db"):
         metadata_from_vendor(ns(**basler))  # no profile: a relative gain cannot be converted
     with pytest.raises(AdapterError, match="gain = 1.5 is outside the driver's gain range"):
@@ -162,3 +177,74 @@ def test_parameter_events_of_the_driver_node_only():
         "exposure_time_s": pytest.approx(0.0156), "gain_db": pytest.approx(6.0)}
     with pytest.raises(ValueError, match="no parameter preset for driver 'ids'"):
         preset_keymap("ids")
+
+
+def test_the_basler_drivers_black_level_converted_by_the_profile():
+    ns = SimpleNamespace
+    basler = dict(__msgtype__=BASLER, exposure=1000.0, gain=0.5, temperature=40.0, success=True, message="")
+    scaled = dataclasses.replace(PROFILE, driver_black_level_dn=0.0625)  # BlackLevelRaw at Mono8: 16 per DN
+    assert metadata_from_vendor(ns(**basler, black_level=256), scaled)["black_level_dn"] == pytest.approx(16.0)
+    assert "black_level_dn" not in metadata_from_vendor(ns(**basler, black_level=-10000), scaled)  # none: profile's
+    assert "black_level_dn" not in metadata_from_vendor(ns(**basler, black_level=0), PROFILE)  # 0 in any unit
+    with pytest.raises(AdapterError, match="black_level = 256 is in the camera's units: the camera profile needs "
+                                           "driver_black_level_dn"):
+        metadata_from_vendor(ns(**basler, black_level=256), PROFILE)
+    stated = dataclasses.replace(PROFILE, black_level_dn=16.0)  # a stated black level stands without a conversion
+    assert "black_level_dn" not in metadata_from_vendor(ns(**basler, black_level=256), stated)
+    with pytest.raises(AdapterError, match="black_level = 4096 DN is not a black level on the 8-bit scale"):
+        metadata_from_vendor(ns(**basler, black_level=4096), dataclasses.replace(PROFILE, driver_black_level_dn=1.0))
+    with pytest.raises(MetadataError, match="driver_black_level_dn must be a number > 0"):
+        profile_from_mapping({"driver_black_level_dn": 0})
+    assert profile_from_mapping({"driver_black_level_dn": 0.25}).driver_black_level_dn == 0.25
+    km = parse_keymap(["cam|BlackLevel|black_level_dn|dn12"])  # a 12-bit camera's 256 codes
+    msg = ns(status=[ns(name="cam", values=[ns(key="BlackLevel", value="256")])])
+    assert metadata_from_keymap(msg, km) == {"black_level_dn": pytest.approx(256 * 255 / 4095)}
+
+
+def test_a_black_level_the_operator_raises_follows_the_drivers_metadata(tmp_path):
+    """A pedestal camera (16 DN) whose black level the operator raises to 40 DN at frame 12 of a held-out campaign
+    (inside a still hold), its Basler driver reporting BlackLevelRaw (16 per DN). With the conversion in the profile
+    every frame reads as the same camera at a constant 16 DN does (per-frame xi to 1e-4 DN but where it saturates)
+    and the lab cuts the hold there; with the profile's static 16 DN the raised frames read 24 DN of pedestal as
+    signal (xi +0.07 and +0.25 DN on the two measured from the image, at ~20 DN of noise, 2026-11-29); without the
+    conversion or a stated black level the driver's value is refused per frame, named."""
+    import torch
+
+    from noise_monitor.bag.replay import replay
+    from noise_monitor.estimator import load
+
+    torch.set_num_threads(1)
+    STEP = 12  # inside a still hold (frames 11-13)
+    base = dataclasses.replace(PROFILE, name="EV76C661 pedestal", black_level_dn=16.0)
+    src = simulate_bag(tmp_path / "ped.mcap", base, "campaign_heldout", frames=16, width=192, height=128,
+                       fps=10.0, seed=33)
+    bag, _ = _driver_bag(tmp_path, "basler", src=src, raise_dn=lambda i: 24.0 * (i >= STEP),
+                         black_units=lambda i: 256 + 384 * (i >= STEP))
+    kw = {"estimator": load("full_meta", device="cpu"), "progress": False, "plot": False}
+
+    def xi(out_dir):  # per frame; NaN where no patch was measurable (xi from the image's bound)
+        rows = list(csv.DictReader((out_dir / "replay.csv").open()))
+        return np.array([float(r["xi"]) if r["xi_measurement"] == "image" else np.nan for r in rows])
+
+    constant = replay(src, base, tmp_path / "constant", **kw)
+    followed = replay(bag, dataclasses.replace(base, black_level_dn=0.0, driver_black_level_dn=0.0625),
+                      tmp_path / "followed", metadata_topic="/basler/current_params", **kw)
+    static = replay(bag, base, tmp_path / "static", metadata_topic="/basler/current_params", **kw)
+    assert constant["frames_processed"] == followed["frames_processed"] == static["frames_processed"] == 16
+    a, b, c = xi(tmp_path / "constant"), xi(tmp_path / "followed"), xi(tmp_path / "static")
+    # the raised camera saturates 24 DN lower: one frame's bright patch is left out there (0.048 DN)
+    assert np.isfinite(a).sum() >= 12 and np.array_equal(np.isnan(a), np.isnan(b))
+    assert np.nansum(np.abs(b - a) > 1e-4) <= 1 and np.nanmax(np.abs(b - a)) <= 0.06
+    assert np.nanmax(np.abs(c[:STEP] - a[:STEP])) <= 1e-4 and np.nanmean(c[STEP:] - a[STEP:]) >= 0.1
+    rows = list(csv.DictReader((tmp_path / "followed" / "replay.csv").open()))
+    assert [float(r["black_level_dn"]) for r in rows] == [16.0] * STEP + [40.0] * (16 - STEP)
+    from noise_monitor.lab.measure import measure_frames
+
+    followed_profile = dataclasses.replace(base, black_level_dn=0.0, driver_black_level_dn=0.0625)
+    with open_bag(bag, metadata_topic="/basler/current_params") as reader:  # the lab: no hold across the change
+        held = [seg.frames for seg in measure_frames(reader.frames(followed_profile)).segments]
+    assert held and all(max(f) < STEP or min(f) >= STEP for f in held)  # frames 11-13 were one hold
+    refused = replay(bag, dataclasses.replace(base, black_level_dn=0.0), None, metadata_topic="/basler/current_params",
+                     **kw)
+    assert refused["frames_processed"] == 0  # 256 units at frame 0 already: no conversion, no stated level
+    assert "driver_black_level_dn" in next(iter(refused["skip_reasons"]))

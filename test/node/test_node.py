@@ -305,6 +305,32 @@ def test_a_black_level_the_image_contradicts_is_a_warning_with_the_cameras_bound
         assert 0.0 <= bound < 8.0
 
 
+def test_the_black_level_the_cameras_metadata_reports_per_frame(rig_factory):
+    """No black level configured: the node takes off what each frame's metadata reports (``black_level_dn``,
+    8-bit DN) and says so (key ``black_level_dn``). The camera's 16 DN pedestal reported reads OK with the noise
+    below black kept; 40 DN reported over the same pedestal WARNs, naming the metadata as the source and bounding
+    the camera's below the 40 DN; a reported value that is no black level makes the frame's metadata invalid (not evaluated)."""
+    clean = scene()
+    clean[:128, :128] = 0.0
+    meta = PROFILE.metadata(**DYNAMIC)
+    rig = rig_factory("reported_black")
+    for i, reported in enumerate((16.0, 16.0, 40.0, 300.0)):
+        noisy, _ = MODEL.simulate(clean, meta, rig.rng, black_level_dn=16.0)
+        report, _ = rig.step(i, pixels=np.clip(np.rint(noisy + 16.0), 0, 255).astype(np.uint8),
+                             metadata={**DYNAMIC, "black_level_dn": reported})
+        if reported == 300.0:
+            assert report.level == WARN and "frame not evaluated: metadata invalid" in report.message
+            assert "black_level_dn = 300 DN is not a black level" in report.message
+        elif reported == 16.0:
+            assert report.level == OK, report.message
+            assert float(report.values["black_level_dn"]) == 16.0
+            assert float(report.values["pixels_below_black_pct"]) == 0.0
+        else:
+            assert report.level == WARN and "below the stated black level of 40 DN (the camera's metadata)" in \
+                report.message and float(report.values["black_level_dn"]) == 40.0
+            assert 16.0 <= float(report.message.split("at most ")[1].split(" DN")[0]) < 30.0
+
+
 def test_frames_arriving_while_busy_are_dropped_and_counted(rig_factory):
     rig = rig_factory("burst")
     stamps = [rig.publish(i)[0] for i in range(12)]  # faster than the worker evaluates them
