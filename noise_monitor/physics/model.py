@@ -186,9 +186,10 @@ class NoiseModel:
         return lam, s2, mixes
 
     def _moments(self, effects: list[Effect], x: np.ndarray, cond: Conditions,
-                 linear: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                 linear: bool = False, pedestal: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """E[n|x], E[n^2|x] of the effects applied together in one pass (through the response unless
-        ``linear``; clipped, then quantized)."""
+        ``linear``; clipped, then quantized); ``pedestal``: the camera's black level, so that the output
+        ``x + pedestal + n`` is what the ADC clips at 0 and 255 and rounds."""
         lam, s2, mixes = self._components(effects, x if linear else self.linear_signal(x, cond), cond)
         _check_finite(effects, lam, s2, mixes)
         lsbs = [self.lsb(e, cond) for e in effects if e.distribution == "quantization"]
@@ -199,8 +200,20 @@ class NoiseModel:
             r1, r2, _ = noise_moments(x, 0.0, 1.0, step**2 / 12.0, None, lsb=max(lsbs), rounding=True)
             return r1, r2
         slope = None if linear else self.slope(x, cond)
-        m1, m2, _ = noise_moments(x, lam, cond.dn_per_e, s2, mixes, lsb=max(lsbs) if lsbs else None, slope=slope)
+        m1, m2, _ = noise_moments(x + pedestal, lam, cond.dn_per_e, s2, mixes, lsb=max(lsbs) if lsbs else None,
+                                  slope=slope)
         return m1, m2
+
+    def output_moments(self, meta: CameraMetadata, black_level_dn: float = 0.0) -> tuple[np.ndarray, np.ndarray,
+                                                                                            np.ndarray]:
+        """(clean signal, mean, variance) of a camera's output with the black level taken off, on the table grid up
+        to ``DN_MAX - black_level_dn``: every effect in one pass, the ADC's clipping at ``-black_level_dn`` and
+        ``DN_MAX - black_level_dn`` and its rounding (joint mode, exact; e.g. the EMVA photon-transfer curve)."""
+        if not 0.0 <= black_level_dn < DN_MAX:
+            raise ValueError(f"black_level_dn must be in [0, {DN_MAX:g}) DN, got {black_level_dn}")
+        v = _V_GRID[_V_GRID <= DN_MAX - black_level_dn + 1e-9]
+        m1, m2 = self._moments(self.noise_effects, v, self.conditions(meta), pedestal=float(black_level_dn))
+        return v, v + m1, m2 - m1**2
 
     def _quantization_moments(self, e: Effect, x: np.ndarray, cond: Conditions) -> tuple[np.ndarray, np.ndarray]:
         """Joint mode: moments of the rounding error of the one-pass noisy output (as ``simulate``)."""

@@ -4,10 +4,11 @@ Mapping (the model works on an 8-bit DN scale with ``DN/e- = 255 g / FW``, g the
 
 - system gain K (native DN/e-, base gain 0 dB): ``full_well_e = (2^bits - 1) / K``. The model's K at
   gain G dB is ``K * 10^(G/20)``; K given at other gain settings is checked against that.
-- saturation capacity: the model saturates at the ADC range (255 DN on its scale); its EMVA saturation
-  (mean at the maximum of the temporal variance, clipping included) is predicted and compared. A
-  datasheet whose saturation exceeds the ADC range at base gain is contradictory (error); one clearly
-  below it (a full well or a black level that the model lacks) cannot be reproduced (stated).
+- saturation capacity: the model saturates at the ADC range (255 DN on its scale), less the black level (the
+  dark offset) where one is given; its EMVA saturation (mean at the maximum of the temporal variance, clipping
+  included) is predicted and compared. A datasheet whose saturation exceeds the ADC range above the dark offset at
+  base gain is contradictory (error); one clearly below it (a full well that the model lacks) cannot be reproduced
+  (stated).
 - dark current mu_I at T and doubling temperature T_d: ``dark_signal_fom_na_cm2`` from the band-gap
   law at T; where T_d differs from the law's own, a ``dark_current_law`` effect adds the exponential
   rate r = (ln 2 - ln(b(T + T_d) / b(T))) / T_d (b: the law), so mu_I(T + T_d) = 2 mu_I(T) exactly.
@@ -97,11 +98,15 @@ def _meta(profile: CameraProfile, gain_db: float = 0.0, exposure_s: float | None
                             sensor_temperature_c=temperature_c)
 
 
-def model_ptc(model: NoiseModel, meta: CameraMetadata) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(clean signal, mean, temporal variance) of the model's output on its 8-bit scale, clipping included."""
-    m1, m2 = model.tables(meta)["total"]
-    v = np.arange(0.0, DN_MAX + 1e-9, TABLE_STEP_DN)  # the model's table grid
-    return v, v + m1, m2 - m1**2
+def model_ptc(model: NoiseModel, meta: CameraMetadata, black_level_dn: float = 0.0
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(clean signal, mean, temporal variance) of the model's output on its 8-bit scale, the black level taken off,
+    clipping included (a camera with a black level saturates that much sooner)."""
+    if not black_level_dn:
+        m1, m2 = model.tables(meta)["total"]
+        v = np.arange(0.0, DN_MAX + 1e-9, TABLE_STEP_DN)  # the model's table grid
+        return v, v + m1, m2 - m1**2
+    return model.output_moments(meta, black_level_dn)
 
 
 def ptc_gain(mean: np.ndarray, var: np.ndarray) -> float:
@@ -137,13 +142,14 @@ def predict_datasheet(profile: CameraProfile, ds: Datasheet) -> dict[str, Any]:
     temp_meas = ds.measurement_temperature_c if ds.measurement_temperature_c is not None else ds.dark_current_temperature_c
     out: dict[str, Any] = {}
     meta0 = _meta(profile, 0.0, t_meas, temp_meas)
-    _, mean, var = model_ptc(model, meta0)
+    black = profile.black_level_dn
+    _, mean, var = model_ptc(model, meta0, black)
     k8 = ptc_gain(mean, var)
     out["system_gain_dn_per_e"] = to_native(k8, bits)
     out["saturation_capacity_e"] = ptc_saturation(mean, var) / k8
     out["gains"] = []
     for g_db, _ in ds.gains:
-        _, mg, vg = model_ptc(model, _meta(profile, g_db, t_meas, temp_meas))
+        _, mg, vg = model_ptc(model, _meta(profile, g_db, t_meas, temp_meas), black)
         out["gains"].append(to_native(ptc_gain(mg, vg), bits))
     cond = model.conditions(meta0)
     dark_var = sum(float(e.variance_dn2(0.0, cond)) for e in model.noise_effects
@@ -337,8 +343,8 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
     if abs(sat / ds.saturation_capacity_e - 1.0) > TOLERANCE:
         notes.append(f"saturation not reproduced: the model saturates at the ADC range ({sat:.0f} e- by the EMVA "
                      f"variance maximum), the figures give {ds.saturation_capacity_e:.0f} e- "
-                     f"({sat_dn / adc:.1%} of the ADC range): a full well or black level below the ADC range is not "
-                     "in the model")
+                     f"({sat_dn / adc:.1%} of the ADC range{' above the dark offset' if offset else ''}): a full "
+                     "well below the ADC range is not in the model")
     return result
 
 

@@ -51,10 +51,10 @@ def plots(result: dict[str, Any], out: Path, profile: CameraProfile | None) -> d
         meta = profile.metadata(gain_db=cond["gain_db"], exposure_time_s=cond["temporal_dark_noise_exposure_s"],
                                 sensor_temperature_c=cond["temperature_c"] if cond["temperature_c"] is not None else 25.0)
         tm = temporal_model(profile)
-        _, mm, mv = model_ptc(tm, meta)
+        _, mm, mv = model_ptc(tm, meta, profile.black_level_dn)  # the black level off: its dark mean is 0
         c = tm.conditions(meta)
         dark_var = sum(float(e.variance_dn2(0.0, c)) for e in tm.noise_effects if e.name != "pn")
-        model = (mm, mv - dark_var)  # the model has no black level: its dark mean is 0
+        model = (mm, mv - dark_var)
     # photon transfer curve
     f, ax = plt.subplots(figsize=(6.4, 4.4))
     ax.plot(x * to_nat, y * to_nat**2, "o", ms=4, color="0.55", label="measured")

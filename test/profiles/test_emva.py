@@ -169,3 +169,19 @@ def test_from_emva_cli_bad_datasheet_exits_2_with_one_line(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "contradictory" in err
     assert not (tmp_path / "p.yaml").exists()
     assert main(["profile", "from-emva", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "p.yaml")]) == 2
+
+
+def test_a_dark_offset_lowers_the_models_saturation():
+    """An 8-bit CCD whose ADC holds a 16 / 40 DN pedestal saturates that much sooner above it: the model predicts
+    9,092 / 8,168 e- for 9,200 / 8,300 e- (the round trip passes); without the pedestal in the model it predicted
+    9,709 e- for both (2026-11-29). The prediction moves by the pedestal over K, as the ADC's top does."""
+    preds = []
+    for offset, sat in ((16.0, 9200.0), (40.0, 8300.0)):
+        ds = datasheet_from_mapping(_doc(bit_depth=8, sensor_type="ccd", system_gain_dn_per_e=0.0255, gains=None,
+                                         saturation_capacity_e=sat, temporal_dark_noise_e=12.0, dark_offset_dn=offset))
+        result = profile_from_datasheet(ds)
+        assert not any("saturation not reproduced" in n for n in result.notes)
+        row = next(r for r in round_trip(ds, result.profile) if r["field"] == "saturation_capacity_e")
+        assert row["ok"] and row["predicted"] < sat
+        preds.append(row["predicted"])
+    assert preds[0] - preds[1] == pytest.approx(24.0 / 0.0255, rel=0.03)
