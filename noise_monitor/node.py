@@ -42,10 +42,10 @@ from msg_adapters.debug_image import debug_view
 from msg_adapters.outputs import DIAGNOSTICS_TYPE, output_topics, rclpy_messages
 from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
+from noise_monitor.monitor.config import NODE_NAME
 from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime, coerce, parameter_table
 
-NODE_NAME = "noise_monitor"
 #: How often images waiting for their metadata are checked (the synchroniser's wait, seconds).
 SYNC_POLL_S = 0.05
 J = TypeVar("J")
@@ -421,13 +421,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="remaining arguments are passed to ROS (remappings, -p name:=value)")
 
 
+def _node_name(ros_args: list[str]) -> str:
+    """The node's name after a ``-r __node:=NAME`` remapping among the ROS arguments (else the default)."""
+    names = [a.split(":=", 1)[1] for a in ros_args if a.startswith("__node:=") or a.startswith("__name:=")]
+    return names[-1] if names else NODE_NAME
+
+
 def run(args: argparse.Namespace) -> int:
     from .monitor.config import default_params_path, read_ros_params
 
     params_file = Path(args.params_file) if args.params_file else default_params_path()
     if not params_file.is_file():
         raise FileNotFoundError(f"params file {params_file} not found")
-    unknown = sorted(set(read_ros_params(params_file)) - set(parameter_table()))
+    unknown = sorted(set(read_ros_params(params_file, _node_name(args.ros_args))) - set(parameter_table()))
     if unknown:
         raise ValueError(f"{params_file}: unknown parameter(s) {', '.join(unknown)}")
     overrides = {k: getattr(args, k) for k in _CLI_OVERRIDES if getattr(args, k) is not None}

@@ -13,6 +13,11 @@ from noise_monitor.physics.constants import MIN_PATCH, MODES
 from .. import safe_yaml
 from ..text import clip
 
+#: the node's default name (``ros2 run``, ``noise-monitor node``; ``-r __node:=...`` renames it)
+NODE_NAME = "noise_monitor"
+#: parameters every rclpy node declares itself: a params file may set them for the monitor's node (rclpy's to read)
+ROS_OWN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"})
+
 XI_SOURCES = ("auto", "estimator", "model")
 MODEL_MODES = MODES
 ALARM_LEVELS = ("WARN", "ERROR")
@@ -144,16 +149,35 @@ def default_params_path() -> Path:
     return share_dir() / "config" / "node.yaml"
 
 
-def read_ros_params(path: str | Path | None = None) -> dict[str, Any]:
-    """``ros__parameters`` of the first node in a ROS 2 params YAML file."""
+def read_ros_params(path: str | Path | None = None, node_name: str = NODE_NAME) -> dict[str, Any]:
+    """The ``ros__parameters`` a node named ``node_name`` takes from a ROS 2 params YAML file: those of every section
+    whose key names it (``/**``, ``noise_monitor``, ``/ns/noise_monitor``, ``/**/noise_monitor``, in any
+    namespace), later sections winning as in rcl; the parameters rclpy declares itself (``use_sim_time``) left out.
+    A file with no section for the node is an error naming its sections."""
     p = Path(path) if path else default_params_path()
     if not p.exists():
         raise FileNotFoundError(f"parameter file {p} not found")
     doc = safe_yaml.load(p)
+    usage = f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'"
     if not isinstance(doc, dict) or not doc:
-        raise ValueError(f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'")
-    node = next(iter(doc.values()))
-    if not isinstance(node, dict) or not isinstance(node.get("ros__parameters"), dict):
-        raise ValueError(f"{p}: expected '<node name>: {{ros__parameters: {{...}}}}'")
-    return dict(node["ros__parameters"])
+        raise ValueError(usage)
+    out: dict[str, Any] = {}
+    matched = False
+    for key, node in doc.items():
+        if not _names_node(str(key), node_name):
+            continue
+        if not isinstance(node, dict) or not isinstance(node.get("ros__parameters"), dict):
+            raise ValueError(usage)
+        matched = True
+        out.update(node["ros__parameters"])
+    if not matched:
+        raise ValueError(f"{p}: no section for the node {node_name!r} (sections: "
+                         f"{clip(', '.join(map(str, doc)), 200)}; e.g. '/**' or '{node_name}')")
+    return {k: v for k, v in out.items() if k not in ROS_OWN_PARAMETERS}
 
+
+def _names_node(key: str, node_name: str) -> bool:
+    """Whether a params file's section key can apply to the node ``node_name``: its last name is the node's, ``*`` or
+    ``**`` (rcl's wildcards); the namespace is the launch's, so the names before it are not checked."""
+    parts = [t for t in key.strip().strip("/").split("/") if t]
+    return bool(parts) and parts[-1] in (node_name, "*", "**")

@@ -6,6 +6,7 @@ the per-frame statuses (~/frame), the stamped numbers and the /diagnostics perio
 """
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from typing import Any
@@ -370,6 +371,32 @@ def test_cli_rejects_bad_parameters_with_exit_code_2(tmp_path, capsys):
     assert "unknown parameter(s) patches_per_frmae" in capsys.readouterr().err
     assert node_main(["--ros-args", "-p", "xi_threshold_dn:=-1.0"]) == 2
     assert "xi_threshold_dn must be > 0" in capsys.readouterr().err
+
+
+def test_a_robots_params_file_with_sections_for_other_nodes_and_use_sim_time(tmp_path, capfd):
+    """A launch's one params file: a camera driver's section first, every node's (``/**``) with rclpy's own
+    use_sim_time, and a later section for the monitor's name winning. The node takes its sections only (until
+    2026-11-29 the first section was read: the driver's keys, and use_sim_time, were 'unknown parameter(s)')."""
+    from noise_monitor.cli import main as cli_main
+    from noise_monitor.monitor.config import read_ros_params
+
+    robot = tmp_path / "robot.yaml"
+    robot.write_text("camera_driver:\n  ros__parameters:\n    exposure_auto: 1\n"
+                     "/**:\n  ros__parameters:\n    use_sim_time: true\n    xi_threshold_dn: 2.0\n"
+                     "    patches_per_frame: 4\n"
+                     "/robot/noise_monitor:\n  ros__parameters:\n    xi_threshold_dn: 1.5\n"
+                     "/robot/other_monitor:\n  ros__parameters:\n    xi_threshold_dn: 9.0\n")
+    assert read_ros_params(robot) == {"xi_threshold_dn": 1.5, "patches_per_frame": 4}
+    assert read_ros_params(robot, "other_monitor") == {"xi_threshold_dn": 9.0, "patches_per_frame": 4}
+    driver_only = tmp_path / "driver.yaml"
+    driver_only.write_text("camera_driver:\n  ros__parameters:\n    exposure_auto: 1\n")
+    with pytest.raises(ValueError, match="no section for the node 'noise_monitor'.*camera_driver"):
+        read_ros_params(driver_only)
+    out = tmp_path / "summary.json"
+    assert cli_main(["node", "--params-file", str(robot), "--duration", "1", "--json", str(out),
+                     "--ros-args", "-r", "__ns:=/robot"]) == 0, capfd.readouterr().err
+    assert json.loads(out.read_text())["frames_received"] == 0
+    assert "monitoring /robot/image with full_meta (patch 64, K=4," in capfd.readouterr().err  # rcl read the file
 
 
 def test_unusable_image_is_a_warning_with_the_reason(rig_factory):
