@@ -44,7 +44,7 @@ from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
 from noise_monitor.monitor.config import NODE_NAME
 from noise_monitor.monitor.period import PeriodSummary
-from noise_monitor.monitor.runtime import MonitorRuntime, coerce, parameter_table
+from noise_monitor.monitor.runtime import MonitorRuntime, check_parameters, coerce, parameter_table
 
 #: How often images waiting for their metadata are checked (the synchroniser's wait, seconds).
 SYNC_POLL_S = 0.05
@@ -189,17 +189,23 @@ class NoiseMonitorNode(Node):
             live.log_cdr(topic, serialize_message(msg), stamp_ns)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """``ros2 param set``: thresholds and alarm settings change at run time (validated, the alarm keeps
-        its state); every other parameter is read-only while the node runs. Rejections carry the reason."""
+        """``ros2 param set``: thresholds, alarm settings and the black level change at run time (validated, the
+        alarm keeps its state); every other parameter is read-only while the node runs. Rejections carry the reason."""
         table = parameter_table()  # others (use_sim_time) are rclpy's own
         try:
             changes = {p.name: coerce(p.name, p.value, table[p.name][0]) for p in params if p.name in table}
-            cfg = self.monitor.reconfigure(**changes)
+            black = changes.pop("black_level_dn", None)  # the camera's pedestal: an operator may change it
+            if black is not None:
+                check_parameters({**self.params, "black_level_dn": black})
+            self.monitor.reconfigure(**changes)
         except ValueError as exc:
             self.get_logger().warning(f"parameter change rejected: {exc}")
             return SetParametersResult(successful=False, reason=str(exc))
+        if black is not None:
+            self.runtime.set_black_level(black)
+            changes["black_level_dn"] = black
         self.params.update(changes)
-        self.get_logger().info(f"parameters changed: {', '.join(f'{k}={getattr(cfg, k)}' for k in changes)}")
+        self.get_logger().info(f"parameters changed: {', '.join(f'{k}={v}' for k, v in changes.items())}")
         return SetParametersResult(successful=True)
 
     # --- inputs (executor thread) --------------------------------------------------------

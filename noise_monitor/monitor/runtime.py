@@ -8,6 +8,7 @@ included), the estimator (loaded once), the :class:`Monitor` and the :class:`Fra
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
@@ -51,9 +52,9 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
                         "serial), else '<profile name>/<camera_name>'"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
-    "black_level_dn": (-1.0, "the camera's black level (pedestal, 8-bit DN scale) taken off every image before the "
-                             "model reads it (overrides the metadata's per frame); -1 = the frame's metadata "
-                             "black_level_dn, else the profile's (0 without)"),
+    "black_level_dn": (-1.0, "the camera's black level (pedestal, 8-bit DN scale; settable at run time) taken off "
+                             "every image before the model reads it (overrides the metadata's per frame); -1 = the "
+                             "frame's metadata black_level_dn, else the profile's (0 without)"),
     "color": ("luma", "reduction of colour images to gray: luma or green"),
     "model": ("full_meta", "estimator variant (noise_monitor.estimator.load)"),
     "weights": ("", "estimator checkpoint (.pt written by `noise-monitor train`); '' = the bundled weights"),
@@ -204,6 +205,12 @@ class MonitorRuntime:
         depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
         self.frame_options = FrameOptions(self.profile, depth, p["color"],
                                           None if p["black_level_dn"] == -1.0 else float(p["black_level_dn"]))
+
+    def set_black_level(self, black_level_dn: float) -> None:
+        """The black level taken off every image from now on (-1: the frame's metadata's, else the profile's)."""
+        self.frame_options = dataclasses.replace(self.frame_options,
+                                                 black_level_dn=None if black_level_dn == -1.0 else float(black_level_dn))
+        self.params["black_level_dn"] = black_level_dn
 
     @classmethod
     def from_params_file(cls, path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,

@@ -545,6 +545,34 @@ def test_run_time_parameter_changes_are_validated(rig_factory):
     assert report.level == ERROR and "image noisier" in report.message
 
 
+def test_the_black_level_set_at_run_time(rig_factory):
+    """``ros2 param set black_level_dn`` (an operator changed the camera's pedestal): taken off from the next frame,
+    validated (300 DN is rejected with the reason), and -1 returns to the metadata's / profile's (none here)."""
+    from rclpy.parameter_client import AsyncParameterClient
+
+    rig = rig_factory("pset_black")
+    client = AsyncParameterClient(rig.cam, rig.node.get_fully_qualified_name())
+    assert client.wait_for_services(TIMEOUT_S)
+
+    def set_black(value: float):
+        fut = client.set_parameters([Parameter("black_level_dn", value=value)])
+        assert rig.spin_until(fut.done, TIMEOUT_S)
+        return fut.result().results[0]
+
+    def frame(i: int) -> StatusReport:
+        noisy, _ = MODEL.simulate(rig.clean, PROFILE.metadata(**DYNAMIC), rig.rng, black_level_dn=16.0)
+        return rig.step(i, pixels=np.clip(np.rint(noisy + 16.0), 0, 255).astype(np.uint8))[0]
+
+    assert "black_level_dn" not in frame(0).values
+    assert set_black(16.0).successful
+    report = frame(1)
+    assert report.level == OK and float(report.values["black_level_dn"]) == 16.0
+    bad = set_black(300.0)
+    assert not bad.successful and "black_level_dn must be -1" in bad.reason
+    assert float(frame(2).values["black_level_dn"]) == 16.0
+    assert set_black(-1.0).successful and "black_level_dn" not in frame(3).values
+
+
 def test_hardware_id_from_the_drivers_serial(rig_factory):
     """Two cameras of one model: the driver's device id (its metadata status's hardware_id) names each;
     an explicit hardware_id parameter wins."""
