@@ -109,9 +109,10 @@ def model_ptc(model: NoiseModel, meta: CameraMetadata, black_level_dn: float = 0
     return model.output_moments(meta, black_level_dn)
 
 
-def ptc_gain(mean: np.ndarray, var: np.ndarray) -> float:
-    """Slope of variance vs mean over the linear range (DN/e- on the data's scale)."""
-    lo, hi = (f * 255.0 for f in PTC_LINEAR_RANGE)
+def ptc_gain(mean: np.ndarray, var: np.ndarray, black_level_dn: float = 0.0) -> float:
+    """Slope of variance vs mean over the linear range of the ADC's span above the black level (DN/e- on the
+    data's scale)."""
+    lo, hi = (f * (255.0 - black_level_dn) for f in PTC_LINEAR_RANGE)
     sel = (mean >= lo) & (mean <= hi)
     return float(np.polyfit(mean[sel], var[sel], 1)[0])
 
@@ -144,13 +145,13 @@ def predict_datasheet(profile: CameraProfile, ds: Datasheet) -> dict[str, Any]:
     meta0 = _meta(profile, 0.0, t_meas, temp_meas)
     black = profile.black_level_dn
     _, mean, var = model_ptc(model, meta0, black)
-    k8 = ptc_gain(mean, var)
+    k8 = ptc_gain(mean, var, black)
     out["system_gain_dn_per_e"] = to_native(k8, bits)
     out["saturation_capacity_e"] = ptc_saturation(mean, var) / k8
     out["gains"] = []
     for g_db, _ in ds.gains:
         _, mg, vg = model_ptc(model, _meta(profile, g_db, t_meas, temp_meas), black)
-        out["gains"].append(to_native(ptc_gain(mg, vg), bits))
+        out["gains"].append(to_native(ptc_gain(mg, vg, black), bits))
     cond = model.conditions(meta0)
     dark_var = sum(float(e.variance_dn2(0.0, cond)) for e in model.noise_effects
                    if e.distribution in ("poisson", "gaussian") and e.name != "pn")
@@ -343,8 +344,8 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
     if abs(sat / ds.saturation_capacity_e - 1.0) > TOLERANCE:
         notes.append(f"saturation not reproduced: the model saturates at the ADC range ({sat:.0f} e- by the EMVA "
                      f"variance maximum), the figures give {ds.saturation_capacity_e:.0f} e- "
-                     f"({sat_dn / adc:.1%} of the ADC range{' above the dark offset' if offset else ''}): a full "
-                     "well below the ADC range is not in the model")
+                     f"({sat_dn / (adc - offset):.1%} of the ADC range{' above the dark offset' if offset else ''}): "
+                     "a full well below the ADC range is not in the model")
     return result
 
 

@@ -185,3 +185,14 @@ def test_a_dark_offset_lowers_the_models_saturation():
         assert row["ok"] and row["predicted"] < sat
         preds.append(row["predicted"])
     assert preds[0] - preds[1] == pytest.approx(24.0 / 0.0255, rel=0.03)
+
+
+def test_a_black_level_above_a_third_of_the_range_keeps_k_right():
+    """K is fitted over 5-70 % of the range above the black level: with a 2000 DN dark offset (12 bit, 49 % of
+    the range) a fit over 5-70 % of the whole range reached into the clipping (K -4.7 / -6.8 / -9.7 % at 0 / 6 /
+    12 dB, 2026-11-29)."""
+    ds = datasheet_from_mapping(_doc(dark_offset_dn=2000.0, saturation_capacity_e=5525.0))
+    rows = {r["field"]: r for r in round_trip(ds, profile_from_datasheet(ds).profile)}
+    for name in ("system_gain_dn_per_e", "system_gain_dn_per_e@6dB", "system_gain_dn_per_e@12dB"):
+        assert abs(rows[name]["rel_error"]) < 1e-3, rows[name]
+    assert rows["saturation_capacity_e"]["ok"]
