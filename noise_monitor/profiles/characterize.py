@@ -21,7 +21,8 @@ also in the camera's native DN:
 - DSNU: sqrt(spatial variance of the dark set) / K; PRNU: sqrt(s_y^2 - s_y.dark^2) / (mu_y - mu_y.dark)
   on the flat set nearest 50 % of saturation (the largest sets are used);
 - linearity error: deviation of mu_y - mu_y.dark from a straight line in exposure between 5 % and 95 %
-  of saturation, in % of the line.
+  of saturation, in % of the line;
+- dark sets with pixels at code 0 (a black level too low for the dark signal's spread) are left out, said in a note.
 
 Quantum efficiency (and so anything in photons) needs a calibrated irradiance: not determined.
 """
@@ -44,6 +45,9 @@ DARK_TOLERANCE = 0.02
 #: A new set starts where the mean jumps by more than this fraction of the range.
 SET_SPLIT = 0.005
 K_FIT_MAX = 0.70
+#: A set with this share of its pixels at the ADC's ends is clipped: a flat at 255 leaves the K fit, a dark at 0 every
+#: dark figure.
+CLIPPED_MAX = 1e-4
 #: Below this dark variance (native DN^2) the dark noise is under the ADC step: not determined.
 QUANTIZATION_LIMIT_DN2 = 0.24
 LINEARITY_RANGE = (0.05, 0.95)
@@ -69,6 +73,7 @@ class FrameSet:
     temporal_var: float = 0.0
     spatial_var: float = 0.0
     clipped_fraction: float = 0.0
+    underflow_fraction: float = 0.0  # pixels at code 0: the black level too low for the dark signal's spread
 
     def add(self, image: np.ndarray) -> None:
         if not self.images:
@@ -84,6 +89,7 @@ class FrameSet:
         self.temporal_var = float(np.mean(pairs))
         self.spatial_var = float(np.var(stack.mean(axis=0)) - self.temporal_var / len(stack))
         self.clipped_fraction = float(np.mean(stack >= 255.0 - 1e-3))
+        self.underflow_fraction = float(np.mean(stack <= 1e-3))
         self.images = []
 
 
@@ -224,6 +230,16 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     for s in rec.sets:
         groups.setdefault((s.gain_db, s.temperature_c), []).append(s)
     _classify(groups, dark_tolerance * 255.0)
+    underflow = [s for s in rec.sets if s.kind == "dark" and s.underflow_fraction >= CLIPPED_MAX]
+    for s in underflow:  # their mean and variance are the clipped signal's: every dark figure would be biased
+        s.kind = "dark at code 0"
+    if underflow:
+        worst = max(underflow, key=lambda s: s.underflow_fraction)
+        notes.append(f"{len(underflow)} dark set(s) left out: up to {worst.underflow_fraction:.1%} of their pixels at "
+                     f"code 0 ({worst.exposure_time_s:g} s"
+                     f"{'' if worst.temperature_c is None else f', {worst.temperature_c:g} degC'}): the black level is "
+                     "too low for the dark signal's spread there; raise it (e.g. BlackLevel) to characterize those "
+                     "conditions")
     flats_by_group = {g: [s for s in m if s.kind == "flat"] for g, m in groups.items()}
     base = max(groups, key=lambda g: (len(flats_by_group[g]), -g[0]))
     gain0, temp0 = base
@@ -236,7 +252,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         raise CharacterizeError("no dark frames (lens cap on) at two or more exposure times"
                                 f"{'' if temp0 is None else f' at {temp0:g} degC'}: dark subtraction and dark "
                                 "current cannot be determined")
-    unclipped = [s for s in flats if s.clipped_fraction < 1e-4]
+    unclipped = [s for s in flats if s.clipped_fraction < CLIPPED_MAX]
     if len(unclipped) < 3:
         raise CharacterizeError(f"only {len(unclipped)} flat-field set(s) without saturated pixels (of {len(flats)}): "
                                 "the photon transfer curve (K) cannot be determined")
@@ -263,8 +279,8 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     else:
         notes.append("saturation not determined: the variance has no maximum inside the exposure series "
                      "(record flat fields beyond saturation)")
-    limit = K_FIT_MAX * (sat_dn if sat_dn else x[np.array([s.clipped_fraction < 1e-4 for s in flats])].max())
-    sel = (x <= limit) & np.array([s.clipped_fraction < 1e-4 for s in flats]) & (x > 0)
+    limit = K_FIT_MAX * (sat_dn if sat_dn else x[np.array([s.clipped_fraction < CLIPPED_MAX for s in flats])].max())
+    sel = (x <= limit) & np.array([s.clipped_fraction < CLIPPED_MAX for s in flats]) & (x > 0)
     if sel.sum() < 3:
         raise CharacterizeError(f"only {int(sel.sum())} flat-field set(s) in the linear range below 70 % of "
                                 "saturation: K cannot be determined")
@@ -385,7 +401,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
                        "skipped": rec.skipped},
         "notes": notes,
         "points": {"ptc": {"signal_dn": x.tolist(), "variance_dn2": y.tolist(), "k_fit": sel.tolist(),
-                           "unclipped": [s.clipped_fraction < 1e-4 for s in flats],
+                           "unclipped": [s.clipped_fraction < CLIPPED_MAX for s in flats],
                            "total_variance_dn2": [s.temporal_var for s in flats],
                            "saturation_dn": sat_dn},
                    "dark": series, "linearity": lin,

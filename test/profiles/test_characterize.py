@@ -217,3 +217,24 @@ def test_8_bit_camera_below_its_adc_step_is_quantization_limited(tmp_path, capsy
     assert res["figures"]["temporal_dark_noise_e"]["value"] is None
     assert any("quantization limit" in n for n in res["notes"])
     assert not (tmp_path / "o" / "profile.yaml").exists()  # no invented read noise
+
+
+def test_dark_sets_clipped_at_code_0_are_left_out_and_said(tmp_path):
+    """The noisy camera with a 64 DN dark offset (12 bit): its DSNU, which grows with the dark signal, spreads the
+    60 degC long darks below code 0 (10.9 % of their pixels). Before, they were used as they were: dark current at 60
+    degC 441.9 against 367.8 e-/s (+20 %), nothing said (2026-11-29). Now they are left out with a note; the dark
+    currents measured at the other temperatures stay within 2 %."""
+    doc = yaml.safe_load(EXAMPLE.read_text())
+    doc.update(CAMERA, dark_offset_dn=64)
+    (tmp_path / "emva.yaml").write_text(yaml.safe_dump(doc))
+    assert main(["profile", "from-emva", str(tmp_path / "emva.yaml"), "--out", str(tmp_path / "cam.yaml")]) == 0
+    bag = tmp_path / "ptc.mcap"
+    assert main(["simulate-bag", str(bag), "--profile", str(tmp_path / "cam.yaml"), "--scenario", "ptc",
+                 "--frames", "120", "--width", "256", "--height", "192", "--seed", "7"]) == 0
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "o"), "--json", str(tmp_path / "c.json")]) == 0
+    res, truth = json.loads((tmp_path / "c.json").read_text()), load_truth(bag)["emva"]
+    assert any("dark set(s) left out" in n and "code 0" in n and "60 degC" in n for n in res["notes"])
+    measured = res["figures"]["dark_current_e_per_s"]
+    assert "60" not in measured and {"30", "40", "50"} <= set(measured)
+    for temp in ("30", "40", "50"):
+        assert measured[temp]["value"] == pytest.approx(truth["dark_current_e_per_s"][temp], rel=0.02)
