@@ -188,6 +188,14 @@ def _fit_line(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p, np.sqrt(np.diag(cov) * s2)
 
 
+def _dithered(s: FrameSet, native2: float) -> bool:
+    """Whether a set's temporal noise dithers the ADC's rounding (variance of at least ``QUANTIZATION_LIMIT_DN2``
+    native DN^2, sigma ~ half a step): below it each pixel rounds alike from frame to frame, and the set's mean
+    keeps an error of up to half a step that no pixel average removes (a fixed pattern rounded this way spreads over
+    two levels whatever its size, so its measured spread is no sign of dithering)."""
+    return s.temporal_var * native2 >= QUANTIZATION_LIMIT_DN2
+
+
 def _value(v: float | None, se: float | None, unit: str) -> dict[str, Any]:
     return {"value": v, "stderr": None if se is None or not math.isfinite(se) else se, "unit": unit}
 
@@ -310,6 +318,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     # dark current per temperature and its doubling temperature
     currents: dict[str, dict[str, Any]] = {}
     series = []
+    quantized: list[str] = []  # temperatures whose dark signal moved less than the ADC's steps resolve
     for (g, temp), members in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] or 0.0)):
         if g != gain0:
             continue
@@ -317,15 +326,25 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         ts = np.array([s.exposure_time_s for s in ds])
         if len(np.unique(ts)) < 2:
             continue
-        p, se = _fit_line(ts, np.array([s.mean for s in ds]))
+        label = "unknown" if temp is None else f"{temp:g}"
+        means = np.array([s.mean for s in ds])
+        undithered = not all(_dithered(s, native2) for s in ds)
+        if undithered and np.ptp(means) < 2.0 * rec.lsb:
+            quantized.append(label)
+            series.append({"temperature_c": temp, "exposure_s": ts.tolist(), "mean_dn": means.tolist(), "fit": None,
+                           "rate_e_per_s": None})
+            continue
+        p, se = _fit_line(ts, means)
+        if undithered:  # each mean is off by up to half an ADC step that no pixel average removes
+            se[0] = math.hypot(se[0] if math.isfinite(se[0]) else 0.0,
+                               rec.lsb / math.sqrt(12.0) / math.sqrt(float(np.sum((ts - ts.mean()) ** 2))))
         rate = p[0] / k8
         rate_se = abs(rate) * math.hypot(rel_k, se[0] / p[0]) if p[0] and math.isfinite(se[0]) else None
-        label = "unknown" if temp is None else f"{temp:g}"
         currents[label] = _value(rate, rate_se, "e-/s")
         series.append({"temperature_c": temp, "exposure_s": ts.tolist(), "mean_dn": [s.mean for s in ds],
                        "fit": p.tolist(), "rate_e_per_s": rate})
     temps = [(s["temperature_c"], s["rate_e_per_s"], currents[f"{s['temperature_c']:g}"]["stderr"])
-             for s in series if s["temperature_c"] is not None and s["rate_e_per_s"] > 0]
+             for s in series if s["temperature_c"] is not None and (s["rate_e_per_s"] or 0.0) > 0]
     doubling = _value(None, None, "K")
     if len(temps) >= 2:
         tt = np.array([v[0] for v in temps])
@@ -336,13 +355,26 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         td_se = td * math.sqrt(cov[0, 0]) / p[0] if (td and cov is not None) else None
         doubling = _value(td, td_se, "K")
     else:
-        notes.append("doubling temperature not determined: dark frames at one temperature only")
+        recorded = len({x["temperature_c"] for x in series if x["temperature_c"] is not None})
+        notes.append("doubling temperature not determined: " + ("dark frames at one temperature only" if recorded < 2
+                                                                  else "dark current determined at fewer than two "
+                                                                       "temperatures"))
+    if quantized:
+        notes.append(f"dark current not determined at {', '.join(q + ' degC' for q in quantized)}: the dark signal "
+                     "moves less than two ADC steps over the exposures and the dark noise does not dither the ADC "
+                     "(below half a step); record longer or warmer darks, more bits or a higher gain")
     # DSNU: the largest dark set at the longest exposure; PRNU: the largest flat set nearest 50 % saturation
     dsnu_set = max(darks, key=lambda s: (s.size, s.exposure_time_s))
     s2d = max(dsnu_set.spatial_var, 0.0)
-    dsnu = math.sqrt(s2d) / k8
-    dsnu_se = dsnu * math.hypot(rel_k, 0.5 * math.sqrt(2.0 / npix) * (dsnu_set.spatial_var + dsnu_set.temporal_var
-                                                                        / dsnu_set.size) / max(s2d, 1e-30))
+    dsnu_value = math.sqrt(s2d) / k8
+    dsnu: float | None = dsnu_value
+    dsnu_se: float | None = dsnu_value * math.hypot(rel_k, 0.5 * math.sqrt(2.0 / npix) * (
+        dsnu_set.spatial_var + dsnu_set.temporal_var / dsnu_set.size) / max(s2d, 1e-30))
+    if not _dithered(dsnu_set, native2) and dsnu_set.spatial_var * native2 < 1.0:
+        notes.append(f"DSNU not determined: its dark set's pattern spreads by {dsnu_set.spatial_var * native2:.3g} "
+                     "DN^2 and its temporal noise is below one ADC step: the ADC rounds such a pattern to one or two "
+                     "levels; record with more bits or a higher gain")
+        dsnu = dsnu_se = None
     prnu = _value(None, None, "%")
     if sat_dn:
         cands = [j for j in range(len(flats)) if sel[j] or x[j] <= 0.7 * sat_dn]

@@ -95,10 +95,12 @@ def plots(result: dict[str, Any], out: Path, profile: CameraProfile | None) -> d
     for i, s in enumerate(pts["dark"]):
         t = np.array(s["exposure_s"])
         lbl = "unknown T" if s["temperature_c"] is None else f"{s['temperature_c']:g} degC"
-        ax.plot(t * 1e3, np.array(s["mean_dn"]) * to_nat, "o", ms=4, color=f"C{i}", label=f"{lbl} measured")
-        tt = np.linspace(0, t.max(), 20)
-        ax.plot(tt * 1e3, np.polyval(s["fit"], tt) * to_nat, "-", color=f"C{i}",
-                label=f"{lbl} fit: {s['rate_e_per_s']:.3g} e-/s")
+        ax.plot(t * 1e3, np.array(s["mean_dn"]) * to_nat, "o", ms=4, color=f"C{i}",
+                label=f"{lbl} measured" if s["fit"] else f"{lbl} measured (within ADC steps: not determined)")
+        if s["fit"]:
+            tt = np.linspace(0, t.max(), 20)
+            ax.plot(tt * 1e3, np.polyval(s["fit"], tt) * to_nat, "-", color=f"C{i}",
+                    label=f"{lbl} fit: {s['rate_e_per_s']:.3g} e-/s")
     ax.set_xlabel("exposure time [ms]")
     ax.set_ylabel(f"dark signal mu_y.dark [DN, {bits} bit]")
     ax.set_title("Dark signal vs exposure time")
@@ -107,7 +109,7 @@ def plots(result: dict[str, Any], out: Path, profile: CameraProfile | None) -> d
     files["dark_exposure"] = _save(f, out / "dark_vs_exposure.png")
     # dark current vs temperature
     temps = [(s["temperature_c"], s["rate_e_per_s"]) for s in pts["dark"] if s["temperature_c"] is not None
-             and s["rate_e_per_s"] > 0]
+             and (s["rate_e_per_s"] or 0.0) > 0]
     if temps:
         f, ax = plt.subplots(figsize=(6.4, 4.4))
         tt, rr = np.array(temps).T

@@ -217,6 +217,13 @@ def test_8_bit_camera_below_its_adc_step_is_quantization_limited(tmp_path, capsy
     assert res["figures"]["temporal_dark_noise_e"]["value"] is None
     assert any("quantization limit" in n for n in res["notes"])
     assert not (tmp_path / "o" / "profile.yaml").exists()  # no invented read noise
+    # nor dark figures the ADC's rounding made: its dark means move by less than two steps and its noise (0.16 DN)
+    # does not dither them (before, 2026-11-29: DSNU 0 +- 0, the dark currents off by up to -100 % and +32 % with
+    # standard errors of a few %)
+    fig = res["figures"]
+    assert fig["dsnu_e"]["value"] is None and fig["doubling_temperature_k"]["value"] is None
+    assert fig["dark_current_e_per_s"] == {}
+    assert any("dark current not determined at 30 degC, 40 degC, 50 degC, 60 degC" in n for n in res["notes"])
 
 
 def test_dark_sets_clipped_at_code_0_are_left_out_and_said(tmp_path):
