@@ -188,6 +188,23 @@ def _fit_line(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p, np.sqrt(np.diag(cov) * s2)
 
 
+def _doubling_fit(t: np.ndarray, log_rate: np.ndarray, rel_se: list[float | None]
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
+    """ln(dark current) vs temperature: line and covariance (None with two points). Weighted by the rates' own
+    errors when all are known, the covariance then widened by the scatter beyond them (Birge ratio: a law that is
+    not exactly exponential, errors from fits of few exposures); unweighted with the scatter's covariance else."""
+    if len(t) < 3:
+        return np.polyfit(t, log_rate, 1), None
+    if all(rel_se):
+        w = 1.0 / np.array(rel_se, dtype=float)
+        p, cov = np.polyfit(t, log_rate, 1, w=w, cov="unscaled")
+        chi2 = float(np.sum((w * (log_rate - np.polyval(p, t))) ** 2))
+        return p, cov * max(1.0, chi2 / (len(t) - 2))
+    p, cov = np.polyfit(t, log_rate, 1, cov="unscaled")
+    resid = log_rate - np.polyval(p, t)
+    return p, cov * float(resid @ resid) / (len(t) - 2)
+
+
 def _dithered(s: FrameSet, native2: float) -> bool:
     """Whether a set's temporal noise dithers the ADC's rounding (variance of at least ``QUANTIZATION_LIMIT_DN2``
     native DN^2, sigma ~ half a step): below it each pixel rounds alike from frame to frame, and the set's mean
@@ -282,8 +299,10 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     # saturation: variance maximum (needs a drop after it)
     i = int(np.argmax(y))
     sat_dn = None
+    sat_se_dn = 0.0
     if 0 < i < len(y) - 1:
         sat_dn = float(x[i])  # EMVA: the measured point of maximum variance (resolution: the level spacing)
+        sat_se_dn = float(x[i + 1] - x[i - 1]) / 2.0 / math.sqrt(12.0)  # the maximum anywhere between its neighbours
     else:
         notes.append("saturation not determined: the variance has no maximum inside the exposure series "
                      "(record flat fields beyond saturation)")
@@ -349,8 +368,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
     if len(temps) >= 2:
         tt = np.array([v[0] for v in temps])
         ly = np.log([v[1] for v in temps])
-        w = np.array([1.0 / (v[2] / v[1]) if v[2] else 1.0 for v in temps])
-        p, cov = np.polyfit(tt, ly, 1, w=w, cov="unscaled") if len(temps) > 2 else (np.polyfit(tt, ly, 1), None)
+        p, cov = _doubling_fit(tt, ly, [v[2] / v[1] if v[2] else None for v in temps])
         td = math.log(2.0) / p[0] if p[0] > 0 else None
         td_se = td * math.sqrt(cov[0, 0]) / p[0] if (td and cov is not None) else None
         doubling = _value(td, td_se, "K")
@@ -409,7 +427,7 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         "temporal_dark_noise_e": _value(sd, sd_se, "e-"),
         "read_noise_e": _value(read, read_se, "e-"),
         "saturation_capacity_e": _value(sat_dn / k8 if sat_dn else None,
-                                        sat_dn / k8 * rel_k if sat_dn else None, "e-"),
+                                        math.hypot(sat_dn * rel_k, sat_se_dn) / k8 if sat_dn else None, "e-"),
         "dark_current_e_per_s": currents,
         "doubling_temperature_k": doubling,
         "dsnu_e": _value(dsnu, dsnu_se, "e-"),
