@@ -61,6 +61,7 @@ class StampSynchronizer(Generic[T, M]):
         self.history = history
         self._stamps: list[int] = []  # sorted metadata stamps and their values
         self._values: list[M] = []
+        self._arrivals: deque[int] = deque()  # the stamps in the order they came: the first to come goes first
         self.pending: deque[tuple[int, T, int]] = deque()
         self.max_pending = max_pending
 
@@ -82,8 +83,10 @@ class StampSynchronizer(Generic[T, M]):
         i = bisect.bisect_right(self._stamps, stamp_ns)
         self._stamps.insert(i, stamp_ns)
         self._values.insert(i, metadata)
-        if len(self._stamps) > self.history:  # forget the oldest
-            del self._stamps[0], self._values[0]
+        self._arrivals.append(stamp_ns)
+        if len(self._stamps) > self.history:  # forget the one that came first (after stamps jumped back, not the
+            j = bisect.bisect_left(self._stamps, self._arrivals.popleft())  # lowest stamp: the newest message)
+            del self._stamps[j], self._values[j]
         out: list[Matched[T, M]] = []
         keep: deque[tuple[int, T, int]] = deque()
         for stamp, image, received in self.pending:
@@ -117,6 +120,7 @@ class StampSynchronizer(Generic[T, M]):
     def clear(self) -> None:
         self._stamps.clear()
         self._values.clear()
+        self._arrivals.clear()
         self.pending.clear()
 
 

@@ -75,3 +75,20 @@ def test_gap_counter_with_the_expected_rate_counts_regular_losses(rng):
     assert exact.observe(stamps[-1] + 10**9 * 5) == 0  # a paused stream is not a loss
     with pytest.raises(ValueError, match="expected_rate_hz"):
         GapCounter(expected_rate_hz=-1.0)
+
+
+def test_stamps_that_jump_back_keep_pairing():
+    """A bag played in a loop, a sim-time restart or a camera clock reset: the stamps jump back a day. The history
+    forgets the metadata that came first, not the lowest stamp: before (2026-11-29) each new metadata was the
+    lowest stamp and was dropped at once, so every later image read "metadata missing" (0 of 100 paired)."""
+    sync: StampSynchronizer[str, str] = StampSynchronizer(tolerance_s=0.01, wait_s=0.05, history=8)
+    day, period = 86_400 * 10**9, 33_333_333
+    for base in (2 * day, day):  # the second pass a day earlier
+        paired = 0
+        for k in range(100):
+            stamp = base + k * period
+            sync.add_metadata(stamp, f"m{stamp}")
+            out = sync.add_image(stamp, f"i{stamp}", now_ns=k)
+            paired += len(out) == 1 and out[0].metadata == f"m{stamp}"
+        assert paired == 100
+    assert len(sync._stamps) == 8 and day <= min(sync._stamps) <= max(sync._stamps) < 2 * day  # the newest pass
