@@ -145,9 +145,11 @@ class NoiseMonitorNode(Node):
         self._pubs = {t: self.create_publisher(DiagnosticArray if kind == DIAGNOSTICS_TYPE else Vector3Stamped, t, 10)
                       for t, kind in output_topics(ns).items()}
         self.namespace_out = ns
-        image_type = CompressedImage if p["image_transport"] == "compressed" else Image
-        self._image_sub = self.create_subscription(image_type, p["image_topic"], self._on_image,
-                                                   qos_profile_sensor_data)
+        compressed = p["image_transport"] == "compressed"  # the base name resolved (remapped) first, as image_transport
+        self._image_sub = self.create_subscription(
+            CompressedImage if compressed else Image,
+            transport_topic(self.resolve_topic_name(p["image_topic"])) if compressed else p["image_topic"],
+            self._on_image, qos_profile_sensor_data)
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
         src = self.metadata_source
         if src is not None:
@@ -425,6 +427,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="address to serve on (0.0.0.0 for other machines; default 127.0.0.1)")
     parser.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=[],
                         help="remaining arguments are passed to ROS (remappings, -p name:=value)")
+
+
+#: image_transport's sub-topics of a base image topic whose messages are sensor_msgs/CompressedImage
+COMPRESSED_SUFFIXES = ("/compressed", "/compressedDepth", "/zstd")
+
+
+def transport_topic(image_topic: str) -> str:
+    """The CompressedImage topic of a base image topic as image_transport names it (``image`` -> ``image/compressed``);
+    a topic already naming a transport (``image/zstd``) is kept."""
+    return image_topic if image_topic.endswith(COMPRESSED_SUFFIXES) else f"{image_topic.rstrip('/')}/compressed"
 
 
 def _node_name(ros_args: list[str]) -> str:

@@ -31,8 +31,10 @@ COLORS = ("luma", "green")
 RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS); relative names resolve in the node's "
                              "namespace and are remappable"),
-    "image_transport": ("raw", "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on image_topic: "
-                               "lossless PNG/TIFF/zstd decoded, lossy formats refused as skipped frames)"),
+    "image_transport": ("raw", "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on "
+                               "image_topic/compressed as image_transport names it, or on image_topic when it ends "
+                               "in /compressed, /compressedDepth or /zstd: lossless PNG/TIFF/zstd decoded, lossy "
+                               "formats refused as skipped frames)"),
     "metadata_topic": ("metadata", "per-frame metadata (type per metadata_source); '' = none"),
     "metadata_source": ("diagnostics", "diagnostics (DiagnosticArray with CameraMetadata key names), keymap "
                                        "(DiagnosticArray through metadata_keymap), flir, basler, realsense (the driver's "

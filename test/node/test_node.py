@@ -31,7 +31,7 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
 
 from noise_monitor.estimator import load  # noqa: E402
-from noise_monitor.node import node_class, parameter_table  # noqa: E402
+from noise_monitor.node import node_class, parameter_table, transport_topic  # noqa: E402
 
 SIZE = 256
 MODEL = NoiseModel()
@@ -70,8 +70,9 @@ class Rig:
         self.cam = rclpy.create_node(f"{topic}_camera", context=self.context)
         from sensor_msgs.msg import CompressedImage
 
-        image_type = CompressedImage if base.get("image_transport") == "compressed" else Image
-        self.pub_img = self.cam.create_publisher(image_type, base["image_topic"], qos_profile_sensor_data)
+        compressed = base.get("image_transport") == "compressed"
+        self.pub_img = self.cam.create_publisher(CompressedImage if compressed else Image, transport_topic(
+            base["image_topic"]) if compressed else base["image_topic"], qos_profile_sensor_data)
         meta_topic = base["metadata_topic"] or f"/{topic}/unused_metadata"
         self.pub_meta = self.cam.create_publisher(DiagnosticArray, meta_topic, 10)
         self.diagnostics: list[tuple[int, StatusReport]] = []  # /diagnostics: the period summaries
@@ -423,12 +424,16 @@ def test_temperature_topic_completes_the_metadata(rig_factory):
     assert report.level == OK, report.message
 
 
-def test_compressed_transport_decodes_png_and_skips_jpeg(rig_factory):
-    """image_transport: compressed - a lossless PNG frame is evaluated, a JPEG one skipped with the reason."""
+@pytest.mark.parametrize("image_topic", ["/pngcam/image_raw", "/pngcam/image_raw/compressed"])
+def test_compressed_transport_decodes_png_and_skips_jpeg(rig_factory, image_topic):
+    """image_transport: compressed - the node reads <image_topic>/compressed as image_transport names it (or the
+    topic given when it names a transport); a lossless PNG frame is evaluated, a JPEG one skipped with the reason.
+    (Until 2026-11-29 it subscribed CompressedImage on image_topic itself, the raw Image's topic: nothing came.)"""
     import cv2
     from sensor_msgs.msg import CompressedImage
 
-    rig = rig_factory("pngcam", image_transport="compressed", image_topic="/pngcam/image_raw/compressed")
+    rig = rig_factory("pngcam", image_transport="compressed", image_topic=image_topic)
+    assert rig.node._image_sub.topic_name == "/pngcam/image_raw/compressed"
     img = np.clip(np.rint(MODEL.simulate(rig.clean, PROFILE.metadata(**DYNAMIC), rig.rng)[0]), 0, 255).astype(np.uint8)
     for i, (ext, fmt) in enumerate(((".png", "mono8; png compressed "), (".jpg", "mono8; jpeg compressed mono8"))):
         stamp = Time(sec=10 + i, nanosec=0)
@@ -445,6 +450,23 @@ def test_compressed_transport_decodes_png_and_skips_jpeg(rig_factory):
         else:
             assert report.level == WARN and "lossy (jpeg)" in report.message
             assert report.values["frames_skipped"] == "1"
+
+
+def test_the_compressed_topic_follows_the_remapped_base_topic():
+    """As image_transport does: ``-r image:=image_raw`` in /cam makes the compressed input /cam/image_raw/compressed."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = node_class()(node_name="remap_monitor", context=ctx, estimator=load("full_meta", device="cpu"),
+                            cli_args=["--ros-args", "-r", "__ns:=/cam", "-r", "image:=image_raw"],
+                            parameter_overrides=[Parameter("image_transport", value="compressed"),
+                                                 Parameter("profile", value="icx285")])
+        try:
+            assert node._image_sub.topic_name == "/cam/image_raw/compressed"
+        finally:
+            node.destroy_node()
+    finally:
+        ctx.try_shutdown()
 
 
 def test_keymap_metadata_source_reads_a_drivers_own_keys(rig_factory, tmp_path):
