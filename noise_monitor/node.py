@@ -13,8 +13,10 @@ the replay and the lab run the same code.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -28,6 +30,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, Temperature
 
@@ -149,7 +152,9 @@ class NoiseMonitorNode(Node):
         self._image_sub = self.create_subscription(
             CompressedImage if compressed else Image,
             transport_topic(self.resolve_topic_name(p["image_topic"])) if compressed else p["image_topic"],
-            self._on_image, qos_profile_sensor_data)
+            # a copy: rclpy writes the qos_overrides.<topic>.subscription.* parameters into the profile it is given
+            self._on_image, copy.copy(qos_profile_sensor_data),
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
         relaxed = QoSProfile(depth=20, reliability=ReliabilityPolicy.BEST_EFFORT)
         src = self.metadata_source
         if src is not None:
@@ -439,10 +444,11 @@ def transport_topic(image_topic: str) -> str:
     return image_topic if image_topic.endswith(COMPRESSED_SUFFIXES) else f"{image_topic.rstrip('/')}/compressed"
 
 
-def _node_name(ros_args: list[str]) -> str:
-    """The node's name after a ``-r __node:=NAME`` remapping among the ROS arguments (else the default)."""
-    names = [a.split(":=", 1)[1] for a in ros_args if a.startswith("__node:=") or a.startswith("__name:=")]
-    return names[-1] if names else NODE_NAME
+def _remapped(ros_args: list[str], what: str, default: str) -> str:
+    """The node's name (``__node``) or namespace (``__ns``) after ``-r what:=VALUE`` among the ROS arguments."""
+    values = [a.split(":=", 1)[1] for a in ros_args if a.startswith(f"{what}:=")
+              or (what == "__node" and a.startswith("__name:="))]
+    return values[-1] if values else default
 
 
 def run(args: argparse.Namespace) -> int:
@@ -451,7 +457,13 @@ def run(args: argparse.Namespace) -> int:
     params_file = Path(args.params_file) if args.params_file else default_params_path()
     if not params_file.is_file():
         raise FileNotFoundError(f"params file {params_file} not found")
-    unknown = sorted(set(read_ros_params(params_file, _node_name(args.ros_args))) - set(parameter_table()))
+    name, namespace = _remapped(args.ros_args, "__node", NODE_NAME), _remapped(args.ros_args, "__ns", "/")
+    others: list[str] = []
+    unknown = sorted(set(read_ros_params(params_file, name, namespace, parameter_table(), others))
+                     - set(parameter_table()))
+    if others:  # rcl gives every node these; the monitor declares none of them
+        print(f"note: {params_file}: parameter(s) {', '.join(sorted(set(others)))} of every node's section are not "
+              "the monitor's (other nodes'; a typo?)", file=sys.stderr)
     if unknown:
         raise ValueError(f"{params_file}: unknown parameter(s) {', '.join(unknown)}")
     overrides = {k: getattr(args, k) for k in _CLI_OVERRIDES if getattr(args, k) is not None}
@@ -465,8 +477,6 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Console script ``noise_monitor_node`` (ROS style: configure with --ros-args)."""
-    import sys
-
     from .cli import USER_ERRORS, error_line
 
     try:

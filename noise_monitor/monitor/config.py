@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+import re
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ from ..text import clip
 #: the node's default name (``ros2 run``, ``noise-monitor node``; ``-r __node:=...`` renames it)
 NODE_NAME = "noise_monitor"
 #: parameters every rclpy node declares itself: a params file may set them for the monitor's node (rclpy's to read)
-ROS_OWN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"})
+ROS_OWN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service", "qos_overrides"})
 
 XI_SOURCES = ("auto", "estimator", "model")
 MODEL_MODES = MODES
@@ -149,11 +150,15 @@ def default_params_path() -> Path:
     return share_dir() / "config" / "node.yaml"
 
 
-def read_ros_params(path: str | Path | None = None, node_name: str = NODE_NAME) -> dict[str, Any]:
-    """The ``ros__parameters`` a node named ``node_name`` takes from a ROS 2 params YAML file: those of every section
-    whose key names it (``/**``, ``noise_monitor``, ``/ns/noise_monitor``, ``/**/noise_monitor``, in any
-    namespace), later sections winning as in rcl; the parameters rclpy declares itself (``use_sim_time``) left out.
-    A file with no section for the node is an error naming its sections."""
+def read_ros_params(path: str | Path | None = None, node_name: str = NODE_NAME, namespace: str | None = None,
+                    known: Collection[str] | None = None, ignored: list[str] | None = None) -> dict[str, Any]:
+    """The ``ros__parameters`` a node named ``node_name`` takes from a ROS 2 params YAML file, later sections winning
+    as in rcl: every section whose key names it (``noise_monitor``, ``/ns/noise_monitor``, ``/**/noise_monitor``) or
+    every node (``/**``, ``/*``). A section's namespace must be ``namespace`` when one is given (the node's); without
+    one, sections for the node in different namespaces are an error naming them. Keys of the every-node sections that
+    are not ``known`` are other nodes' (left out, appended to ``ignored``: a typo there is the caller's to name);
+    rclpy's own (``use_sim_time``, ``qos_overrides``) are rclpy's. A file with no section for the node is an error
+    naming its sections."""
     p = Path(path) if path else default_params_path()
     if not p.exists():
         raise FileNotFoundError(f"parameter file {p} not found")
@@ -162,22 +167,50 @@ def read_ros_params(path: str | Path | None = None, node_name: str = NODE_NAME) 
     if not isinstance(doc, dict) or not doc:
         raise ValueError(usage)
     out: dict[str, Any] = {}
+    spaces: set[str] = set()
     matched = False
     for key, node in doc.items():
-        if not _names_node(str(key), node_name):
+        names = _section(str(key), node_name, namespace)
+        if names is None:
             continue
         if not isinstance(node, dict) or not isinstance(node.get("ros__parameters"), dict):
             raise ValueError(usage)
         matched = True
-        out.update(node["ros__parameters"])
+        values = dict(node["ros__parameters"])
+        if names == "every" and known is not None:
+            others = [k for k in values if k not in known and k not in ROS_OWN_PARAMETERS]
+            if ignored is not None:
+                ignored.extend(others)
+            values = {k: v for k, v in values.items() if k not in others}
+        else:
+            spaces.add(names)
+        out.update(values)
     if not matched:
         raise ValueError(f"{p}: no section for the node {node_name!r} (sections: "
                          f"{clip(', '.join(map(str, doc)), 200)}; e.g. '/**' or '{node_name}')")
+    if namespace is None and len(spaces - {"*"}) > 1:
+        raise ValueError(f"{p}: sections for the node {node_name!r} in several namespaces "
+                         f"({', '.join(sorted(spaces - {'*'}))}): give the namespace")
     return {k: v for k, v in out.items() if k not in ROS_OWN_PARAMETERS}
 
 
-def _names_node(key: str, node_name: str) -> bool:
-    """Whether a params file's section key can apply to the node ``node_name``: its last name is the node's, ``*`` or
-    ``**`` (rcl's wildcards); the namespace is the launch's, so the names before it are not checked."""
+def _section(key: str, node_name: str, namespace: str | None) -> str | None:
+    """What a params file's section key names of the node ``node_name``: ``"every"`` (``/**``, ``/*``), its namespace
+    (``/ns``; ``*`` for a wildcard one, ``/`` for none), or None when it names another node or namespace (rcl's
+    wildcards: ``*`` one name, ``**`` any)."""
     parts = [t for t in key.strip().strip("/").split("/") if t]
-    return bool(parts) and parts[-1] in (node_name, "*", "**")
+    if not parts or parts[-1] not in (node_name, "*", "**"):
+        return None
+    if parts[-1] != node_name:
+        return "every" if len(parts) == 1 or namespace is None or _space_matches(parts[:-1], namespace) else None
+    space = parts[:-1]
+    if any(t in ("*", "**") for t in space):
+        return "*" if namespace is None or _space_matches(space, namespace) else None
+    name = "/" + "/".join(space)
+    return name if namespace is None or name == "/" + namespace.strip("/") else None
+
+
+def _space_matches(tokens: list[str], namespace: str) -> bool:
+    """Whether namespace tokens with rcl's wildcards match a namespace."""
+    pattern = "/".join("[^/]+" if t == "*" else ".*" if t == "**" else re.escape(t) for t in tokens)
+    return re.fullmatch(pattern, namespace.strip("/")) is not None

@@ -219,7 +219,7 @@ class MonitorRuntime:
                          **kwargs: Any) -> MonitorRuntime:
         """The runtime of a ROS params file (default: the package's config/node.yaml) with ``overrides``
         (e.g. command-line options; None values are ignored)."""
-        params = read_ros_params(path)
+        params = read_ros_params(path, known=parameter_table())
         params.update({k: v for k, v in (overrides or {}).items() if v is not None})
         return cls(params, **kwargs)
 

@@ -367,7 +367,7 @@ def test_cli_rejects_bad_parameters_with_exit_code_2(tmp_path, capsys):
     from noise_monitor.node import main as node_main
 
     bad = tmp_path / "node.yaml"
-    bad.write_text("/**:\n  ros__parameters:\n    patches_per_frmae: 4\n")
+    bad.write_text("noise_monitor:\n  ros__parameters:\n    patches_per_frmae: 4\n")
     assert cli_main(["node", "--params-file", str(bad), "--duration", "1"]) == 2
     assert "unknown parameter(s) patches_per_frmae" in capsys.readouterr().err
     assert node_main(["--ros-args", "-p", "xi_threshold_dn:=-1.0"]) == 2
@@ -375,20 +375,27 @@ def test_cli_rejects_bad_parameters_with_exit_code_2(tmp_path, capsys):
 
 
 def test_a_robots_params_file_with_sections_for_other_nodes_and_use_sim_time(tmp_path, capfd):
-    """A launch's one params file: a camera driver's section first, every node's (``/**``) with rclpy's own
-    use_sim_time, and a later section for the monitor's name winning. The node takes its sections only (until
-    2026-11-29 the first section was read: the driver's keys, and use_sim_time, were 'unknown parameter(s)')."""
+    """A launch's one params file: a camera driver's section first, every node's (``/**``: rclpy's use_sim_time, a
+    key of other nodes, and monitor settings), QoS overrides of the image input, and the monitor's own sections per
+    namespace. The node takes what names it in its namespace (until 2026-11-29 the first section was read: the
+    driver's keys, use_sim_time or another node's key were 'unknown parameter(s)'); a typo in its own section is still
+    refused; replay without a namespace refuses a file with sections for several."""
     from noise_monitor.cli import main as cli_main
     from noise_monitor.monitor.config import read_ros_params
+    from noise_monitor.node import parameter_table
 
+    known = parameter_table()
     robot = tmp_path / "robot.yaml"
     robot.write_text("camera_driver:\n  ros__parameters:\n    exposure_auto: 1\n"
-                     "/**:\n  ros__parameters:\n    use_sim_time: true\n    xi_threshold_dn: 2.0\n"
-                     "    patches_per_frame: 4\n"
+                     "/**:\n  ros__parameters:\n    use_sim_time: true\n    frame_prefix: robot1/\n"
+                     "    xi_threshold_dn: 2.0\n    patches_per_frame: 4\n"
+                     "    qos_overrides:\n      /robot/image:\n        subscription:\n          reliability: reliable\n"
                      "/robot/noise_monitor:\n  ros__parameters:\n    xi_threshold_dn: 1.5\n"
-                     "/robot/other_monitor:\n  ros__parameters:\n    xi_threshold_dn: 9.0\n")
-    assert read_ros_params(robot) == {"xi_threshold_dn": 1.5, "patches_per_frame": 4}
-    assert read_ros_params(robot, "other_monitor") == {"xi_threshold_dn": 9.0, "patches_per_frame": 4}
+                     "/other/noise_monitor:\n  ros__parameters:\n    xi_threshold_dn: 9.0\n")
+    assert read_ros_params(robot, namespace="/robot", known=known) == {"xi_threshold_dn": 1.5, "patches_per_frame": 4}
+    assert read_ros_params(robot, namespace="/other", known=known) == {"xi_threshold_dn": 9.0, "patches_per_frame": 4}
+    with pytest.raises(ValueError, match="in several namespaces \\(/other, /robot\\): give the namespace"):
+        read_ros_params(robot, known=known)
     driver_only = tmp_path / "driver.yaml"
     driver_only.write_text("camera_driver:\n  ros__parameters:\n    exposure_auto: 1\n")
     with pytest.raises(ValueError, match="no section for the node 'noise_monitor'.*camera_driver"):
@@ -398,6 +405,35 @@ def test_a_robots_params_file_with_sections_for_other_nodes_and_use_sim_time(tmp
                      "--ros-args", "-r", "__ns:=/robot"]) == 0, capfd.readouterr().err
     assert json.loads(out.read_text())["frames_received"] == 0
     assert "monitoring /robot/image with full_meta (patch 64, K=4," in capfd.readouterr().err  # rcl read the file
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("/**:\n  ros__parameters:\n    frame_prefix: robot1/\n"
+                    "noise_monitor:\n  ros__parameters:\n    xi_treshold_dn: 2.0\n")
+    assert cli_main(["node", "--params-file", str(typo), "--duration", "1"]) == 2
+    err = capfd.readouterr().err
+    assert "unknown parameter(s) xi_treshold_dn" in err and "frame_prefix of every node's section" in err
+
+
+def test_qos_overrides_of_the_image_input(tmp_path):
+    """``qos_overrides./<image topic>.subscription.reliability: reliable`` (ROS's QoS overriding) sets the image
+    subscription's QoS; the default stays sensor-data best effort."""
+    from rclpy.qos import ReliabilityPolicy
+
+    params = tmp_path / "qos.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    qos_overrides:\n      /qcam/image:\n        subscription:\n"
+                      "          reliability: reliable\n")
+    for args, want in (([], ReliabilityPolicy.BEST_EFFORT), (["--params-file", str(params)], ReliabilityPolicy.RELIABLE)):
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx)
+        try:
+            node = node_class()(node_name="qos_monitor", context=ctx, estimator=load("full_meta", device="cpu"),
+                                cli_args=["--ros-args", "-r", "__ns:=/qcam", *args],
+                                parameter_overrides=[Parameter("profile", value="icx285")])
+            try:
+                assert node._image_sub.qos_profile.reliability == want
+            finally:
+                node.destroy_node()
+        finally:
+            ctx.try_shutdown()
 
 
 def test_unusable_image_is_a_warning_with_the_reason(rig_factory):
