@@ -27,6 +27,8 @@ from typing import Any, Generic, TypeVar
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -49,6 +51,9 @@ from noise_monitor.monitor.config import NODE_NAME
 from noise_monitor.monitor.period import PeriodSummary
 from noise_monitor.monitor.runtime import MonitorRuntime, check_parameters, coerce, parameter_table
 
+#: A jump of the node's clock by more than this (s, either way; sim time: /clock starting or looping) restarts the
+#: diagnostics period and the image age.
+CLOCK_JUMP_S = 5.0
 #: How often images waiting for their metadata are checked (the synchroniser's wait, seconds).
 SYNC_POLL_S = 0.05
 J = TypeVar("J")
@@ -170,6 +175,10 @@ class NoiseMonitorNode(Node):
         self.live: Any = None
         self._last_debug_ns = -(1 << 62)
         self.period = PeriodSummary(self._now())
+        # sim time (use_sim_time): /clock starts, loops or restarts; the period and the image age restart with it
+        self._jump = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=Duration(seconds=CLOCK_JUMP_S), min_backward=Duration(seconds=-CLOCK_JUMP_S)),
+            post_callback=self._on_clock_jump)
         self.create_timer(self.runtime.diagnostics_period_ns / 1e9, self._on_diagnostics_timer)
         self.create_timer(SYNC_POLL_S, self._on_sync_timer)
         self._worker: LatestJobWorker[_Job] = LatestJobWorker(self._work, "noise_monitor_worker")
@@ -271,6 +280,16 @@ class NoiseMonitorNode(Node):
     def _on_sync_timer(self) -> None:
         for matched in self.sync.poll(self._now()):
             self._enqueue(matched)
+
+    def _on_clock_jump(self, jump: Any) -> None:
+        """The node's clock jumped (sim time started, a bag looped): what was timed on the old clock restarts."""
+        now = self._now()
+        self.period.restart(now)
+        self.monitor.clock_jumped(now)
+        for matched in self.sync.poll(now + (1 << 62)):  # images waiting on the old clock: released now
+            self._enqueue(matched)
+        self.get_logger().info(f"clock jumped by {jump.delta.nanoseconds / 1e9:+.3f} s: the period and the image age "
+                               "restart")
 
     def _on_diagnostics_timer(self) -> None:
         """``/diagnostics`` at diagnostics_rate_hz: the summary of the period since the previous one."""

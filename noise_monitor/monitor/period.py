@@ -47,6 +47,11 @@ class PeriodSummary:
         self._frame_counters = dict.fromkeys(FRAME_COUNTERS, 0)  # the latest added result's counters
         self._start(start_ns)
 
+    def restart(self, start_ns: int) -> None:
+        """Begin the period again at ``start_ns`` (the clock jumped), keeping its frames."""
+        with self._lock:
+            self.start_ns = start_ns
+
     def _start(self, start_ns: int) -> None:
         self.start_ns = start_ns
         self._results: list[FrameResult] = []

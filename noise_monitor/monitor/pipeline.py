@@ -455,6 +455,11 @@ class Monitor:
                         f"{state.evidence:.1f} of {cfg.alarm_evidence:g} ({detail})")
         return OK, f"noise matches the model ({detail})"
 
+    def clock_jumped(self, now_ns: int) -> None:
+        """The caller's clock jumped (sim time started or looped): the last image counts as received now."""
+        if self.last_received_ns is not None:
+            self.last_received_ns = now_ns
+
     def idle_report(self, now_ns: int) -> StatusReport:
         """Status when no new frame was processed: STALE after ``image_timeout_s`` without images,
         otherwise the last frame's status."""

@@ -74,6 +74,30 @@ def test_play_publishes_the_bag_bit_exact_with_its_stamps(tmp_path, ros):
         assert metadata_from_diagnostics(meta)["gain_db"] == pytest.approx(f.metadata.gain_db)
 
 
+def test_play_publishes_the_bags_clock(tmp_path, ros):
+    """``--clock``: the bag's time on /clock, at the clock rate while waiting and before every message (a node with
+    use_sim_time sees each message at its own log time); never backwards; rates outside [0, 1000] Hz refused."""
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Image
+
+    bag = simulate_bag(tmp_path / "c.mcap", "icx285", "gain_sweep", frames=5, width=32, height=24, hold_s=0, fps=5.0)
+    listener = ros(rclpy.create_node("clock_listener"))
+    clocks, images = [], []
+    listener.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec), 100)
+    listener.create_subscription(Image, "/camera/image_raw", images.append, 10)
+    play(bag, rate=2.0, wait_subscribers_s=20.0, wait_topics=["/camera/image_raw", "/clock"], progress=False,
+         clock_hz=50.0)
+    assert _wait(lambda: len(images) == 5)
+    with open_bag(bag) as reader:
+        stamps = [f.log_time_ns for f in reader.frames()]
+    assert clocks == sorted(clocks) and set(stamps) <= set(clocks)
+    assert clocks[0] >= stamps[0] - 1 and clocks[-1] == stamps[-1]
+    between = [c for c in clocks if stamps[0] < c < stamps[1]]  # 0.2 s of bag at rate 2 and 50 Hz: ~4 ticks
+    assert 2 <= len(between) <= 8
+    with pytest.raises(ValueError, match="clock_hz must be in"):
+        play(bag, clock_hz=-1.0)
+
+
 def test_play_loops_until_stopped_and_rejects_bad_input(tmp_path, ros):
     from sensor_msgs.msg import Image
 

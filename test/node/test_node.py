@@ -436,6 +436,31 @@ def test_qos_overrides_of_the_image_input(tmp_path):
             ctx.try_shutdown()
 
 
+def test_sim_time_from_clock(rig_factory):
+    """``use_sim_time`` with a bag's /clock (``noise-monitor play --clock``): /diagnostics follows /clock, and its
+    first period starts where /clock did (until 2026-11-29 it started at sim time 0: period_s 1000 s here, and
+    STALE "no image for 1.7e9 s" with a real bag's clock)."""
+    from rosgraph_msgs.msg import Clock
+
+    rig = rig_factory("simtime", use_sim_time=True)
+    clock = rig.cam.create_publisher(Clock, "/clock", 10)
+
+    def tick(stamp_ns: int) -> None:
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(stamp_ns, 10**9)
+        clock.publish(msg)
+        rig.spin_until(lambda: rig.node.get_clock().now().nanoseconds >= stamp_ns, TIMEOUT_S)
+
+    for i in range(12):
+        stamp = 1_000 * 10**9 + i * 33_333_333
+        tick(stamp)
+        report, _ = rig.step(i)
+        assert report.level == OK, report.message
+    tick(1_000 * 10**9 + 12 * 33_333_333)
+    assert rig.spin_until(lambda: any(r.level == OK for _, r in rig.diagnostics), TIMEOUT_S)
+    assert all(float(r.values["period_s"]) < 1.0 for _, r in rig.diagnostics), rig.diagnostics
+
+
 def test_unusable_image_is_a_warning_with_the_reason(rig_factory):
     rig = rig_factory("yuv")
     image = Image(height=4, width=4, encoding="yuv422", step=8, data=bytes(32))
