@@ -41,6 +41,17 @@ def parameter_values(event: Any, node_name: str) -> dict[str, Any] | None:
     return out
 
 
+def read_values(names: Sequence[str], values: Sequence[Any]) -> dict[str, Any]:
+    """{name: value} of a GetParameters response's ``values`` (rcl_interfaces/ParameterValue, in the order of the
+    names asked for); parameters the driver does not have (type NOT_SET) or of other types are absent."""
+    out: dict[str, Any] = {}
+    for name, value in zip(names, values):
+        field = _VALUE_FIELDS.get(int(value.type))
+        if field is not None:
+            out[str(name)] = getattr(value, field)
+    return out
+
+
 def metadata_from_parameters(values: dict[str, Any], keymap: Sequence[KeyMapEntry], profile: Any = None) -> dict[str, float]:
     """Fields from a driver's parameter values through the key map (parameters it lacks are absent)."""
     return apply_keymap({("*", k): v for k, v in values.items()}, keymap, profile)

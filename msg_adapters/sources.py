@@ -38,6 +38,12 @@ class MetadataSource:
     topic: str
     convert: Callable[[Any], dict[str, Any] | None]
     held: bool = False
+    #: a driver whose values are its ROS parameters (``parameters``): its node, the parameters to read at start
+    #: (events only tell changes) and ``from_values`` for what that read returns ({name: value}: fills what no
+    #: event has told yet)
+    driver_node: str = ""
+    parameter_names: tuple[str, ...] = ()
+    from_values: Callable[[dict[str, Any]], dict[str, Any]] | None = None
 
     def hardware_id(self, msg: Any) -> str | None:
         """The driver's device id (its serial) when the message carries one: a DiagnosticArray status's
@@ -72,7 +78,14 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
             state.update(values)
             return metadata_from_parameters(state, km, profile)
 
-        return MetadataSource(source, ParameterEvent, PARAMETER_EVENTS_TOPIC, from_event, held=True)
+        def from_values(values: dict[str, Any]) -> dict[str, Any]:
+            for name, value in values.items():
+                state.setdefault(name, value)
+            return metadata_from_parameters(state, km, profile)
+
+        return MetadataSource(source, ParameterEvent, PARAMETER_EVENTS_TOPIC, from_event, held=True,
+                              driver_node=driver_node, parameter_names=tuple(e.key for e in km),
+                              from_values=from_values)
     if not topic:
         return None
     if source in SOURCE_TYPES:

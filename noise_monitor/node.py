@@ -45,6 +45,7 @@ from msg_adapters import (
 )
 from msg_adapters.debug_image import debug_view
 from msg_adapters.outputs import DIAGNOSTICS_TYPE, output_topics, rclpy_messages
+from msg_adapters.parameter_events import read_values
 from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
 from noise_monitor.monitor.config import NODE_NAME
@@ -54,6 +55,8 @@ from noise_monitor.monitor.runtime import MonitorRuntime, check_parameters, coer
 #: A jump of the node's clock by more than this (s, either way; sim time: /clock starting or looping) restarts the
 #: diagnostics period and the image age.
 CLOCK_JUMP_S = 5.0
+#: How often the node looks for a parameter-driven camera driver to read its parameters from (s).
+DRIVER_POLL_S = 0.5
 #: How often images waiting for their metadata are checked (the synchroniser's wait, seconds).
 SYNC_POLL_S = 0.05
 J = TypeVar("J")
@@ -165,6 +168,13 @@ class NoiseMonitorNode(Node):
         if src is not None:
             qos = QoSProfile(depth=100) if src.held else relaxed  # parameter events are reliable
             self.create_subscription(src.msg_type, src.topic, self._on_metadata, qos)
+        self._driver: Any = None  # a driver whose values are its parameters: read once it is up (events tell changes)
+        if src is not None and src.driver_node:
+            from rclpy.parameter_client import AsyncParameterClient
+
+            self._driver = AsyncParameterClient(self, src.driver_node)
+            self._driver_read = False
+            self.create_timer(DRIVER_POLL_S, self._read_driver_parameters)
         if p["camera_info_topic"]:
             self.create_subscription(CameraInfo, p["camera_info_topic"], self._on_camera_info, relaxed)
         if p["temperature_topic"]:
@@ -253,6 +263,31 @@ class NoiseMonitorNode(Node):
         stamp = _stamp_ns(msg) if hasattr(msg, "header") else self._now()  # Basler: no header
         for matched in self.sync.add_metadata(stamp, values):
             self._enqueue(matched)
+
+    def _read_driver_parameters(self) -> None:
+        """Read the driver's parameters whenever it (re)appears: /parameter_events has no history, so a driver that
+        started first would tell its exposure and gain only when they change."""
+        ready = self._driver.services_are_ready()
+        if ready and not self._driver_read:
+            self._driver_read = True
+            assert self.metadata_source is not None
+            self._driver.get_parameters(list(self.metadata_source.parameter_names)).add_done_callback(
+                self._on_driver_parameters)
+        elif not ready:
+            self._driver_read = False
+
+    def _on_driver_parameters(self, future: Any) -> None:
+        src = self.metadata_source
+        assert src is not None and src.from_values is not None
+        try:
+            values: dict | str = src.from_values(read_values(src.parameter_names, future.result().values))
+        except AdapterError as exc:
+            values = str(exc)
+        except Exception as exc:  # the service call failed: try again when the driver is next up
+            self.get_logger().warning(f"reading the parameters of {src.driver_node} failed: {exc!r}")
+            self._driver_read = False
+            return
+        self._held = values
 
     def _on_camera_info(self, msg: Any) -> None:
         try:

@@ -577,6 +577,48 @@ def test_parameter_events_of_a_v4l2_driver_node_give_the_metadata(rig_factory, t
         assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
 
 
+def test_a_v4l2_driver_that_started_first_is_read_at_start(rig_factory, tmp_path):
+    """/parameter_events has no history: a driver node up before the monitor (the usual order) told its exposure and
+    gain only on a change, so until 2026-11-29 every frame read "metadata missing" until then. The monitor reads the
+    driver's parameters once it is up; a later change still comes by the events."""
+    import threading
+
+    from sensor_msgs.msg import Temperature
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    driver = rclpy.create_node("v4l2_camera", namespace="/early", context=ctx)
+    driver.declare_parameter("exposure_time_absolute", 100)  # 10 ms
+    driver.declare_parameter("gain", 180)  # of 240 -> 18 dB
+    spinner = SingleThreadedExecutor(context=ctx)
+    spinner.add_node(driver)
+    thread = threading.Thread(target=spinner.spin, daemon=True)
+    thread.start()
+    try:
+        ref, _ = rig_factory("eref").step(0)
+        prof = tmp_path / "icx285_v4l2.yaml"
+        prof.write_text(PROFILE.to_yaml() + "gain_range_db: [0.0, 24.0]\ndriver_gain_range: [0, 240]\n")
+        rig = rig_factory("early", metadata_source="parameters", metadata_topic="", profile=str(prof),
+                          metadata_driver_node="/early/v4l2_camera", temperature_topic="/early/temperature")
+        temp = rig.cam.create_publisher(Temperature, "/early/temperature", 10)
+        assert rig.spin_until(lambda: temp.get_subscription_count() > 0, TIMEOUT_S)
+        temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))
+        assert rig.spin_until(lambda: rig.node._held == {"exposure_time_s": pytest.approx(0.01),
+                                                          "gain_db": pytest.approx(18.0)}, TIMEOUT_S), rig.node._held
+        assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
+        report, _ = rig.step(0, metadata={})
+        assert report.level == OK, report.message
+        for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
+            assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+        driver.set_parameters([Parameter("gain", value=120)])  # a change: 12 dB by the event
+        assert rig.spin_until(lambda: rig.node._held.get("gain_db") == pytest.approx(12.0), TIMEOUT_S), rig.node._held
+    finally:
+        spinner.shutdown()
+        driver.destroy_node()
+        ctx.try_shutdown()
+        thread.join(timeout=5)
+
+
 def test_driver_metadata_source_without_its_package_names_it():
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
