@@ -658,7 +658,10 @@ def test_run_time_parameter_changes_are_validated(rig_factory):
     assert not bad.successful and "xi_hysteresis_dn must be in [0, xi_threshold_dn)" in bad.reason
     assert rig.node.monitor.config.xi_hysteresis_dn == 0.5
     ro = set_(patches_per_frame=2)[0]
-    assert not ro.successful and "patches_per_frame cannot change at run time" in ro.reason
+    assert not ro.successful and "read-only parameter: patches_per_frame" in ro.reason  # its descriptor says so
+    desc = {d.name: d for d in rig.node.describe_parameters(["patches_per_frame", "xi_threshold_dn", "black_level_dn"])}
+    assert desc["patches_per_frame"].read_only and not desc["xi_threshold_dn"].read_only
+    assert not desc["black_level_dn"].read_only
     typed = set_(alarm_min_frames="three")[0]
     assert not typed.successful and "alarm_min_frames must be of type int" in typed.reason
     # the new threshold acts: +N(0, 3 DN) image noise (|xi| ~ 1.5 DN) raises no alarm at 2.5 DN ...
