@@ -340,7 +340,17 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
     result = ProfileResult(profile, notes=notes, derived={
         "full_well_e": fw, "read_noise_e": math.sqrt(read_var), "dark_shot_noise_at_measurement_e": math.sqrt(mu_meas),
         "law_rate_per_k": rate, "law_scale": scale})
-    sat = predict_datasheet(profile, ds)["saturation_capacity_e"]
+    predicted = predict_datasheet(profile, ds)
+    for g_db, k_g in ds.gains:  # the model's K at G dB is K x 10^(G/20): a gain in true dB
+        if abs(k_g / (k * 10.0 ** (g_db / 20.0)) - 1.0) > TOLERANCE:
+            notes.append(f"K at {g_db:g} dB not reproduced: the figures give {k_g:g} DN/e-, K x 10^({g_db:g}/20) = "
+                         f"{k * 10.0 ** (g_db / 20.0):.4g}: that setting amplifies by {20.0 * math.log10(k_g / k):.2f} "
+                         f"dB, not {g_db:g}; the node needs the camera's true gain in dB (its metadata or a gain table)")
+    k0 = predicted["system_gain_dn_per_e"]
+    if abs(k0 / k - 1.0) > TOLERANCE and not offset:
+        notes.append(f"K not reproduced ({k0:.4g} for {k:g} DN/e-): without a dark offset the model's dark level is 0, "
+                     f"where it clips half of its dark noise ({ds.temporal_dark_noise_e:g} e-); give dark_offset_dn")
+    sat = predicted["saturation_capacity_e"]
     if abs(sat / ds.saturation_capacity_e - 1.0) > TOLERANCE:
         notes.append(f"saturation not reproduced: the model saturates at the ADC range ({sat:.0f} e- by the EMVA "
                      f"variance maximum), the figures give {ds.saturation_capacity_e:.0f} e- "

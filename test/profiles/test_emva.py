@@ -196,3 +196,12 @@ def test_a_black_level_above_a_third_of_the_range_keeps_k_right():
     for name in ("system_gain_dn_per_e", "system_gain_dn_per_e@6dB", "system_gain_dn_per_e@12dB"):
         assert abs(rows[name]["rel_error"]) < 1e-3, rows[name]
     assert rows["saturation_capacity_e"]["ok"]
+
+
+def test_a_gain_setting_that_is_not_its_db_is_named():
+    """K at '12 dB' of 1.0 DN/e- where K x 10^(12/20) = 1.441: the round trip fails there (+44 %), and a note says
+    that setting amplifies by 8.83 dB (before 2026-11-29: the failure alone, no cause)."""
+    ds = datasheet_from_mapping(_doc(gains=[{"gain_db": 12.0, "system_gain_dn_per_e": 1.0}]))
+    result = profile_from_datasheet(ds)
+    assert any("K at 12 dB not reproduced" in n and "amplifies by 8.83 dB, not 12" in n for n in result.notes)
+    assert not any("K at" in n for n in profile_from_datasheet(datasheet_from_mapping(_doc())).notes)
