@@ -87,7 +87,9 @@ def run(args: argparse.Namespace) -> int:
     for n in result["notes"]:
         print(f"  note: {n}")
     if rows:
-        print(f"profile {profile_file}; its model predicts the measured figures back:")
-        print_round_trip(rows, given="measured")
+        print(f"profile {profile_file}; its model predicts back the figures it was made from (the temporal dark "
+              "noise at the DSNU's exposure, the dark-current law fitted over the temperatures: not the lines above) "
+              "and the measured dark currents:")
+        print_round_trip(rows, given="made from")
     print(f"report {report}")
     return 0

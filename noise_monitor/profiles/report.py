@@ -187,8 +187,10 @@ def write_html(result: dict[str, Any], out: Path, files: dict[str, str], source:
                   "</ul>"]
     if round_trip:
         parts += ["<h2>Profile for the node</h2>",
-                  f"<p>{html.escape(profile_file or '')}: the figures predicted back from the profile's model.</p>",
-                  "<table><tr><th>figure</th><th>measured</th><th>profile's model</th><th>error</th></tr>"]
+                  f"<p>{html.escape(profile_file or '')}: the figures it was made from (the temporal dark noise at "
+                  "the DSNU's exposure, the dark-current law fitted over the temperatures) and the measured dark "
+                  "currents, predicted back from the profile's model.</p>",
+                  "<table><tr><th>figure</th><th>made from</th><th>profile's model</th><th>error</th></tr>"]
         for r in round_trip:
             err = "n/a" if r["rel_error"] is None else f"{100 * r['rel_error']:+.2f} %"
             parts.append(f"<tr><td>{html.escape(r['field'])}</td><td>{_fmt(r['datasheet'])}</td>"
