@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from noise_monitor.bag.reader import open_bag
+from noise_monitor.monitor.period import skip_category
 
 from .datasheet import Datasheet, datasheet_from_mapping
 from .emva import fit_dark_law
@@ -101,6 +102,7 @@ class Recording:
     frames: int
     skipped: dict[str, int]
     static: dict[str, Any]
+    unusable: str = ""  # the frames skipped as unusable, said (empty: none)
 
     @property
     def lsb(self) -> float:
@@ -130,15 +132,17 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
     depth = _bit_depth(path, bit_depth, topics)
     sets: list[FrameSet] = []
     skipped: dict[str, int] = {}
+    example: dict[str, str] = {}  # a full reason of each kind skipped
     shape = None
     static: dict[str, Any] = {}
     count = 0
     with open_bag(path, **topics) as reader:
         for frame in reader.frames(bit_depth=depth):
             count += 1
-            if frame.image_dn is None:
+            if frame.image_dn is None:  # counted by kind (a pixel value per frame would make a kind each)
                 reason = frame.skip_reason or "image unusable"
-                skipped[reason] = skipped.get(reason, 0) + 1
+                example.setdefault(skip_category(reason), reason)
+                skipped[skip_category(reason)] = skipped.get(skip_category(reason), 0) + 1
                 continue
             img = frame.image_dn
             if shape is None:
@@ -163,7 +167,7 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
                 sets.append(last)
             last.add(img)
     if shape is None:
-        raise CharacterizeError(f"{path}: no usable image")
+        raise CharacterizeError(f"{path}: no usable image ({_skips(skipped, example, count)})")
     singles = sum(1 for s in sets if s.size < 2)
     if singles:
         skipped["single frame of its conditions (no pair for the difference image)"] = singles
@@ -174,7 +178,15 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
                                 "(`simulate-bag --scenario ptc` shows one)")
     for s in sets:
         s.compute()
-    return Recording(sets, depth, shape, count, skipped, static)
+    return Recording(sets, depth, shape, count, skipped, static, _skips(skipped, example, count) if example else "")
+
+
+def _skips(skipped: dict[str, int], example: dict[str, str], count: int) -> str:
+    """The frames skipped as unusable: how many of all, and the commonest reason in full."""
+    if not example:
+        return "every frame unusable"
+    kind = max(example, key=lambda k: skipped[k])
+    return f"{sum(skipped[k] for k in example)} of {count} frames skipped, e.g. {example[kind]}"
 
 
 def _fit_line(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -249,7 +261,18 @@ def _classify(groups: dict[tuple[float, float | None], list[FrameSet]], toleranc
 
 
 def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict[str, Any]:
-    """The EMVA figures of a recording (each with its standard error) and the points behind the plots."""
+    """The EMVA figures of a recording (each with its standard error) and the points behind the plots; a recording
+    that cannot be characterized names the frames it skipped as unusable too (a wrong --bit-depth, say)."""
+    try:
+        result = _characterize(rec, dark_tolerance)
+    except CharacterizeError as exc:
+        raise CharacterizeError(f"{exc} ({rec.unusable})" if rec.unusable else str(exc)) from None
+    if rec.unusable:
+        result["notes"].insert(0, rec.unusable)
+    return result
+
+
+def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
     notes: list[str] = []
     groups: dict[tuple[float, float | None], list[FrameSet]] = {}
     for s in rec.sets:

@@ -150,6 +150,8 @@ def _flat(rng, level: float, shape=(48, 64)) -> np.ndarray:
     ("saturated", "without saturated pixels"),
     ("size", "must keep its image size"),
     ("no_pairs", "no two consecutive frames share"),  # before: 'max() arg is an empty sequence'
+    # a 12-bit recording read as 8 bit: the flats above 255 skipped, and said (before: 'no dark frames' alone)
+    ("bits", "frames skipped, e.g. image unusable: pixel value"),
 ])
 def test_unusable_recordings_exit_2_with_the_reason(tmp_path, capsys, case, message):
     rng = np.random.default_rng(0)
@@ -165,7 +167,8 @@ def test_unusable_recordings_exit_2_with_the_reason(tmp_path, capsys, case, mess
     if case == "no_pairs":  # new conditions every frame (a live driver's recording)
         frames = [(img, 0.01 + 0.001 * i) for i, (img, _) in enumerate(frames)]
     bag = _write(tmp_path / f"{case}.mcap", frames)
-    assert main(["characterize", str(bag), "--out", str(tmp_path / "o")]) == 2
+    bits = ["--bit-depth", "8"] if case == "bits" else []
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "o"), *bits]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
 
