@@ -182,7 +182,7 @@ def round_trip(ds: Datasheet, profile: CameraProfile) -> list[dict[str, Any]]:
         (f"dark_current_e_per_s@{ds.dark_current_temperature_c:g}C", ds.dark_current_e_per_s,
          pred["dark_current_e_per_s"]),
     ]
-    if ds.doubling_temperature_k is not None:
+    if ds.doubling_temperature_k is not None and ds.dark_current_e_per_s > 0:  # of no dark current: no doubling
         t2 = ds.dark_current_temperature_c + ds.doubling_temperature_k
         rows.append((f"dark_current_e_per_s@{t2:g}C", 2.0 * ds.dark_current_e_per_s,
                      pred["dark_current_e_per_s_at_t_plus_td"]))
@@ -319,8 +319,9 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
         effects["prnu"] = {"sigma_pct": ds.prnu_pct}
     if ds.dsnu_e is not None:
         if not t_meas:
-            notes.append("DSNU not represented: its exposure time (measurement.exposure_time_s) is not given, and the "
-                         "model's DSNU is a fraction of the dark signal")
+            notes.append("DSNU not represented: its exposure time (measurement.exposure_time_s) is "
+                         f"{'not given' if t_meas is None else '0 s: no dark signal'}, and the model's DSNU is a "
+                         "fraction of the dark signal")
         else:
             fraction = ds.dsnu_e / mu_meas if mu_meas > 0 else math.inf
             if fraction > _DSNU_MAX_FRACTION:
