@@ -343,6 +343,8 @@ def run_replay(
         "idle_gaps_capped": capped_gaps,
         "metadata_overrides": constants,
         "black_level_contradicted": _black_level_summary(black_bounds),
+        # keys of the params file's every-node sections that are not the monitor's (other nodes'; a typo?)
+        "params_ignored": rt.params_ignored,
     }
     if truth is not None:
         summary["truth_check"] = truth_check(episodes, truth)

@@ -61,6 +61,9 @@ def print_summary(s: dict[str, Any]) -> None:
     if s.get("metadata_overrides"):
         print("  note: the bag's metadata set camera constants, which win over the profile's: " + ", ".join(
             f"{k} {v['bag']} (profile {v['profile']})" for k, v in s["metadata_overrides"].items()))
+    if s.get("params_ignored"):
+        print(f"  note: parameter(s) {', '.join(s['params_ignored'])} of the params file's every-node section are not "
+              "the monitor's (other nodes'; a typo?)")
     black = s.get("black_level_contradicted")
     if black:
         by = {"metadata": "the camera's metadata", "parameter": "the black_level_dn parameter"}.get(

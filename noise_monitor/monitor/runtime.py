@@ -208,6 +208,9 @@ class MonitorRuntime:
         self.frame_options = FrameOptions(self.profile, depth, p["color"],
                                           None if p["black_level_dn"] == -1.0 else float(p["black_level_dn"]))
 
+    #: keys of a params file's every-node sections that are not the monitor's (:meth:`from_params_file`)
+    params_ignored: list[str] = []
+
     def set_black_level(self, black_level_dn: float) -> None:
         """The black level taken off every image from now on (-1: the frame's metadata's, else the profile's)."""
         self.frame_options = dataclasses.replace(self.frame_options,
@@ -218,10 +221,14 @@ class MonitorRuntime:
     def from_params_file(cls, path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
                          **kwargs: Any) -> MonitorRuntime:
         """The runtime of a ROS params file (default: the package's config/node.yaml) with ``overrides``
-        (e.g. command-line options; None values are ignored)."""
-        params = read_ros_params(path, known=parameter_table())
+        (e.g. command-line options; None values are ignored). Keys of the file's every-node sections that are not
+        the monitor's (other nodes'; a typo?) are in :attr:`params_ignored`."""
+        ignored: list[str] = []
+        params = read_ros_params(path, known=parameter_table(), ignored=ignored)
         params.update({k: v for k, v in (overrides or {}).items() if v is not None})
-        return cls(params, **kwargs)
+        runtime = cls(params, **kwargs)
+        runtime.params_ignored = sorted(set(ignored))
+        return runtime
 
     @property
     def diagnostics_period_ns(self) -> int:

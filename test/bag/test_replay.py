@@ -323,3 +323,18 @@ def test_camera_constants_of_the_bag_that_win_over_the_profile_are_named(tmp_pat
     assert other["metadata_overrides"]["sensor_type"]["bag"] == "ccd"
     same = replay(bag, "icx285", tmp_path / "o2", estimator=estimator, config=CONFIG, progress=False, plot=False)
     assert same["metadata_overrides"] == {}
+
+
+def test_replay_params_file_of_a_robot(tmp_path, estimator, capsys):
+    """``replay --params`` with a robot's params file: the monitor's settings taken from the sections that name it,
+    every-node keys of other nodes named on the console and in the summary (``params_ignored``), not refused."""
+    bag = simulate_bag(tmp_path / "r.mcap", "icx285", "gain_sweep", frames=4, width=96, height=64, hold_s=0)
+    params = tmp_path / "robot.yaml"
+    params.write_text("camera_driver:\n  ros__parameters:\n    exposure_auto: 1\n"
+                      "/**:\n  ros__parameters:\n    frame_prefix: robot1/\n    use_sim_time: true\n"
+                      "noise_monitor:\n  ros__parameters:\n    xi_threshold_dn: 2.5\n")
+    out = replay(bag, "icx285", None, config=params, estimator=estimator, progress=False, plot=False)
+    assert out["frames_processed"] == 4 and out["config"]["xi_threshold_dn"] == 2.5
+    assert out["params_ignored"] == ["frame_prefix"]
+    assert main(["replay", str(bag), "--profile", "icx285", "--params", str(params), "--no-plot"]) == 0
+    assert "note: parameter(s) frame_prefix of the params file's every-node section" in capsys.readouterr().out
