@@ -12,12 +12,15 @@ import json
 import resource
 import time
 from collections.abc import Iterable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from noise_monitor.estimator.inference import weights_path
+from noise_monitor.monitor.config import default_params_path, read_ros_params
+from noise_monitor.paths import camera_profile_path
 from noise_monitor.physics import load_profile
 
 from .bags import Problem, find_bags, fingerprint
@@ -39,13 +42,20 @@ def _file_digest(path: str | None) -> str | None:
 
 
 def settings_key(settings: CampaignSettings) -> str:
-    """What makes a bag's results: profiles (and their files' contents), estimator, weights, params, plug-ins."""
+    """What makes a bag's results: the contents of the profiles (bundled ones too), the params file (the default
+    config/node.yaml too), the estimator's weights (the bundled ones of the model in effect too) and plug-ins; the
+    device, threads and whether the per-bag outputs are written."""
     specs = [*settings.profiles.cameras.values(), settings.profiles.default]
+    params = settings.params or str(default_params_path())
+    values = read_ros_params(params)
+    model = settings.model or str(values.get("model") or "full_meta")
+    weights = settings.weights or str(values.get("weights") or "")
+    weight_files = [weights] if weights else [str(weights_path(model).with_suffix(s)) for s in (".pt", ".onnx")]
     doc = {"profiles": {"cameras": settings.profiles.cameras, "default": settings.profiles.default},
-           "profile_files": {s: _file_digest(s) for s in specs if s and s.endswith((".yaml", ".yml"))},
-           "model": settings.model, "weights": _file_digest(settings.weights), "device": settings.device,
-           "params": _file_digest(settings.params), "plugins": [_file_digest(p) for p in settings.plugins],
-           "threads": settings.threads}
+           "profile_files": {s: _file_digest(str(camera_profile_path(s))) for s in specs if s},
+           "model": model, "weights": [_file_digest(w) for w in weight_files], "device": settings.device,
+           "params": _file_digest(params), "plugins": [_file_digest(p) for p in settings.plugins],
+           "threads": settings.threads, "bag_outputs": settings.bag_outputs}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -121,7 +131,8 @@ def run_campaign(
     t0 = time.perf_counter()
     bags, problems = find_bags(inputs)
     paths = [str(b.resolve()) for b in bags]
-    manifest = Manifest(out, settings_key(settings))
+    settings = replace(settings, key=settings_key(settings))  # the bags' outputs of these settings: their own folder
+    manifest = Manifest(out, settings.key)
     todo = [p for p in paths if not manifest.finished(p, *fingerprint(Path(p)))]
     resumed = len(paths) - len(todo)
     executor = _executor(backend, ray_address, workers, timeout_s, problems) if todo else None
@@ -159,7 +170,7 @@ def run_campaign(
     campaign["interrupted"] = interrupted
     outputs = {"json": str(out / OUTPUTS["json"]), "manifest": str(manifest.path)}
     if not interrupted:
-        parts = [(bag_dir(out, b["sha256"]) / "frames.parquet", b["path"]) for b in campaign["bags"]]
+        parts = [(bag_dir(out, b["sha256"], settings.key) / "frames.parquet", b["path"]) for b in campaign["bags"]]
         if parts:
             campaign["frames_in_table"] = merge(parts, out / OUTPUTS["parquet"])
             outputs["parquet"] = str(out / OUTPUTS["parquet"])

@@ -6,7 +6,7 @@ import base64
 import html
 import io
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -76,8 +76,17 @@ def _bag_row(e: dict[str, Any]) -> dict[str, Any]:
     row.update(start_utc=utc(r["start_ns"]), end_utc=utc(r["end_ns"]), stats=r["stats"],
                alarms=[{**a, "start_utc": utc(a["start_ns"]), "end_utc": utc(a["end_ns"])} for a in r["alarms"]],
                wall_s=e.get("wall_s"), peak_rss_mb=e.get("peak_rss_mb"),
-               temporal_noise_changes=r.get("temporal_noise_changes", 0))  # absent from records of older versions
+               temporal_noise_changes=r.get("temporal_noise_changes", 0),  # absent from records of older versions
+               frames_lost=r.get("frames_lost", 0))
     return row
+
+
+def _reasons(rows: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """Skipped frames per reason over bags, commonest first."""
+    counts: Counter[str] = Counter()
+    for r in rows:
+        counts.update(r["skip_reasons"])
+    return dict(counts.most_common())
 
 
 def _scaled(xi_dn: float, threshold_dn: float) -> float:
@@ -143,6 +152,7 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "first_utc": utc(min((r["start_ns"] for r in rows if r["start_ns"] is not None), default=None)),
         "last_utc": utc(max((r["end_ns"] for r in rows if r["end_ns"] is not None), default=None)),
         "frames_total": total, "frames_processed": processed, "frames_skipped": total - processed,
+        "skip_reasons": _reasons(rows), "frames_lost": sum(r["frames_lost"] for r in rows),
         "frames_in_alarm": in_alarm, "alarm_episodes": len(episodes), "temporal_noise_changes": changes,
         "alarm_time_s": round(sum(a["duration_s"] for a in episodes), 3),
         "mean": means, "trends": trends, "xi_threshold_dn": thr,
@@ -184,6 +194,8 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
             "frames_total": sum(b["frames_total"] for b in bags),
             "frames_processed": sum(b["frames_processed"] for b in bags),
             "frames_skipped": sum(b["frames_skipped"] for b in bags),
+            "skip_reasons": _reasons(bags),
+            "frames_lost": sum(b["frames_lost"] for b in bags),
             "alarm_episodes": len(episodes),
             "temporal_noise_changes": sum(b["temporal_noise_changes"] for b in bags),
         },
@@ -320,7 +332,7 @@ def write_html(campaign: dict[str, Any], path: Path) -> None:
              c["mean"]["sigma_dcsn"], trend_cell(c["trends"]["xi"]), trend_cell(c["trends"]["sigma_dcsn"]),
              "; ".join(c["findings"])] for c in campaign["cameras"]]
     bags = [[b["hardware_id"], Path(b["path"]).name, b["start_utc"], b["frames_total"], b["frames_processed"],
-             b["frames_skipped"], b["alarm_episodes"], b["stats"]["xi"]["mean"], b["stats"]["sigma_pn"]["mean"],
+             b["frames_skipped"], b["frames_lost"], b["alarm_episodes"], b["stats"]["xi"]["mean"], b["stats"]["sigma_pn"]["mean"],
              b["stats"]["sigma_dcsn"]["mean"], b["stats"]["sigma_rn"]["mean"], b["conditions"]["sensor_temperature_c"],
              b["conditions"]["gain_db"]] for b in campaign["bags"]]
     eps = [[a["hardware_id"], Path(a["bag"]).name, a["start_utc"], a["end_utc"], a["duration_s"], a["frames"],
@@ -335,7 +347,8 @@ def write_html(campaign: dict[str, Any], path: Path) -> None:
         f"<p>{t['bags_found']} bags found: {t['bags_evaluated']} evaluated, {t['bags_failed']} failed, "
         f"{t['bags_duplicate']} duplicates, {t['bags_not_run']} not run; {t['inputs_rejected']} inputs rejected. "
         f"{t['cameras']} cameras, {t['frames_total']} frames ({t['frames_processed']} processed, "
-        f"{t['frames_skipped']} skipped), {t['alarm_episodes']} alarm episodes. Backend {html.escape(str(run['backend']))}, "
+        f"{t['frames_skipped']} skipped; {t['frames_lost']} missing from the recordings by their stamps), "
+        f"{t['alarm_episodes']} alarm episodes. Backend {html.escape(str(run['backend']))}, "
         f"{run['bags_run']} bags run in {run['wall_time_s']} s ({run['bags_resumed']} finished before).</p>",
         "<h2>Cameras ranked by health</h2><p>Health = 1 - the worst symptom: fraction of frames in alarm, "
         "fraction not evaluated, |mean xi| and a significant xi drift over the campaign (0 below a quarter of the "
@@ -348,8 +361,11 @@ def write_html(campaign: dict[str, Any], path: Path) -> None:
         "<h2>Alarm episodes (UTC)</h2>",
         _table(eps, ["camera", "bag", "start", "end", "duration [s]", "frames", "xi sign", "peak xi [DN]", "cause"]),
         "<h2>Not evaluated</h2>", _table(bad, ["input", "reason"]) if bad else "<p>none</p>",
+        "<h2>Frames skipped, by reason</h2>",
+        _table([[n, reason] for reason, n in t["skip_reasons"].items()], ["frames", "reason"]) if t["skip_reasons"]
+        else "<p>none</p>",
         "<h2>Bags</h2>",
-        _table(bags, ["camera", "bag", "start (UTC)", "frames", "processed", "skipped", "episodes", "xi [DN]",
+        _table(bags, ["camera", "bag", "start (UTC)", "frames", "processed", "skipped", "lost", "episodes", "xi [DN]",
                       "PN [DN]", "DCSN [DN]", "RN [DN]", "temperature [°C]", "gain [dB]"], limit=2000),
         "</body></html>",
     ]

@@ -50,10 +50,12 @@ class CampaignSettings:
     threads: int = 1
     memory_limit_mb: float = 0.0  # 0 = no limit
     bag_outputs: bool = False  # also replay's MCAP + CSV + PNG per bag
+    key: str = ""  # what makes the results (:func:`..campaign.settings_key`): the bags' outputs go under it
 
 
-def bag_dir(out_dir: str | Path, sha256: str) -> Path:
-    return Path(out_dir) / "bags" / sha256[:16]
+def bag_dir(out_dir: str | Path, sha256: str, key: str = "") -> Path:
+    """A bag's outputs under the settings that made them: a re-run with other settings never overwrites them."""
+    return Path(out_dir) / "bags" / (key[:16] or "default") / sha256[:16]
 
 
 def rss_mb() -> float:
@@ -158,6 +160,7 @@ def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
         "start_ns": int(stamps[0]) if len(stamps) else None, "end_ns": int(stamps[-1]) if len(stamps) else None,
         "frames_total": summary["frames_total"], "frames_processed": summary["frames_processed"],
         "frames_skipped": summary["frames_skipped"], "skip_reasons": summary["skip_reasons"],
+        "frames_lost": summary["frames_lost"],  # images missing from the recording (stamp gaps)
         "frames_in_alarm": int(table.column("alarm")[processed].sum()),
         "alarm_episodes": len(summary["alarms"]),
         "temporal_noise_changes": int(summary.get("temporal_noise_changes", 0)),
@@ -185,7 +188,7 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
             hw = camera_id(bag)
             spec = settings.profiles.resolve(hw)
             prof = load_profile(spec) if spec else None
-            out = bag_dir(settings.out_dir, sha)
+            out = bag_dir(settings.out_dir, sha, settings.key)
             out.mkdir(parents=True, exist_ok=True)
             table = FrameTable()
             summary = replay(bag, prof, out if settings.bag_outputs else None, estimator=_estimator(settings, prof),

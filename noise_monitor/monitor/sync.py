@@ -124,6 +124,8 @@ class StampSynchronizer(Generic[T, M]):
         self.pending.clear()
 
 
+#: Stamp intervals seen before the frame period is inferred (their gaps are counted once it is).
+WARMUP_INTERVALS = 8
 #: Shortest frame period believed from header stamps (10 kHz): closer stamps are a bogus clock, not losses.
 MIN_PERIOD_NS = 100_000
 
@@ -142,6 +144,7 @@ class GapCounter:
             raise ValueError(f"expected_rate_hz must be in [0, {1e9 / MIN_PERIOD_NS:g}] Hz, got {expected_rate_hz}")
         self.implausible = 0
         self.intervals: deque[int] = deque(maxlen=window)
+        self._warm = False  # the period has been inferred once (the warm-up gaps counted)
         self.last_ns: int | None = None
         self.pause_ns = int(pause_s * 1e9)
         self.period_ns = 1e9 / expected_rate_hz if expected_rate_hz > 0 else None
@@ -157,10 +160,13 @@ class GapCounter:
         if self.period_ns is not None:
             return max(int(round(dt / self.period_ns)) - 1, 0)
         self.intervals.append(dt)
-        if len(self.intervals) < 8:
+        if len(self.intervals) < WARMUP_INTERVALS:
             return 0
         period = float(np.percentile(self.intervals, 25))
         if period < MIN_PERIOD_NS:
             self.implausible += 1
             return 0
-        return max(int(round(dt / period)) - 1, 0)
+        # the first time the period is known, the gaps seen while learning it count too
+        gaps = self.intervals if len(self.intervals) == WARMUP_INTERVALS and not self._warm else (dt,)
+        self._warm = True
+        return sum(max(int(round(g / period)) - 1, 0) for g in gaps)

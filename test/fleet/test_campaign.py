@@ -23,6 +23,7 @@ from noise_monitor.bag.simulate import START_NS, simulate_bag  # noqa: E402
 from noise_monitor.cli import main  # noqa: E402
 from noise_monitor.fleet import run_campaign  # noqa: E402
 from noise_monitor.fleet.report import trend  # noqa: E402
+from noise_monitor.fleet.task import bag_dir  # noqa: E402
 from noise_monitor.physics import load_profile  # noqa: E402
 from noise_monitor.physics.metadata import CameraProfile  # noqa: E402
 
@@ -182,6 +183,67 @@ def test_resume_skips_finished_bags_and_survives_a_torn_manifest(pool_run: tuple
     assert sum(1 for ln in lines if ln.startswith('{"path": "/torn')) == 1
 
 
+def test_runs_with_other_settings_keep_their_own_results(fleet: dict[str, Path], tmp_path: Path) -> None:
+    """One --out, three runs: default params, a threshold of 5 DN, the defaults again (resumed), then with
+    --bag-outputs. Each settings' bags have their own folder, so the resumed run's campaign.json, frames.parquet and
+    the bags' summaries agree (until 2026-11-29 the folder was the bag's alone: the resume merged the other run's
+    files under the 1.0 DN summary; the default node.yaml, bundled profiles and weights were not in the settings
+    key, and --bag-outputs on a finished campaign wrote nothing)."""
+    bags = [fleet["good"] / "a0.mcap", fleet["good"] / "b0.mcap"]
+    params = tmp_path / "node.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    xi_threshold_dn: 5.0\n")
+    kw = {"profile": "ev76c661", "backend": "pool", "workers": 2, "progress": False}
+    first = run_campaign(bags, tmp_path / "out", **kw)
+    other = run_campaign(bags, tmp_path / "out", params=str(params), **kw)
+    again = run_campaign(bags, tmp_path / "out", **kw)
+    assert first["settings"]["key"] != other["settings"]["key"]
+    assert again["run"]["bags_resumed"] == 2 and again["settings"]["key"] == first["settings"]["key"]
+    alarms = sum(pq.read_table(tmp_path / "out" / "frames.parquet")["alarm"].to_pylist())
+    assert alarms == sum(b["frames_in_alarm"] for b in again["bags"]) == sum(b["frames_in_alarm"] for b in first["bags"])
+    assert sum(b["frames_in_alarm"] for b in other["bags"]) < alarms  # at 5 DN fewer frames alarm
+    outputs = run_campaign(bags, tmp_path / "out", bag_outputs=True, **kw)
+    assert outputs["run"]["bags_run"] == 2
+    for b in outputs["bags"]:
+        assert (bag_dir(tmp_path / "out", b["sha256"], outputs["settings"]["key"]) / "replay.csv").is_file()
+
+
+def test_frames_lost_and_skip_reasons_reach_the_campaign(tmp_path: Path) -> None:
+    """A recording with frames 3, 4 and 9 missing (lost before the recorder) and one image of an unusable encoding: the
+    campaign's bag, camera and totals count them as the replay does (frames_lost, skip_reasons), and the report
+    names them (until 2026-11-29 frames_lost stopped at the bag's summary.json and the report had no skip reasons)."""
+    import dataclasses
+    from html import escape
+
+    from noise_monitor.bag.reader import open_bag
+    from noise_monitor.bag.writer import BagWriter
+
+    src = _sim(tmp_path / "src.mcap", "robot5/front", 0, seed=3, frames=14)
+    bag = tmp_path / "gaps.mcap"
+    with open_bag(src) as reader, BagWriter(bag) as w:
+        images = metas = 0
+        for topic, log_time, msg in reader.messages(sorted(reader.topics)):
+            if topic == reader.image_topic:
+                images += 1
+                if images - 1 in (3, 4, 9):
+                    continue
+                if images - 1 == 12:
+                    msg = dataclasses.replace(msg, encoding="yuv422")
+            if topic == reader.metadata_topic:
+                metas += 1
+                if metas - 1 in (3, 4, 9):
+                    continue
+            w.write(topic, msg, log_time)
+    ref = replay(bag, "ev76c661", None, progress=False, plot=False)
+    assert ref["frames_lost"] == 3 and ref["frames_skipped"] == 1
+    c = run_campaign([bag], tmp_path / "out", profile="ev76c661", backend="pool", workers=1, progress=False)
+    b, cam, t = c["bags"][0], c["cameras"][0], c["totals"]
+    assert b["frames_lost"] == cam["frames_lost"] == t["frames_lost"] == 3
+    assert b["skip_reasons"] == cam["skip_reasons"] == t["skip_reasons"] == ref["skip_reasons"]
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "3 missing from the recordings by their stamps" in html and "Frames skipped, by reason" in html
+    assert escape(next(iter(ref["skip_reasons"]))) in html
+
+
 def test_ray_gives_the_pool_results(pool_run: tuple[dict, Path], fleet: dict[str, Path], tmp_path: Path) -> None:
     pytest.importorskip("ray")
     c = run_campaign([fleet["good"]], tmp_path, profile_map=fleet["map"], backend="ray", workers=2, progress=False)
@@ -261,7 +323,7 @@ def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path],
     assert 2 <= len(entries) < 8
     for e in entries:  # every recorded bag has its complete outputs
         assert e["status"] == "ok"
-        d = out / "bags" / e["sha256"][:16]
+        d = bag_dir(out, e["sha256"], e["settings"])
         assert pq.read_table(d / "frames.parquet").num_rows == e["frames"]
         assert json.loads((d / "summary.json").read_text())["frames_total"] == e["frames"]
     assert json.loads((out / "campaign.json").read_text())["interrupted"] is True
