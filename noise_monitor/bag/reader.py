@@ -185,6 +185,16 @@ class BagReader:
     def _conns(self, topic: str | None) -> list[Connection]:
         return [c for c in self._reader.connections if c.topic == topic]
 
+    def hardware_id(self) -> str | None:
+        """The driver's device id: the ``hardware_id`` of the first metadata message's first status (a
+        DiagnosticArray), or None."""
+        if self.metadata_topic is None:
+            return None
+        for _, _, msg in self.messages([self.metadata_topic]):
+            status = getattr(msg, "status", None)
+            return (str(status[0].hardware_id).strip() or None) if status else None
+        return None
+
     def messages(self, topics: list[str]) -> Iterator[tuple[str, int, Any]]:
         """(topic, log time ns, deserialised message) in log-time order.
 

@@ -238,6 +238,8 @@ def run_replay(
                                 estimator=estimator, config=config)
         else:
             rt = MonitorRuntime.from_params_file(config, overrides, profile=profile, estimator=estimator)
+        if not rt.params["hardware_id"]:  # the driver's device id names the camera, as in the node
+            rt.hardware_id = rt.monitor.hardware_id = reader.hardware_id() or rt.hardware_id
         prof, cfg, monitor, hw = rt.profile, rt.config, rt.monitor, rt.hardware_id
         diag_period_ns = rt.diagnostics_period_ns
         debug_hz = float(rt.params["debug_image_rate_hz"])

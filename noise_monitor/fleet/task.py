@@ -116,12 +116,7 @@ class MemoryLimit:
 def camera_id(bag: Path) -> str | None:
     """The hardware_id of the bag's first metadata message (DiagnosticArray), or None."""
     with open_bag(bag) as reader:
-        if reader.metadata_topic is None:
-            return None
-        for _, _, msg in reader.messages([reader.metadata_topic]):
-            status = getattr(msg, "status", None)
-            return (str(status[0].hardware_id).strip() or None) if status else None
-    return None
+        return reader.hardware_id()
 
 
 _ESTIMATORS: dict[tuple[Any, ...], Any] = {}

@@ -338,3 +338,13 @@ def test_replay_params_file_of_a_robot(tmp_path, estimator, capsys):
     assert out["params_ignored"] == ["frame_prefix"]
     assert main(["replay", str(bag), "--profile", "icx285", "--params", str(params), "--no-plot"]) == 0
     assert "note: parameter(s) frame_prefix of the params file's every-node section" in capsys.readouterr().out
+
+
+def test_replay_names_the_camera_by_its_drivers_id(tmp_path, estimator):
+    """As the node does: the metadata's hardware_id (the driver's device id) names the camera unless the
+    hardware_id parameter is set (until 2026-11-29 replay said '<PROFILE>/camera', the node and campaign the id)."""
+    bag = simulate_bag(tmp_path / "r.mcap", "icx285", "gain_sweep", frames=3, width=96, height=64, hold_s=0,
+                       hardware_id="robot1/front")
+    kw = {"estimator": estimator, "progress": False, "plot": False}
+    assert replay(bag, "icx285", None, **kw)["hardware_id"] == "robot1/front"
+    assert replay(bag, "icx285", None, hardware_id="left-front", **kw)["hardware_id"] == "left-front"
