@@ -55,7 +55,8 @@ def settings_key(settings: CampaignSettings) -> str:
            "profile_files": {s: _file_digest(str(camera_profile_path(s))) for s in specs if s},
            "model": model, "weights": [_file_digest(w) for w in weight_files], "device": settings.device,
            "params": _file_digest(params), "plugins": [_file_digest(p) for p in settings.plugins],
-           "threads": settings.threads, "bag_outputs": settings.bag_outputs}
+           "threads": settings.threads, "bag_outputs": settings.bag_outputs,
+           "topics": [settings.image_topic, settings.metadata_topic]}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -102,6 +103,8 @@ def run_campaign(
     timeout_s: float | None = 600.0,
     memory_limit_mb: float = 0.0,
     bag_outputs: bool = False,
+    image_topic: str | None = None,
+    metadata_topic: str | None = None,
     progress: bool = True,
     report: bool = True,
 ) -> dict[str, Any]:
@@ -127,7 +130,8 @@ def run_campaign(
     plugins = tuple(str(Path(p).resolve()) for p in plugins)
     settings = CampaignSettings(out_dir=str(out.resolve()), profiles=profiles, model=model, weights=weights,
                                 device=device, params=str(Path(params).resolve()) if params else None,
-                                plugins=plugins, memory_limit_mb=memory_limit_mb, bag_outputs=bag_outputs)
+                                plugins=plugins, memory_limit_mb=memory_limit_mb, bag_outputs=bag_outputs,
+                                image_topic=image_topic, metadata_topic=metadata_topic)
     t0 = time.perf_counter()
     bags, problems = find_bags(inputs)
     paths = [str(b.resolve()) for b in bags]

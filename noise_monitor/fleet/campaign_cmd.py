@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 from typing import Any
 
@@ -40,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="load noise effects from FILE in every worker (repeatable)")
     parser.add_argument("--bag-outputs", action="store_true",
                         help="also write replay's MCAP, CSV and PNG per bag (bags/<sha>/)")
+    parser.add_argument("--image-topic", help="the camera to evaluate in bags that hold several (e.g. "
+                                             "/left/image_raw; its metadata topic is then detected in its namespace)")
+    parser.add_argument("--metadata-topic", help="override the detected metadata topic")
     parser.add_argument("--no-report", action="store_true", help="skip the HTML report")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -63,7 +67,12 @@ def _print(c: dict[str, Any]) -> None:
         print(f"  {kind:8s} {path}")
 
 
+def _stop(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM (systemd, Kubernetes) stops a campaign as Ctrl-C does: resumable, recorded
+
+
 def run(args: argparse.Namespace) -> int:
+    signal.signal(signal.SIGTERM, _stop)
     backend = "pool" if args.pool else ("ray" if args.ray else "auto")
     address = None if args.ray in (None, "local") else args.ray
     try:
@@ -71,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
                                 model=args.model, weights=args.weights, device=args.device, params=args.params,
                                 plugins=args.effect_plugin, backend=backend, ray_address=address,
                                 workers=args.workers, timeout_s=args.timeout, memory_limit_mb=args.worker_memory,
-                                bag_outputs=args.bag_outputs, progress=not args.no_progress,
+                                bag_outputs=args.bag_outputs, image_topic=args.image_topic,
+                                metadata_topic=args.metadata_topic, progress=not args.no_progress,
                                 report=not args.no_report)
     except KeyboardInterrupt as exc:
         print(f"noise-monitor campaign: {exc}" if str(exc) else "noise-monitor campaign: interrupted", file=sys.stderr)

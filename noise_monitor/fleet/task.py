@@ -50,6 +50,8 @@ class CampaignSettings:
     threads: int = 1
     memory_limit_mb: float = 0.0  # 0 = no limit
     bag_outputs: bool = False  # also replay's MCAP + CSV + PNG per bag
+    image_topic: str | None = None  # the camera to evaluate in bags that hold several (default: detected)
+    metadata_topic: str | None = None
     key: str = ""  # what makes the results (:func:`..campaign.settings_key`): the bags' outputs go under it
 
 
@@ -113,9 +115,9 @@ class MemoryLimit:
         self.peak_mb = max(self.peak_mb, rss_mb())
 
 
-def camera_id(bag: Path) -> str | None:
+def camera_id(bag: Path, image_topic: str | None = None, metadata_topic: str | None = None) -> str | None:
     """The hardware_id of the bag's first metadata message (DiagnosticArray), or None."""
-    with open_bag(bag) as reader:
+    with open_bag(bag, image_topic=image_topic, metadata_topic=metadata_topic) as reader:
         return reader.hardware_id()
 
 
@@ -180,7 +182,7 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
                     load_plugin_file(plugin)
                     _PLUGINS.add(plugin)
             sha = outcome["sha256"] = content_hash(bag)
-            hw = camera_id(bag)
+            hw = camera_id(bag, settings.image_topic, settings.metadata_topic)
             spec = settings.profiles.resolve(hw)
             prof = load_profile(spec) if spec else None
             out = bag_dir(settings.out_dir, sha, settings.key)
@@ -188,6 +190,7 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
             table = FrameTable()
             summary = replay(bag, prof, out if settings.bag_outputs else None, estimator=_estimator(settings, prof),
                              config=settings.params, hardware_id=hw, threads=settings.threads, progress=False,
+                             image_topic=settings.image_topic, metadata_topic=settings.metadata_topic,
                              plot=settings.bag_outputs, table=table)
             summary["sha256"] = sha
             write_parquet(to_arrow(table, summary["hardware_id"], sha), out / "frames.parquet")

@@ -244,6 +244,31 @@ def test_frames_lost_and_skip_reasons_reach_the_campaign(tmp_path: Path) -> None
     assert escape(next(iter(ref["skip_reasons"]))) in html
 
 
+def test_a_stereo_bag_is_evaluated_camera_by_camera(tmp_path: Path) -> None:
+    """One recording with /left and /right cameras: without a choice it is reported (the replay's reason names
+    --image-topic, which campaign now takes: before 2026-11-29 it had no such option and the bag's frames were
+    lost); with --image-topic each camera's frames are evaluated as its own replay gives them."""
+    from noise_monitor.bag.reader import open_bag
+    from noise_monitor.bag.writer import BagWriter
+
+    parts = [simulate_bag(tmp_path / f"{side}.mcap", "ev76c661", "static", frames=5, width=96, height=96, seed=i,
+                          hardware_id=f"robot6/{side}", namespace=f"/{side}") for i, side in enumerate(("left", "right"))]
+    stereo = tmp_path / "stereo.mcap"
+    with BagWriter(stereo) as w:
+        for part in parts:
+            with open_bag(part) as reader:
+                for topic, log_time, msg in reader.messages(sorted(reader.topics)):
+                    w.write(topic, msg, log_time)
+    kw = {"profile": "ev76c661", "backend": "pool", "workers": 1, "progress": False}
+    both = run_campaign([stereo], tmp_path / "both", **kw)
+    assert both["totals"]["bags_failed"] == 1 and "--image-topic" in both["failed"][0]["reason"]
+    for side in ("left", "right"):
+        c = run_campaign([stereo], tmp_path / side, image_topic=f"/{side}/image_raw", **kw)
+        ref = replay(tmp_path / f"{side}.mcap", "ev76c661", None, progress=False, plot=False)
+        assert c["bags"][0]["hardware_id"] == f"robot6/{side}" and c["totals"]["frames_processed"] == 5
+        assert c["bags"][0]["stats"]["xi"] == ref["xi"]
+
+
 def test_ray_gives_the_pool_results(pool_run: tuple[dict, Path], fleet: dict[str, Path], tmp_path: Path) -> None:
     pytest.importorskip("ray")
     c = run_campaign([fleet["good"]], tmp_path, profile_map=fleet["map"], backend="ray", workers=2, progress=False)
@@ -301,7 +326,9 @@ def test_ageing_sensor_found_and_ranked(tmp_path: Path) -> None:
     assert any("ageing sensor" in f for f in old["findings"])
 
 
-def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path], tmp_path: Path) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])  # Ctrl-C; systemd / Kubernetes stopping it
+def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path], tmp_path: Path, sig: int) -> None:
+    """(SIGTERM until 2026-11-29: no campaign.json written.)"""
     bags = tmp_path / "bags"
     bags.mkdir()
     for i in range(8):
@@ -315,7 +342,7 @@ def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path],
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not (manifest.is_file() and manifest.read_text().count("\n") >= 2):
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "re-run the same command to resume" in err
