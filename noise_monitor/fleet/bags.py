@@ -62,10 +62,11 @@ def _walk(root: Path) -> Iterable[Path]:
 def find_bags(inputs: Iterable[str | Path]) -> tuple[list[Path], list[Problem]]:
     """Bags named by ``inputs`` (bag files, rosbag2 folders, folders searched recursively), each once.
 
-    Paths that do not exist, files that are not bags and folders without bags are problems, not errors.
+    Paths that do not exist, files that are not bags, folders without bags and links to a bag found before are
+    problems, not errors (a path named twice is counted once).
     """
     bags: list[Path] = []
-    seen: set[Path] = set()
+    seen: dict[Path, Path] = {}  # resolved path -> the path it was first found as
     problems: list[Problem] = []
     for raw in inputs:
         p = Path(raw)
@@ -83,6 +84,8 @@ def find_bags(inputs: Iterable[str | Path]) -> tuple[list[Path], list[Problem]]:
         for bag in found:
             key = bag.resolve()
             if key not in seen:
-                seen.add(key)
+                seen[key] = bag
                 bags.append(bag)
+            elif bag.absolute() != seen[key].absolute():  # a link to a bag found before (not the same path again)
+                problems.append(Problem(str(bag), f"duplicate of {seen[key]} (the same file, linked): counted once"))
     return bags, problems

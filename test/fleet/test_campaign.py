@@ -402,3 +402,16 @@ def test_merge_fills_what_an_older_part_lacks(tmp_path: Path) -> None:
     assert np.isnan(m["xi"].to_numpy()[2]) and np.isnan(m["sigma_extra"].to_numpy()[:2]).all()
     only_old = merge([(tmp_path / "old.parquet", "b.mcap")], tmp_path / "o.parquet")  # no part has the column
     assert only_old == 1 and "xi_measurement" not in pq.read_table(tmp_path / "o.parquet").column_names
+
+
+def test_a_link_to_a_bag_is_a_duplicate_and_a_path_named_twice_counts_once(tmp_path: Path) -> None:
+    """(Until 2026-11-29 a symlink to a bag found before was merged silently.)"""
+    from noise_monitor.fleet.bags import find_bags
+
+    bag = tmp_path / "a.mcap"
+    bag.write_bytes(b"x")
+    (tmp_path / "link.mcap").symlink_to(bag)
+    bags, problems = find_bags([bag, tmp_path, bag])
+    assert bags == [bag]
+    assert [(Path(p.path).name, p.reason) for p in problems] == [
+        ("link.mcap", f"duplicate of {bag} (the same file, linked): counted once")]
