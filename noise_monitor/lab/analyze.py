@@ -186,7 +186,8 @@ def analyze(
             "cells_after": _strip(rows_after),
         })
         if write_profile:
-            out["profile_written"] = str(_write_profile(write_profile, prof, res.effects, meas))
+            out["profile_written"] = str(_write_profile(write_profile, prof, res.effects, meas,
+                                                        [str(f) for f in plugins] if plugin_names else []))
     if estimator is not None:
         models = {"before": NoiseModel(base), **({"after": after_model} if after_model is not None else {})}
         views = estimator_views(tqdm(frames(), total=n, desc="estimator", unit="frame", disable=not progress),
@@ -215,8 +216,10 @@ def _strip(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()} for r in rows]
 
 
-def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[Effect], meas: Measurements) -> Path:
-    """The profile with the added effects (fitted values) appended to its effect set."""
+def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[Effect], meas: Measurements,
+                   plugins: Sequence[str] = ()) -> Path:
+    """The profile with the added effects (fitted values) appended to its effect set; a comment names the plug-in
+    files its effects may come from (a profile does not load them: --effect-plugin does)."""
     if prof is None:
         meta = meas.segments[0].meta.as_dict()
         values = {k: v for k, v in meta.items() if k not in ("gain_db", "exposure_time_s", "sensor_temperature_c")}
@@ -224,7 +227,8 @@ def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[E
     new = CameraProfile(prof.name, dict(prof.values), {**dict(prof.effects), **{e.name: dict(e.values) for e in effects}})
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(new.to_yaml())
+    head = "".join(f"# effects from the plug-in file {f}: load it with --effect-plugin {f}\n" for f in plugins)
+    p.write_text(head + new.to_yaml())
     load_profile(p)  # the written profile must load again
     return p
 

@@ -63,7 +63,12 @@ def test_outside_effect_on_a_field_like_campaign(effect: str, tmp_path: Path) ->
         # views to be confirmed as offset in every frame (the 120-frame campaign names that trait too)
         assert "isolated pixels blinking from frame to frame" in un["traits"]
         assert un["suggested"]["distribution"] == "mixture"
-    summary = analyze(bag, "ev76c661", plugins=[plugin], add_effects=[f"{name}=fit"], estimator=None)
+    written = tmp_path / "extended.yaml"
+    summary = analyze(bag, "ev76c661", plugins=[plugin], add_effects=[f"{name}=fit"], estimator=None,
+                      write_profile=written)
+    # the profile names the plug-in file its effect comes from (2026-11-29: it did not, and loading it without the
+    # plug-in said only "unknown effect")
+    assert written.read_text().startswith(f"# effects from the plug-in file {plugin}: load it with --effect-plugin")
     names = [c["effect"] for c in summary["candidates"]]
     assert names[0] == name, names[:3]
     assert [c["effect"] for c in summary["candidates"] if c["significant"]] == [name]

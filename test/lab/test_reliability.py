@@ -145,7 +145,7 @@ def test_analyze_with_an_unusable_plugin_file(capsys, bag, plugins, file, match)
 
 def test_analyze_with_unknown_or_out_of_range_added_effects(capsys, bag):
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "no_such_effect")
-    assert code == 2 and "unknown effect 'no_such_effect'; known: " in one_line(err)
+    assert code == 2 and "unknown effect 'no_such_effect' (a plug-in's? load its file with --effect-plugin); known: " in one_line(err)
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu=-5")
     assert code == 2 and "prnu." in one_line(err) and "is outside" in one_line(err)
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu=lots")

@@ -116,7 +116,8 @@ def available() -> dict[str, type[Effect]]:
 def effect_class(name: str) -> type[Effect]:
     reg = available()
     if name not in reg:
-        raise EffectError(f"unknown effect {name!r}; known: {', '.join(sorted(reg))}")
+        raise EffectError(f"unknown effect {name!r} (a plug-in's? load its file with --effect-plugin); known: "
+                          f"{', '.join(sorted(reg))}")
     return reg[name]
 
 
