@@ -50,8 +50,13 @@ from msg_adapters.sources import resolve_source
 from noise_monitor.monitor import FrameResult, GapCounter, Matched, StampSynchronizer
 from noise_monitor.monitor.config import NODE_NAME
 from noise_monitor.monitor.period import PeriodSummary
-from noise_monitor.monitor.pipeline import RUNTIME_SETTABLE
-from noise_monitor.monitor.runtime import MonitorRuntime, check_parameters, coerce, parameter_table
+from noise_monitor.monitor.runtime import (
+    SETTABLE_PARAMETERS,
+    MonitorRuntime,
+    check_parameters,
+    coerce,
+    parameter_table,
+)
 
 #: A jump of the node's clock by more than this (s, either way; sim time: /clock starting or looping) restarts the
 #: diagnostics period and the image age.
@@ -131,9 +136,9 @@ class NoiseMonitorNode(Node):
     def __init__(self, node_name: str = NODE_NAME, estimator: Any = None, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         p = {}
-        settable = {*RUNTIME_SETTABLE, "black_level_dn"}  # the others are read-only while the node runs
-        for name, (default, description) in parameter_table().items():
-            desc = ParameterDescriptor(description=description, dynamic_typing=True, read_only=name not in settable)
+        for name, (default, description) in parameter_table().items():  # the unsettable read-only while it runs
+            desc = ParameterDescriptor(description=description, dynamic_typing=True,
+                                       read_only=name not in SETTABLE_PARAMETERS)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
         # a camera namespace names the camera: /cam1 and /cam2 report apart on /diagnostics
         p["camera_name"] = p["camera_name"] or self.get_namespace().strip("/").replace("/", "_")

@@ -6,6 +6,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from noise_monitor.monitor.black_level import STATED_BY
+
 from .replay import live_topics, replay
 from .staging import input_files, refuse_overwriting_inputs, write_text_atomic
 
@@ -66,10 +68,9 @@ def print_summary(s: dict[str, Any]) -> None:
               "the monitor's (other nodes'; a typo?)")
     black = s.get("black_level_contradicted")
     if black:
-        by = {"metadata": "the camera's metadata", "parameter": "the black_level_dn parameter"}.get(
-            black["stated_by"], "the profile")
         print(f"  black level: {black['frames']} frame(s) read pixels far below the {black['stated_dn']:g} DN stated "
-              f"by {by}: the camera's is at most {black['camera_at_most_dn']:g} DN (state it: profile or node "
+              f"by {STATED_BY[black['stated_by']]}: the camera's is at most {black['camera_at_most_dn']:g} DN "
+              "(state it: profile or node "
               "parameter black_level_dn; a driver's value: its conversion, profile driver_black_level_dn)")
     print(f"\n  {'source':12s} {'mean':>6s} {'p5':>6s} {'p95':>6s}   [DN]")
     for key, label in (("sigma_pn", "PN"), ("sigma_dcsn", "DCSN"), ("sigma_rn", "RN"), ("sigma_total", "total"),

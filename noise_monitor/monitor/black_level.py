@@ -22,7 +22,8 @@ DARK_QUANTILE = 0.001
 BOUND_SIGMAS = 3.5
 
 
-_STATED_BY = {"parameter": "node parameter black_level_dn", "metadata": "the camera's metadata",
+#: who stated a black level, for people
+STATED_BY = {"parameter": "node parameter black_level_dn", "metadata": "the camera's metadata",
               "profile": "camera profile"}
 _FIX = {"parameter": "set the parameter to the camera's",
         "metadata": "check the conversion of the driver's value (profile driver_black_level_dn) or override it "
@@ -47,7 +48,7 @@ class BlackLevelCheck:
 
     def message(self) -> str:
         return (f"{self.below_pct:.2g} % of the pixels read more than {self.limit_dn:.1f} DN below the stated black "
-                f"level of {self.black_level_dn:g} DN ({_STATED_BY[self.source]}): the camera's is lower (at most "
+                f"level of {self.black_level_dn:g} DN ({STATED_BY[self.source]}): the camera's is lower (at most "
                 f"{self.upper_dn:.1f} DN); {_FIX[self.source]}")
 
 

@@ -24,10 +24,12 @@ from noise_monitor.text import clip
 
 from .config import DESCRIPTIONS, MonitorConfig, read_ros_params
 from .frame import Frame
-from .pipeline import Estimator, FrameResult, Monitor
+from .pipeline import RUNTIME_SETTABLE, Estimator, FrameResult, Monitor
 
 COLORS = ("luma", "green")
 #: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
+#: the node's parameters that ``ros2 param set`` may change while it runs (the monitor's settings and the black level)
+SETTABLE_PARAMETERS = (*RUNTIME_SETTABLE, "black_level_dn")
 RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS); relative names resolve in the node's "
                              "namespace and are remappable"),
@@ -205,11 +207,10 @@ class MonitorRuntime:
         self.hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
         self.monitor = Monitor(self.config, estimator, self.model, p["camera_name"], self.hardware_id)
         depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
+        #: keys of a params file's every-node sections that are not the monitor's (:meth:`from_params_file`)
+        self.params_ignored: list[str] = []
         self.frame_options = FrameOptions(self.profile, depth, p["color"],
                                           None if p["black_level_dn"] == -1.0 else float(p["black_level_dn"]))
-
-    #: keys of a params file's every-node sections that are not the monitor's (:meth:`from_params_file`)
-    params_ignored: list[str] = []
 
     def set_black_level(self, black_level_dn: float) -> None:
         """The black level taken off every image from now on (-1: the frame's metadata's, else the profile's)."""

@@ -141,8 +141,9 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
             count += 1
             if frame.image_dn is None:  # counted by kind (a pixel value per frame would make a kind each)
                 reason = frame.skip_reason or "image unusable"
-                example.setdefault(skip_category(reason), reason)
-                skipped[skip_category(reason)] = skipped.get(skip_category(reason), 0) + 1
+                kind = skip_category(reason)
+                example.setdefault(kind, reason)
+                skipped[kind] = skipped.get(kind, 0) + 1
                 continue
             img = frame.image_dn
             if shape is None:
@@ -329,8 +330,9 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
     else:
         notes.append("saturation not determined: the variance has no maximum inside the exposure series "
                      "(record flat fields beyond saturation)")
-    limit = K_FIT_MAX * (sat_dn if sat_dn else x[np.array([s.clipped_fraction < CLIPPED_MAX for s in flats])].max())
-    sel = (x <= limit) & np.array([s.clipped_fraction < CLIPPED_MAX for s in flats]) & (x > 0)
+    whole = np.array([s.clipped_fraction < CLIPPED_MAX for s in flats])  # flats without saturated pixels
+    limit = K_FIT_MAX * (sat_dn if sat_dn else x[whole].max())
+    sel = (x <= limit) & whole & (x > 0)
     if sel.sum() < 3:
         raise CharacterizeError(f"only {int(sel.sum())} flat-field set(s) in the linear range below 70 % of "
                                 "saturation: K cannot be determined")
@@ -474,7 +476,7 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
                        "skipped": rec.skipped},
         "notes": notes,
         "points": {"ptc": {"signal_dn": x.tolist(), "variance_dn2": y.tolist(), "k_fit": sel.tolist(),
-                           "unclipped": [s.clipped_fraction < CLIPPED_MAX for s in flats],
+                           "unclipped": whole.tolist(),
                            "total_variance_dn2": [s.temporal_var for s in flats],
                            "saturation_dn": sat_dn},
                    "dark": series, "linearity": lin,
