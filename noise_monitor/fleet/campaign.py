@@ -23,7 +23,7 @@ from noise_monitor.monitor.config import default_params_path, read_ros_params
 from noise_monitor.paths import camera_profile_path
 from noise_monitor.physics import load_profile
 
-from .bags import Problem, find_bags, fingerprint
+from .bags import Problem, content_hash, find_bags, fingerprint
 from .frames import merge, require_pyarrow
 from .manifest import Manifest
 from .pool import LocalPool
@@ -58,6 +58,39 @@ def settings_key(settings: CampaignSettings) -> str:
            "threads": settings.threads, "bag_outputs": settings.bag_outputs,
            "topics": [settings.image_topic, settings.metadata_topic]}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _duplicates(paths: list[str], todo: list[str], manifest: Manifest) -> dict[str, dict[str, Any]]:
+    """Manifest entries for the bags of ``todo`` whose content a bag before them in ``paths`` has (to be replayed
+    now, or finished before): ``duplicate_of`` names it. Only bags of a size another bag has are hashed here; the
+    others' content is hashed by the worker that replays them."""
+    known = {p: manifest.entries[p] for p in paths if p not in todo and p in manifest.entries}
+    sizes: dict[str, tuple[int, int]] = {}
+    for p in todo:
+        try:
+            sizes[p] = fingerprint(Path(p))
+        except OSError:
+            continue  # gone: its worker reports it
+    by_size: dict[int, list[str]] = {}
+    for p in paths:
+        size = sizes[p][0] if p in sizes else known[p].get("size") if p in known else None
+        if size is not None:
+            by_size.setdefault(size, []).append(p)
+    out: dict[str, dict[str, Any]] = {}
+    for group in by_size.values():
+        if len(group) < 2 or not any(p in sizes for p in group):
+            continue
+        first: dict[str, str] = {}
+        for p in group:
+            sha = known[p].get("sha256") if p in known else content_hash(Path(p))
+            if not sha:
+                continue
+            if sha not in first:
+                first[sha] = p
+            elif p in sizes:
+                out[p] = {"path": p, "status": "ok", "sha256": sha, "size": sizes[p][0], "mtime_ns": sizes[p][1],
+                          "duplicate_of": first[sha]}
+    return out
 
 
 def _executor(backend: str, ray_address: str | None, workers: int, timeout_s: float | None,
@@ -139,6 +172,9 @@ def run_campaign(
     manifest = Manifest(out, settings.key)
     todo = [p for p in paths if not manifest.finished(p, *fingerprint(Path(p)))]
     resumed = len(paths) - len(todo)
+    for path, entry in _duplicates(paths, todo, manifest).items():  # the same content is replayed once
+        manifest.record(entry)
+        todo.remove(path)
     executor = _executor(backend, ray_address, workers, timeout_s, problems) if todo else None
     run_info: dict[str, Any] = executor.describe() if executor else {"backend": None}
     finished = frames = 0

@@ -166,16 +166,20 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
     """campaign.json: totals, cameras ranked by health, bags, alarm episodes and everything not evaluated."""
     order = {p: i for i, p in enumerate(paths)}
     bags, duplicates, failed = [], [], []
-    primary: dict[str, str] = {}
-    for e in sorted(entries, key=lambda e: order[e["path"]]):
+    ordered = sorted(entries, key=lambda e: order[e["path"]])
+    primary: dict[str, str] = {}  # per content, the first bag replayed (a duplicate is not: ``duplicate_of``)
+    for e in ordered:
+        if e["status"] == "ok" and "record" in e:
+            primary.setdefault(e["sha256"], e["path"])
+    for e in ordered:
         if e["status"] != "ok":
             failed.append({"path": e["path"], "reason": e.get("reason", "unknown")})
-        elif e["sha256"] in primary:
-            duplicates.append({"path": e["path"], "reason": f"duplicate of {primary[e['sha256']]} (same content, "
-                                                            f"sha256 {e['sha256'][:16]}...): counted once"})
-        else:
-            primary[e["sha256"]] = e["path"]
+        elif primary.get(e["sha256"]) == e["path"]:
             bags.append(_bag_row(e))
+        else:
+            first = primary.get(e["sha256"], e.get("duplicate_of"))
+            duplicates.append({"path": e["path"], "reason": f"duplicate of {first} (same content, "
+                                                            f"sha256 {e['sha256'][:16]}...): counted once"})
     by_cam: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for b in bags:
         by_cam[b["hardware_id"]].append(b)

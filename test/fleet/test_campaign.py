@@ -340,7 +340,7 @@ def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path],
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     manifest = out / "manifest.jsonl"
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (manifest.is_file() and manifest.read_text().count("\n") >= 2):
+    while time.monotonic() < deadline and not (manifest.is_file() and manifest.read_text().count("\n") >= 6):
         time.sleep(0.05)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
@@ -348,8 +348,11 @@ def test_ctrl_c_leaves_a_consistent_manifest_and_resumes(fleet: dict[str, Path],
     assert "re-run the same command to resume" in err
     entries = [json.loads(ln) for ln in manifest.read_text().splitlines()]
     assert 2 <= len(entries) < 8
-    for e in entries:  # every recorded bag has its complete outputs
+    assert sum("duplicate_of" in e for e in entries) == 5  # recorded before any replay, never replayed
+    for e in entries:  # every recorded bag has its complete outputs (a duplicate: its content's)
         assert e["status"] == "ok"
+        if "duplicate_of" in e:
+            continue
         d = bag_dir(out, e["sha256"], e["settings"])
         assert pq.read_table(d / "frames.parquet").num_rows == e["frames"]
         assert json.loads((d / "summary.json").read_text())["frames_total"] == e["frames"]
@@ -415,3 +418,25 @@ def test_a_link_to_a_bag_is_a_duplicate_and_a_path_named_twice_counts_once(tmp_p
     assert bags == [bag]
     assert [(Path(p.path).name, p.reason) for p in problems] == [
         ("link.mcap", f"duplicate of {bag} (the same file, linked): counted once")]
+
+
+def test_a_copy_of_a_bag_is_replayed_once(fleet: dict[str, Path], tmp_path: Path) -> None:
+    """Two copies of one bag beside another: the content is replayed once and the copy named its duplicate, and a
+    copy added to the finished campaign is recorded without a replay. (Until 2026-11-29 both copies were replayed
+    into the same folder: the one that finished last wrote its path into the shared summary.json.)"""
+    bags = tmp_path / "bags"
+    bags.mkdir()
+    for name, source in (("a.mcap", "a0.mcap"), ("b.mcap", "b0.mcap"), ("c_copy_of_a.mcap", "a0.mcap")):
+        shutil.copy(fleet["good"] / source, bags / name)
+    kw = {"profile": "ev76c661", "backend": "pool", "workers": 2, "progress": False}
+    out = tmp_path / "out"
+    c = run_campaign([bags], out, **kw)
+    assert c["run"]["bags_run"] == 2 and c["totals"]["bags_duplicate"] == 1
+    first = str((bags / "a.mcap").resolve())
+    assert [d["reason"].split(" (")[0] for d in c["duplicates"]] == [f"duplicate of {first}"]
+    row = next(b for b in c["bags"] if b["path"] == first)
+    assert json.loads((bag_dir(out, row["sha256"], c["settings"]["key"]) / "summary.json").read_text())["bag"] == first
+    shutil.copy(fleet["good"] / "b0.mcap", bags / "d_copy_of_b.mcap")
+    again = run_campaign([bags], out, **kw)
+    assert again["run"]["bags_run"] == 0 and again["run"]["bags_resumed"] == 3
+    assert again["totals"]["bags_duplicate"] == 2 and again["totals"]["bags_evaluated"] == 2
