@@ -135,6 +135,9 @@ def run(args: argparse.Namespace) -> int:
                "episodes": truth["episodes"], **({"images": truth["images"]} if "images" in truth else {})}
     print(f"wrote {bag} ({summary['frames']} frames, {truth['profile']}, scenario {truth['scenario']}) "
           f"and {summary['truth']}")
+    if summary["frames"] != args.frames:
+        print(f"  {summary['frames']} of the {args.frames} frames asked for: the {truth['scenario']} scenario records "
+              "whole sets of frames (the rest would make a partial one)")
     for ep in truth["episodes"]:
         print(f"  episode frames {ep['start_index']}-{ep['end_index']}: {'; '.join(ep['corrupted'])} "
               f"(true xi {ep['mean_xi']:+.2f} DN)")

@@ -345,3 +345,16 @@ def test_a_rolling_shutter_reads_a_vibrating_view_row_by_row() -> None:
     assert campaign.wobble_px(whole) == 0.0
     assert np.array_equal(campaign.first_row(rows), whole) and campaign.first_row(whole) is whole
 
+
+
+def test_a_plan_of_whole_sets_says_how_many_frames_it_wrote(tmp_path, capsys) -> None:
+    """The ptc plan records whole sets (30 fixed frames, then levels of 4): 63 frames asked for make 62, and the
+    command says so (until 2026-11-29 it wrote fewer without a word)."""
+    bag = tmp_path / "ptc.mcap"
+    assert main(["simulate-bag", str(bag), "--profile", "icx285", "--scenario", "ptc", "--frames", "63",
+                 "--width", "32", "--height", "32"]) == 0
+    printed = capsys.readouterr().out
+    assert len(load_truth(bag)["frames"]) == 62
+    assert "62 of the 63 frames asked for: the ptc scenario records whole sets of frames" in printed
+    with open_bag(bag) as reader:
+        assert len(reader) == 62
