@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .analyze import analyze, component_change_text, write_json
-from .measure import field_conditions_text, scene_in_views_text
+from .measure import field_conditions_text, scene_in_single_views_text, scene_in_views_text
 from .noise_events import events_text
 from .shape import fixed_shape_text
 
@@ -66,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {line}")
     if m["scene_in_partner_views"]:
         print(f"  {scene_in_views_text(m['scene_in_partner_views'])}")
+    if scene := scene_in_single_views_text(m["scene_in_single_views"]):
+        print(f"  {scene}")
     top = summary["candidates"][:5]
     for c in top:
         mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "

@@ -451,7 +451,8 @@ class _SegmentBase:
         regions = seg.region[rep]
         self.regions = [np.flatnonzero(regions == k) for k in np.unique(regions)]
         self.regions = [idx for idx in self.regions if idx.size >= MIN_REGION_BLOCKS] if len(self.regions) > 1 else []
-        self.regional = tuple(k for k in REGIONAL if k in seg.values)
+        # a single view that shows the scene: its fixed pattern's regions differ by the scene's texture there
+        self.regional = tuple(k for k in REGIONAL if k in seg.values and not (k == "fixed" and seg.scene_dn2 is not None))
 
         self.region_errors: dict[str, list[float]] = {}
         self.partners: list[Partner] = []
@@ -586,6 +587,8 @@ class Observables:
                                                 for sb in segments]) for k in REGIONAL]
         self.order = np.concatenate(order)
         self.outlier_pixels = np.array([sb.seg.outlier_pixels for sb in segments], dtype=float)
+        #: 0 where a single view's outlier pixels are the scene's specks (not a measurement of the sensor's)
+        self.outliers_measured = np.array([sb.seg.outliers_measured for sb in segments], dtype=float)
         self.amplitude = np.array([sb.seg.outlier_amplitude_dn for sb in segments], dtype=float)
         self.amplitude_err = np.maximum(np.hypot([sb.seg.outlier_amplitude_err_dn for sb in segments],
                                                  AMPLITUDE_SYSTEMATIC * self.amplitude), 1e-6)
@@ -634,7 +637,7 @@ class Observables:
         amp_err = np.maximum(self.amplitude_err, np.hypot(AMPLITUDE_SYSTEMATIC * self.amplitude, spread / np.sqrt(n)))
         amp_res = share * (self.amplitude - amp) / amp_err
         amp_like = share * np.sqrt(2.0 * np.log(amp_err / self.amplitude_err))
-        tail = np.stack([count_res, amp_res, amp_like], axis=1).ravel()
+        tail = (np.stack([count_res, amp_res, amp_like], axis=1) * self.outliers_measured[:, None]).ravel()
         return np.concatenate([cell_res, like, pooled_res, region_res, tail])[self.order]
 
 
@@ -751,7 +754,8 @@ class Comparison:
     # --- reporting ---------------------------------------------------------------------------
     def cell_table(self, extra: Sequence[Effect] = ()) -> list[dict[str, Any]]:
         """One row per cell: conditions, measured and model sigma (DN) per component and in total
-        (with ``extra`` effects: the additive approximation of :meth:`predict_with`)."""
+        (with ``extra`` effects: the additive approximation of :meth:`predict_with`); the measured sigma's standard
+        error on the model's side (:func:`sigma_error`)."""
         pairs = self.predict_with(extra)
         rows = []
         t0 = self.meas.segments[0].stamp_ns
@@ -774,14 +778,30 @@ class Comparison:
                     "blocks": int(cell.block_index.size),
                     "frames": seg.n_frames,
                     "measured_sigma_dn": ms,
-                    "measured_sigma_err_dn": err_total / (2.0 * max(ms, 1e-3)),
+                    "measured_sigma_err_dn": sigma_error(ms, err_total, above=ms >= mm),
                     "model_sigma_dn": mm,
                     "residual_dn": ms - mm,
                     "measured_var_dn2": dict(cell.values),
                     "measured_var_err_dn2": dict(cell.errors),
                     "model_var_dn2": {c: model[c] for c in cell.values},
-                })
+                } | ({"cross_view": _cross_view_conditions(seg, cell)} if seg.partners else {}))
         return rows
+
+
+def _cross_view_conditions(seg: SegmentMeasurement, cell: Cell) -> dict[str, Any]:
+    """What a cell's cross-view components (fixed, column, row: products of a sensor pattern's size here and in the
+    partner views) are measured at: the geometric means, over its blocks and their partner views (by weight), of
+    the intensity here and there (a pattern of variance ~ I^n gives (I_here I_partner)^(n/2), so a law fitted
+    against it has the pattern's own power), and each partner segment's share of the weight (for the same means of
+    the exposure, gain and dark current: :func:`.signature.cross_view_condition`)."""
+    assert seg.partner_weight is not None and seg.partner_intensity_dn is not None
+    w = seg.partner_weight[cell.block_index]
+    total = max(float(w.sum()), 1e-300)
+    here = np.log(np.maximum(seg.intensity_dn[cell.block_index], 1e-3))[:, None]
+    there = np.log(np.maximum(seg.partner_intensity_dn[cell.block_index], 1e-3))
+    shares = w.sum(axis=0) / total
+    return {"intensity_dn": float(np.exp(np.sum(w * 0.5 * (here + there)) / total)),
+            "partners": {int(j): float(x) for j, x in zip(seg.partners, shares)}}
 
 
 def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[str, Any]]:
@@ -803,6 +823,15 @@ def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[st
         rows.append({"region": region, "blocks": len(meas_var[region]), "measured_sigma_dn": ms,
                      "model_sigma_dn": mm, "mean_residual_dn": ms - mm, "rms_residual_dn": abs(ms - mm)})
     return rows
+
+
+def sigma_error(sigma: float, var_err: float, above: bool) -> float:
+    """The standard error (DN) of a measured sigma from that of its variance (DN^2), on one side: below it when the
+    measurement lies ``above`` the model, else above it. They differ where the variance's error is comparable to the
+    variance (a single view's scene: the sigma could be down to 0); var_err / (2 sigma) on either side elsewhere."""
+    if above:
+        return sigma - math.sqrt(max(sigma * sigma - var_err, 0.0))
+    return math.sqrt(sigma * sigma + var_err) - sigma
 
 
 def rms_error_raw(rows: Iterable[dict[str, Any]]) -> float:

@@ -18,8 +18,10 @@ vibration are taken out, in blocks whose frame differences fit pure noise (no re
 in part of the view). Blocks are chosen flat and unclipped on the hold mean and in every frame's light. The fixed-pattern, column and row components are cross
 energies of a block's hold-mean residual with the same sensor block seen from other camera poses
 (:func:`_cross_views`): the scene moves, the fixed pattern does not; with one pose only they are the
-hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so. Outlier
-pixels count when another view confirms them. Every cell (segment x intensity bin) carries the
+hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so; where that residual's
+neighbouring pixels are correlated (a sensor's fixed pattern is white, the optics' image of a scene is not) the
+view shows the scene, and those components' errors take the scene's variance. Outlier pixels count when another
+view confirms them; in a single view, unless their neighbours share their offset (the scene's specks). Every cell (segment x intensity bin) carries the
 standard error of its mean over blocks. The fixed pattern's *shape* (:class:`.shape.FixedShape`): its
 kurtosis from four views of each sensor pixel at four camera poses (a Gaussian pattern such as PRNU has
 3; a few pixels far off, such as random telegraph pixels below the outlier threshold, far more).
@@ -111,6 +113,20 @@ SPIKE_FACTOR = 5.0
 #: telegraph pixels make such a group in ~0.3 % of blocks at 2 frames, fewer at more (left out of the
 #: pure-noise test as blinking, the edge's pixels would pass into the temporal variance)
 MIN_CHANGE_CLUSTER = 4
+#: a single view shows the scene in its fixed pattern when its blocks' mean lag-1 excess (:func:`_lag1_excess`: the
+#: neighbour covariance of the de-lined hold-mean residual beyond white noise's; a fixed pattern such as PRNU, DSNU
+#: or hot pixels is white on the sensor, the optics' image of a scene is not) lies this many standard errors from 0
+#: (above: a scene the optics blurred; below: a grating at 2-3 px)
+SCENE_SIGMAS = 4.0
+#: the lag-1 excess per DN^2 of scene variance in a flat block: 0.44-0.61 measured on the campaigns' photographs
+#: and the lab chart (clean cameras, where the single view's fixed part is all scene); the lower end taken, so the
+#: scene's variance (excess / this) errs high; a texture finer than the optics' blur (white at pixel scale) escapes
+SCENE_LAG1_PER_DN2 = 0.4
+#: a single view's outlier pixels are the scene's specks when their 4-neighbours carry more than this share of their
+#: offset (mean over the view's outlier pixels, SCENE_SIGMAS standard errors above it, the errors a defect's noisy
+#: neighbours give): a defect is one sensor pixel, the optics spread a speck over its neighbours (0.14-0.33 on the
+#: campaigns' photographs, -0.02-0 for hot pixels)
+NEIGHBOUR_SHARE = 0.05
 #: draws of the Monte-Carlo behind :func:`spike_fraction` (seeded)
 SPIKE_DRAWS = 20000
 _NO_DYNAMIC = {"gain_db": 0.0, "exposure_time_s": 1.0, "sensor_temperature_c": 0.0}
@@ -193,6 +209,12 @@ class SegmentMeasurement:
     light_pct: float = 0.0
     motion_px: float = 0.0
     last_stamp_ns: int = 0  # the stamp of its last frame
+    #: (B,) where a single view shows the scene (``SCENE_SIGMAS``), per block the scene's variance in its fixed
+    #: pattern (lag-1 excess / ``SCENE_LAG1_PER_DN2``, DN^2; None: measured across views, or no scene shown)
+    scene_dn2: np.ndarray | None = None
+    #: False where a single view's outlier pixels show the scene (:func:`_specks_of_the_scene`): their count,
+    #: amplitude and energy are not a measurement of the sensor's outlier pixels
+    outliers_measured: bool = True
 
     @property
     def n_frames(self) -> int:
@@ -259,6 +281,15 @@ class Measurements:
         return {"holds": len(holds), "light_changing": len(lit), "light_pct_max": round(max(lit, default=0.0), 3),
                 "vibrating": len(shaken), "motion_px_max": round(max(shaken, default=0.0), 3)}
 
+    def scene_in_single_views(self) -> dict[str, Any]:
+        """The holds and single frames measured from one view (no partner view) and how many of them show the scene: in their fixed
+        pattern (``fixed_pattern``: errors widened by the scene's variance, the largest hold mean ``scene_dn2_max``)
+        and in their outlier pixels (``outlier_pixels``: not counted)."""
+        single = [s for s in self.segments if not s.partners and s.intensity_dn.size]
+        fixed = [abs(float(np.mean(s.scene_dn2))) for s in single if s.scene_dn2 is not None]
+        return {"views": len(single), "fixed_pattern": len(fixed), "scene_dn2_max": round(max(fixed, default=0.0), 3),
+                "outlier_pixels": sum(not s.outliers_measured for s in single)}
+
     def summary(self) -> dict[str, Any]:
         shape = (self.fixed_shape.summary() if self.fixed_shape else
                  {"not_measured": "no hold seen from three other, mutually distinct camera poses"})
@@ -269,6 +300,7 @@ class Measurements:
             "frames_skipped": dict(self.skipped),
             "not_measured": dict(self.not_measured),
             "scene_in_partner_views": list(self.scene_in_views),
+            "scene_in_single_views": self.scene_in_single_views(),
             "field_conditions": self.field_conditions(),
             "noise_changes": [c.summary(self.segments[0].stamp_ns) for c in self.noise_changes],
             "segments": len(self.segments),
@@ -315,6 +347,31 @@ def _lag1(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     r3 = r.reshape(-1, b, b)
     e = np.maximum(np.sum(r * r, axis=1), 1e-12)
     return np.sum(r3[:, :, 1:] * r3[:, :, :-1], axis=(1, 2)) / e, np.sum(r3[:, 1:, :] * r3[:, :-1, :], axis=(1, 2)) / e
+
+
+@lru_cache(maxsize=8)
+def _lag1_operators(b: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """(the projector taking a plane-fit residual's column and row means out, the neighbour-pair form (each
+    horizontal and vertical pair once), white noise's expected ratio of the pair sum to the energy)."""
+    n = b * b
+    col = np.kron(np.ones((b, b)) / b, np.eye(b))  # pixel (i, j) -> mean of column j
+    row = np.kron(np.eye(b), np.ones((b, b)) / b)  # pixel (i, j) -> mean of row i
+    lines_out = (np.eye(n) - col) @ (np.eye(n) - row)
+    step = np.eye(b, k=1)
+    pairs = 0.5 * (np.kron(np.eye(b), step) + np.kron(step, np.eye(b)))
+    pairs = pairs + pairs.T
+    proj = lines_out @ _plane_fit(b)[0]
+    white = float(np.trace(proj.T @ pairs @ proj) / np.trace(proj.T @ proj))
+    return lines_out, pairs, white
+
+
+def _lag1_excess(r: np.ndarray, b: int) -> np.ndarray:
+    """(N,) per block, the mean product of neighbouring pixels of plane-fit residuals ``r`` (N, b*b) with the
+    column and row means taken out, beyond what white noise of the same energy gives (DN^2, 0 in expectation for
+    any white pattern, temporal or fixed; positive for a spatially correlated scene)."""
+    lines_out, pairs, white = _lag1_operators(b)
+    d = r @ lines_out.T
+    return (np.einsum("ni,ij,nj->n", d, pairs, d) - white * np.sum(d * d, axis=1)) / (2 * b * (b - 1))
 
 
 def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -609,7 +666,7 @@ class _SegmentAccumulator:
                      v, region, values, robust, span, is_out, centred,
                      keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes,
                      light_pct=0.0 if self.light is None else self.light.percent(), motion_px=self.motion_px,
-                     last_stamp_ns=self.stamps[-1], still=still)
+                     last_stamp_ns=self.stamps[-1], still=still, lag1=_lag1_excess(clean, b))
 
 
 @dataclass
@@ -652,6 +709,8 @@ class _Full:
     #: noise is read on: :mod:`.hold_change`); empty for a single frame
     still: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     lone: bool = False  # a hold's edge frame alone on its side of a noise change (not measured: ``LONE``)
+    #: (N,) the hold mean's lag-1 excess per block (:func:`_lag1_excess`), the scene's signature in a single view
+    lag1: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _select(f: _Full, b: int) -> SegmentMeasurement:
@@ -689,7 +748,51 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         light_pct=f.light_pct,
         motion_px=f.motion_px,
         last_stamp_ns=f.last_stamp_ns,
+        scene_dn2=_scene_in_single_view(f),
+        outliers_measured=not _specks_of_the_scene(f, b),
     )
+
+
+def _specks_of_the_scene(f: _Full, b: int) -> bool:
+    """Whether a single view's outlier pixels are the scene's specks: their 4-neighbours in the block (outliers
+    left out) carry on average more than ``NEIGHBOUR_SHARE`` of their offset, ``SCENE_SIGMAS`` standard errors
+    beyond it, the errors of defects (isolated pixels: their neighbours' mean scatters by the block's robust sigma
+    over the square root of their number); never across views: partner views confirm outliers there."""
+    if f.partners:
+        return False
+    c, out = f.centred[f.keep].reshape(-1, b, b), f.is_out[f.keep].reshape(-1, b, b)
+    sigma = np.broadcast_to(f.robust[f.keep][:, None, None], c.shape)
+    near, count = np.zeros(c.shape), np.zeros(c.shape)
+    valid = np.where(out, 0.0, c)
+    for axis in (1, 2):
+        for step in (1, -1):
+            near += np.roll(valid, step, axis=axis) * _inside(b, axis, step)
+            count += np.roll(~out, step, axis=axis) * _inside(b, axis, step)
+    sel = out & (count > 0)
+    if not sel.any():
+        return False
+    share = near[sel] / count[sel] / c[sel]
+    se = math.sqrt(float(np.sum(sigma[sel] ** 2 / count[sel] / c[sel] ** 2))) / share.size
+    return bool(share.mean() - NEIGHBOUR_SHARE > SCENE_SIGMAS * se)
+
+
+def _inside(b: int, axis: int, step: int) -> np.ndarray:
+    """(1, b, b) 1 where ``np.roll`` by ``step`` along ``axis`` brings a neighbour from inside the block, else 0."""
+    m = np.ones((1, b, b))
+    m[(slice(None), 0 if step == 1 else -1, slice(None)) if axis == 1 else (slice(None), slice(None), 0 if step == 1 else -1)] = 0.0
+    return m
+
+
+def _scene_in_single_view(f: _Full) -> np.ndarray | None:
+    """Per accepted block, the scene's variance in a single view's fixed pattern, when the view shows the scene
+    (its blocks' mean lag-1 excess ``SCENE_SIGMAS`` standard errors from 0); None across views or without it. A
+    cell's scene variance is the magnitude of its blocks' mean (a grating's excess is negative)."""
+    x = f.lag1[f.keep]
+    if f.partners or x.size < MIN_BLOCKS_PER_CELL:
+        return None
+    if abs(x.mean()) <= SCENE_SIGMAS * x.std(ddof=1) / math.sqrt(x.size):
+        return None
+    return x / SCENE_LAG1_PER_DN2
 
 
 def _cross_energies(a: np.ndarray, c: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -769,6 +872,9 @@ POOLED = ("column", "row", "outlier", "temporal_column", "temporal_row")
 
 #: pooled components whose gross outliers (an edge that slipped through) are trimmed
 TRIMMED = ("column", "row", "temporal_column", "temporal_row")
+#: single-view components whose errors take the scene's variance where the view shows the scene
+#: (:func:`_scene_in_single_view`): the fixed pattern, column and row offsets are the hold mean's residual there
+SCENE_WIDENED = ("fixed", "single", "column", "row")
 TRIM_MADS = 8.0
 
 
@@ -798,6 +904,13 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
             comp: max(float(arr[sel[comp]].std(ddof=1)), floor[comp], MIN_VAR_ERR_DN2) / math.sqrt(sel[comp].size)
             for comp, arr in seg.values.items()
         }
+        if not seg.outliers_measured:  # the scene's specks: as much as measured may be scene
+            errs["outlier"] = math.hypot(errs["outlier"], max(vals["outlier"], 0.0))
+        if seg.scene_dn2 is not None:  # the scene's variance may sit in the single view's fixed pattern
+            for comp in SCENE_WIDENED:
+                if comp in errs:
+                    scene = seg.scene_dn2[sel[comp]].mean()
+                    errs[comp] = math.hypot(errs[comp], abs(float(scene)))
         views = {}
         for comp, per_partner in (seg.partner_values or {}).items():
             assert seg.partner_weight is not None
@@ -823,6 +936,21 @@ def scene_in_views_text(components: list[str]) -> str:
     return (f"the scene repeats under the camera's shifts (a periodic texture) in the {', '.join(components)} "
             "measurements across views: their errors take the views' spread, and a weak pattern there cannot be told "
             "from the scene")
+
+
+def scene_in_single_views_text(found: dict[str, Any]) -> str | None:
+    """One line for people from ``Measurements.summary()['scene_in_single_views']`` (None: no view shows it)."""
+    parts = []
+    if found["fixed_pattern"]:
+        parts.append(f"in the fixed pattern of {found['fixed_pattern']} of {found['views']} views without a partner "
+                     f"(neighbouring pixels correlated: fixed pattern, column and row errors take the scene's variance, "
+                     f"up to {found['scene_dn2_max']:.3g} DN^2)")
+    if found["outlier_pixels"]:
+        parts.append(f"in the outlier pixels of {found['outlier_pixels']} (their neighbours share their offset: "
+                     "the scene's specks, not counted)")
+    if not parts:
+        return None
+    return "the scene shows " + "; ".join(parts) + "; partner views (a moved camera) or a flat chart separate it"
 
 
 def _widen_where_the_scene_shows(cells: list[Cell]) -> list[str]:

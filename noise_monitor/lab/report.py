@@ -19,7 +19,7 @@ from ..physics import NoiseModel  # noqa: E402
 from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve, signed_sigma  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
-from .measure import BLOCK, field_conditions_text, scene_in_views_text  # noqa: E402
+from .measure import BLOCK, field_conditions_text, scene_in_single_views_text, scene_in_views_text  # noqa: E402
 from .noise_events import events_text  # noqa: E402
 from .shape import fixed_shape_text  # noqa: E402
 
@@ -301,6 +301,9 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     gaps += [f"{what}: {why}" for what, why in summary["measurement"].get("not_measured", {}).items()]
     if summary["measurement"].get("scene_in_partner_views"):
         gaps.append(scene_in_views_text(summary["measurement"]["scene_in_partner_views"]))
+    if line := scene_in_single_views_text(summary["measurement"].get("scene_in_single_views", {"fixed_pattern": 0,
+                                                                                              "outlier_pixels": 0})):
+        gaps.append(line)
     if gaps:
         parts.append("<p><b>Not measured</b><ul>" + "".join(f"<li>{html.escape(g)}</li>" for g in gaps) + "</ul></p>")
     if "fixed_pattern_shape" in summary["measurement"]:

@@ -31,6 +31,7 @@ from scipy.stats import f as f_dist
 from ..physics import Effect
 from ..physics.sensor import dark_electrons
 from .compare import Comparison, as_measured, gaussian_fixed
+from .measure import CROSS_VIEW
 
 #: a component's weighted mean excess must be this many standard errors from zero to count
 Z_SIGNIFICANT = 5.0
@@ -86,9 +87,18 @@ class _Obs:
     corner: str | None = None
 
 
-def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool, dark: dict[int, float],
-                  corner: tuple[str, np.ndarray] | None = None) -> _Obs | None:
-    """The component's excess per cell (per segment when pooled); ``corner``: (its name, each row's mean
+def cross_view_condition(values: dict[int, float], here: int, partners: dict[int, float]) -> float:
+    """A segment condition (exposure, gain, dark current) where a cross-view component is measured: the geometric
+    mean of its value ``here`` and in the ``partners`` (segment -> share of the weight)."""
+    logs = sum(share * math.log(max(values[j], 1e-300)) for j, share in partners.items())
+    return math.exp(0.5 * (math.log(max(values[here], 1e-300)) + logs / max(sum(partners.values()), 1e-300)))
+
+
+def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool,
+                  conditions: dict[str, dict[int, float]], corner: tuple[str, np.ndarray] | None = None) -> _Obs | None:
+    """The component's excess per cell (per segment when pooled), with the conditions it is measured at (cross-view
+    components: the geometric means over the views, ``cell_table``'s ``cross_view``); ``conditions``: per
+    segment, its ``exposure``, ``gain`` (linear) and ``dark`` (dark current); ``corner``: (its name, each row's mean
     of its shape), a factor of the law."""
     seen: set[int] = set()
     data = []
@@ -100,9 +110,12 @@ def _observations(rows: Sequence[dict[str, Any]], comp: str, pooled: bool, dark:
                 continue
             seen.add(r["segment"])
         m, p = r["measured_var_dn2"][comp], r["model_var_dn2"].get(comp, 0.0)
+        cross = r.get("cross_view") if comp in CROSS_VIEW else None
+        at = ([r["intensity_dn"]] + [conditions[k][r["segment"]] for k in ("exposure", "gain", "dark")] if cross is None
+              else [cross["intensity_dn"]] + [cross_view_condition(conditions[k], r["segment"], cross["partners"])
+                                              for k in ("exposure", "gain", "dark")])
         data.append((m - p, max(r["measured_var_err_dn2"][comp], 1e-9), p, sum(r["model_var_dn2"].values()),
-                     r["intensity_dn"], r["exposure_time_s"], 10.0 ** (r["gain_db"] / 20.0), dark[r["segment"]],
-                     1.0 if corner is None else corner[1][i]))
+                     *at, 1.0 if corner is None else corner[1][i]))
     if not data:
         return None
     excess, error, model, total, intensity, exposure, gain, dark_rate, position = np.asarray(data, dtype=float).T
@@ -223,14 +236,16 @@ def position_pattern(comp: Comparison, name: str, extra: Sequence[Effect] = (),
     segment); ``strength``: the block excess variance (DN^4 summed over blocks) the shape explains.
 
     The fixed component counts only in segments measured across views: a single view's fixed pattern is
-    the hold mean's residual, where a region of fine scene texture would read as a position law. A
+    the hold mean's residual, where a region of fine scene texture would read as a position law (so does a single
+    frame's noise where the view shows the scene: ``SegmentMeasurement.scene_dn2``). A
     component whose partner views showed the scene (``Measurements.scene_in_views``) has no position
     pattern: the scene's share of each block follows the optics (vignetting), not the sensor."""
     if name in comp.meas.scene_in_views:
         return None
     xs, segs, pos, vs = [], [], [], []
     for j, (sb, comps) in enumerate(comp.predict_with(extra)):
-        if name not in sb.seg.values or (name == "fixed" and not sb.seg.partners):
+        if (name not in sb.seg.values or (name == "fixed" and not sb.seg.partners)
+                or (name == "single" and sb.seg.scene_dn2 is not None)):
             continue
         xs.append(sb.seg.values[name][sb.rep] - as_measured(sb, comps, name))
         segs.append(np.full(sb.rep.size, j))
@@ -288,12 +303,14 @@ def _f_p_value(drop: float, rss1: float, segments: int, blocks: int) -> float:
 
 
 def _pixel_counts(comp: Comparison) -> dict[str, float]:
-    """Outlier pixels of the frame averages and temporal spikes: observed, expected, z."""
+    """Outlier pixels of the frame averages (in views whose outliers are not the scene's specks) and temporal
+    spikes: observed, expected, z."""
     out_obs = out_exp = spk_obs = spk_exp = checked = 0.0
     for sb, count in zip(comp.segments, comp.outlier_expectation()[0]):
         seg = sb.seg
-        out_obs += seg.outlier_pixels
-        out_exp += float(count)
+        if seg.outliers_measured:
+            out_obs += seg.outlier_pixels
+            out_exp += float(count)
         spk_obs += seg.temporal_spikes
         spk_exp += seg.temporal_spikes_expected
         checked += seg.pixels_checked
@@ -309,7 +326,9 @@ def _pixel_counts(comp: Comparison) -> dict[str, float]:
 def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) -> dict[str, Any]:
     """The residual of ``comp`` (model vs measurement) described in physics terms (see module doc)."""
     rows = comp.cell_table() if rows is None else rows
-    dark = {sb.seg.index: dark_electrons(sb.seg.meta, 1.0, sb.seg.meta.temperature_k) for sb in comp.segments}
+    conditions = {"exposure": {s.index: s.meta.exposure_time_s for s in comp.meas.segments},
+                  "gain": {s.index: 10.0 ** (s.meta.gain_db / 20.0) for s in comp.meas.segments},
+                  "dark": {s.index: dark_electrons(s.meta, 1.0, s.meta.temperature_k) for s in comp.meas.segments}}
     pooled_names = ("column", "row", "temporal_column", "temporal_row")
     stats: dict[str, dict[str, Any]] = {}
     observations: dict[str, _Obs] = {}
@@ -317,7 +336,7 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
     for name in ("temporal", "fixed", "single") + pooled_names:
         pixelwise = name in ("temporal", "fixed", "single")
         found = position_pattern(comp, name) if pixelwise and any(name in r["measured_var_dn2"] for r in rows) else None
-        obs = _observations(rows, name, name in pooled_names, dark, _corner_factor(comp, found))
+        obs = _observations(rows, name, name in pooled_names, conditions, _corner_factor(comp, found))
         if obs is None:
             continue
         observations[name] = obs

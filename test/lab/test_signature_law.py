@@ -1,0 +1,38 @@
+"""The residual's law for a fixed pattern measured across camera poses: each cell's fixed variance is a cross energy
+with other views, a_here x a_partner, so for a pattern of variance ~ I^n it grows as (I_here I_partner)^(n/2). Fitted
+against the cell's own intensity (as it was), a PRNU (n = 2) read as "proportional to the intensity" and the plug-in
+skeleton written from it had the wrong law."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.lab import analyze
+from noise_monitor.lab.signature import cross_view_condition
+
+torch.set_num_threads(1)
+
+
+def test_a_cross_view_condition_is_the_geometric_mean_over_the_views() -> None:
+    exposure = {0: 0.01, 1: 0.04, 2: 0.16}
+    assert cross_view_condition(exposure, 0, {1: 1.0}) == pytest.approx(0.02)
+    assert cross_view_condition(exposure, 0, {1: 0.5, 2: 0.5}) == pytest.approx((0.01 * (0.04 * 0.16) ** 0.5) ** 0.5)
+
+
+def test_a_prnu_reads_as_growing_with_the_intensity_squared(tmp_path: Path) -> None:
+    """A 2 % PRNU on a 64-frame campaign (holds at several poses): before, intensity power 1, amplitude 4.8 DN^2 at
+    128 DN (truth 6.55) and a skeleton with ``(v / 128) ** 1``; now power 2 and the skeleton's law with it."""
+    bag = simulate_bag(tmp_path / "prnu.mcap", "ev76c661", "campaign", frames=64, width=160, height=128, seed=3,
+                       effects=["prnu=2"], fps=10.0)
+    skeleton = tmp_path / "skeleton.py"
+    lab = analyze(bag, "ev76c661", estimator=None, write_plugin_skeleton=skeleton)
+    crossed = [r for r in lab["cells"] if "cross_view" in r]
+    assert crossed and all(r["cross_view"]["partners"] for r in crossed)
+    law = lab["unexplained"]["law"]
+    assert lab["unexplained"]["dominant_component"] == "fixed"
+    assert (law["intensity_power"], law["exposure_power"], law["gain_power"]) == (2, 0, 0)
+    assert law["amplitude_dn2"] == pytest.approx((0.02 * 128.0) ** 2, rel=0.2)
+    assert "law = (v / 128) ** 2" in skeleton.read_text()
