@@ -69,11 +69,12 @@ def run(args: argparse.Namespace) -> int:
     if scene := scene_in_single_views_text(m["scene_in_single_views"]):
         print(f"  {scene}")
     top = summary["candidates"][:5]
+    width = max([18, *(len(c["effect"]) for c in top)])  # a plug-in's long name keeps the columns aligned
     for c in top:
         mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "
         params = ", ".join(_param_text(k, v, c["param_ranges"].get(k)) for k, v in c["params"].items())
         same = f"  (indistinguishable from {', '.join(c['equivalent_to'])})" if c["equivalent_to"] else ""
-        print(f" {mark} {c['rank']:2d} {c['effect']:18s} explained {c['explained_fraction']:6.1%}  {params}{same}")
+        print(f" {mark} {c['rank']:2d} {c['effect']:{width}s} explained {c['explained_fraction']:6.1%}  {params}{same}")
     print(summary["diagnosis"])
     refits = {c["rank"]: c["beyond"] for c in summary["candidates"] if c["beyond"]}  # one per group
     for rank, beyond in refits.items():

@@ -383,6 +383,19 @@ def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     return r - lines, lines
 
 
+def _without_line_noise(stack: np.ndarray, light: LightChange | None) -> np.ndarray:
+    """The hold's frames (k x H x W) less each frame's column and row offsets: the medians over the rows (columns) of
+    its deviation from the hold mean, once the light's change is out. For the pure-noise test alone: temporal column
+    or row noise (a noisy ADC reference) moves the block means from frame to frame as a scene change would, but it is
+    the camera's noise, measured as ``temporal_column`` / ``temporal_row`` (1 DN of column noise left a quarter of a
+    campaign's blocks out, 2026-11-29)."""
+    steady = stack if light is None else light.undo(stack)
+    dev = steady - steady.mean(axis=0)
+    col = np.median(dev, axis=1, keepdims=True)
+    row = np.median(dev - col, axis=2, keepdims=True)
+    return stack - col - row
+
+
 def _robust_sigma(d: np.ndarray) -> np.ndarray:
     """Robust per-pixel sigma of de-lined residuals: rms of all but the largest TRIM_PIXELS |values|,
     rescaled for a Gaussian (not discretized by 8-bit values as a MAD would be)."""
@@ -650,7 +663,8 @@ class _SegmentAccumulator:
             # frame differences that do not fit pure noise: residual motion, flicker, a moving object
             # (blinking pixels are temporal noise, measured as temporal_spikes, not a scene change)
             blinking = self._blinking(k)
-            run = block_temporal(np.stack(self.images), b, exclude=blinking, whiteness=True)
+            run = block_temporal(_without_line_noise(np.stack(self.images), self.light), b, exclude=blinking,
+                                 whiteness=True)
             changed = _largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER
             moving = keep & (~run.accepted | changed)
             still = keep & run.still & ~changed
