@@ -755,7 +755,7 @@ class Comparison:
     def cell_table(self, extra: Sequence[Effect] = ()) -> list[dict[str, Any]]:
         """One row per cell: conditions, measured and model sigma (DN) per component and in total
         (with ``extra`` effects: the additive approximation of :meth:`predict_with`); the measured sigma's standard
-        error on the model's side (:func:`sigma_error`)."""
+        error below and above it and on the model's side (:func:`sigma_error`)."""
         pairs = self.predict_with(extra)
         rows = []
         t0 = self.meas.segments[0].stamp_ns
@@ -768,6 +768,7 @@ class Comparison:
                 err_total = math.sqrt(sum(e * e for e in cell.errors.values()))
                 model_total = sum(model[c] for c in MEASURED)
                 ms, mm = math.sqrt(max(meas_total, 0.0)), math.sqrt(max(model_total, 0.0))
+                below, above = sigma_error(ms, err_total, above=True), sigma_error(ms, err_total, above=False)
                 rows.append({
                     "segment": seg.index,
                     "time_s": (seg.stamp_ns - t0) * 1e-9,
@@ -778,7 +779,9 @@ class Comparison:
                     "blocks": int(cell.block_index.size),
                     "frames": seg.n_frames,
                     "measured_sigma_dn": ms,
-                    "measured_sigma_err_dn": sigma_error(ms, err_total, above=ms >= mm),
+                    "measured_sigma_err_dn": below if ms >= mm else above,
+                    "measured_sigma_err_below_dn": below,
+                    "measured_sigma_err_above_dn": above,
                     "model_sigma_dn": mm,
                     "residual_dn": ms - mm,
                     "measured_var_dn2": dict(cell.values),

@@ -50,7 +50,7 @@ def _nlf_plot(summary: dict[str, Any], comp: Comparison, after: NoiseModel | Non
         seg = segs[i].seg
         rows = [r for r in cells if r["segment"] == seg.index]
         x = [r["intensity_dn"] for r in rows]
-        ax.errorbar(x, [r["measured_sigma_dn"] for r in rows], yerr=[r["measured_sigma_err_dn"] for r in rows],
+        ax.errorbar(x, [r["measured_sigma_dn"] for r in rows], yerr=_sigma_errors(rows),
                     fmt="o", ms=4, color="k", label="measured (total)")
         if "temporal" in rows[0]["measured_var_dn2"]:
             ax.plot(x, np.sqrt(np.maximum([r["measured_var_dn2"]["temporal"] for r in rows], 0)), "s", ms=3,
@@ -106,11 +106,17 @@ def _xi_plot(views: dict[str, Any]) -> str:
     return _png(fig)
 
 
+def _sigma_errors(rows: list[dict[str, Any]]) -> list[list[float]]:
+    """Error bars (below, above) of the cells' measured sigma: they differ where the variance's error is as large as
+    the variance (a view that shows the scene: down to 0 below)."""
+    return [[r["measured_sigma_err_below_dn"] for r in rows], [r["measured_sigma_err_above_dn"] for r in rows]]
+
+
 def _residual_plot(summary: dict[str, Any]) -> str:
     fig, ax = plt.subplots(figsize=(7, 3.6))
     cells = summary["cells"]
     ax.errorbar([r["intensity_dn"] for r in cells], [r["residual_dn"] for r in cells],
-                yerr=[r["measured_sigma_err_dn"] for r in cells], fmt="o", ms=3, alpha=0.7, color="tab:red",
+                yerr=_sigma_errors(cells), fmt="o", ms=3, alpha=0.7, color="tab:red",
                 label=f"before: rms {summary['rms_error_raw_dn']:.3f} DN (net {summary['rms_error_dn']:.3f})")
     if "cells_after" in summary:
         after = summary["cells_after"]

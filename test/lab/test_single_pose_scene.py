@@ -57,6 +57,10 @@ def test_a_short_clip_of_a_textured_scene_claims_nothing(tmp_path: Path, capsys:
     assert not any(c["significant"] for c in lab["candidates"]), [c["effect"] for c in lab["candidates"]]
     assert not lab["unexplained"]["significant"]
     assert lab["rms_error_dn"] < 0.5
+    # a cell's sigma error below it holds the scene's variance (down to the model), above it far less
+    worst = max(lab["cells"], key=lambda r: r["measured_sigma_dn"])
+    assert worst["measured_sigma_dn"] - worst["measured_sigma_err_below_dn"] < 1.5 * worst["model_sigma_dn"]
+    assert worst["measured_sigma_err_above_dn"] < 0.7 * worst["measured_sigma_err_below_dn"]
     assert lab["rms_error_by_component_dn"]["temporal"] < 0.05  # the temporal noise, measured from the frames, is right
 
 
