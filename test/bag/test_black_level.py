@@ -159,7 +159,10 @@ def test_under_every_field_condition_the_pair_replaces_a_weaker_single_claim(tmp
     assert cands["black_level"]["beyond"]["params"]["offset_dn"] == pytest.approx(BLACK, abs=2.0)
     assert cands["extra_read_noise"]["beyond"]["params"]["sigma_e"] == pytest.approx(8.0, abs=1.0)
     law = cands["dark_current_law"]
-    assert law["significant_alone"] and law["explained_by"] == ["black_level", "extra_read_noise"]
+    # not claimed; where the forward selection alone takes it, the pair explains it (with line noise out of the lab's
+    # pure-noise test, 2026-11-29, this bag keeps 89 cells instead of 81 and the law is no longer significant alone)
+    assert not law["significant"]
+    assert not law["significant_alone"] or law["explained_by"] == ["black_level", "extra_read_noise"]
 
 
 def test_the_lab_finds_an_unstated_black_level(tmp_path: Path, pedestal: CameraProfile) -> None:
