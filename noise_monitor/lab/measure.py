@@ -120,7 +120,8 @@ MIN_CHANGE_CLUSTER = 4
 SCENE_SIGMAS = 4.0
 #: the lag-1 excess per DN^2 of scene variance in a flat block: 0.44-0.61 measured on the campaigns' photographs
 #: and the lab chart (clean cameras, where the single view's fixed part is all scene); the lower end taken, so the
-#: scene's variance (excess / this) errs high; a texture finer than the optics' blur (white at pixel scale) escapes
+#: scene's variance (excess / this) errs high; a texture finer than the optics' blur (white at pixel scale) escapes,
+#: and one of scikit-learn's photographs (an evaluation, not tuned on) gave 0.27: a third of its variance escapes
 SCENE_LAG1_PER_DN2 = 0.4
 #: a single view's outlier pixels are the scene's specks when their 4-neighbours carry more than this share of their
 #: offset (mean over the view's outlier pixels, SCENE_SIGMAS standard errors above it, the errors a defect's noisy
