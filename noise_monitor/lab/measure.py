@@ -50,6 +50,7 @@ from ..measure.temporal import (
     LightChange,
     block_temporal,
     camera_shift,
+    energy_and_lag,
     light_and_motion,
     motion_rms,
     steady_run,
@@ -351,28 +352,24 @@ def _lag1(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @lru_cache(maxsize=8)
-def _lag1_operators(b: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """(the projector taking a plane-fit residual's column and row means out, the neighbour-pair form (each
-    horizontal and vertical pair once), white noise's expected ratio of the pair sum to the energy)."""
+def _white_lag1(b: int) -> float:
+    """White noise's expected ratio of :func:`..measure.temporal.energy_and_lag`'s neighbour sum to its energy on
+    plane-fit residuals of b x b blocks (exact, from the projector: -0.25 at 8 x 8)."""
     n = b * b
     col = np.kron(np.ones((b, b)) / b, np.eye(b))  # pixel (i, j) -> mean of column j
     row = np.kron(np.eye(b), np.ones((b, b)) / b)  # pixel (i, j) -> mean of row i
-    lines_out = (np.eye(n) - col) @ (np.eye(n) - row)
+    proj = (np.eye(n) - col) @ (np.eye(n) - row) @ _plane_fit(b)[0]
     step = np.eye(b, k=1)
-    pairs = 0.5 * (np.kron(np.eye(b), step) + np.kron(step, np.eye(b)))
-    pairs = pairs + pairs.T
-    proj = lines_out @ _plane_fit(b)[0]
-    white = float(np.trace(proj.T @ pairs @ proj) / np.trace(proj.T @ proj))
-    return lines_out, pairs, white
+    pairs = 0.5 * (np.kron(np.eye(b), step) + np.kron(step, np.eye(b)))  # each neighbour pair once in x^T (P + P^T) x
+    return float(np.trace(proj.T @ (pairs + pairs.T) @ proj) / np.trace(proj.T @ proj))
 
 
 def _lag1_excess(r: np.ndarray, b: int) -> np.ndarray:
     """(N,) per block, the mean product of neighbouring pixels of plane-fit residuals ``r`` (N, b*b) with the
     column and row means taken out, beyond what white noise of the same energy gives (DN^2, 0 in expectation for
     any white pattern, temporal or fixed; positive for a spatially correlated scene)."""
-    lines_out, pairs, white = _lag1_operators(b)
-    d = r @ lines_out.T
-    return (np.einsum("ni,ij,nj->n", d, pairs, d) - white * np.sum(d * d, axis=1)) / (2 * b * (b - 1))
+    energy, lag = energy_and_lag(r[None], b)
+    return (lag - _white_lag1(b) * energy[0]) / (2 * b * (b - 1))
 
 
 def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -384,14 +381,14 @@ def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     return r - lines, lines
 
 
-def _without_line_noise(stack: np.ndarray, light: LightChange | None) -> np.ndarray:
+def _without_line_noise(stack: np.ndarray, lit: np.ndarray) -> np.ndarray:
     """The hold's frames (k x H x W) less each frame's column and row offsets: the medians over the rows (columns) of
-    its deviation from the hold mean, once the light's change is out. For the pure-noise test alone: temporal column
+    its deviation from the hold mean in ``lit`` (the frames with the light's change out). For the pure-noise test
+    alone: temporal column
     or row noise (a noisy ADC reference) moves the block means from frame to frame as a scene change would, but it is
     the camera's noise, measured as ``temporal_column`` / ``temporal_row`` (1 DN of column noise left a quarter of a
     campaign's blocks out, 2026-11-29)."""
-    steady = stack if light is None else light.undo(stack)
-    dev = steady - steady.mean(axis=0)
+    dev = lit - lit.mean(axis=0)
     col = np.median(dev, axis=1, keepdims=True)
     row = np.median(dev - col, axis=2, keepdims=True)
     return stack - col - row
@@ -536,15 +533,16 @@ class _SegmentAccumulator:
         self.s2_col += col
         self.s2_row += row
 
-    def _steady(self) -> None:
+    def _steady(self, stack: np.ndarray) -> np.ndarray:
         """The frames' sums, energies and per-pixel variances again, with the light's change from frame to frame
         (flicker, a rolling shutter's bands: :func:`..measure.temporal.light_and_motion`) and the camera's vibration
         (:func:`..measure.temporal.steady_run`) taken out of every pixel (nothing when neither shows); the frames
-        themselves stay for the pure-noise test, which rejects the blocks where the motion shows."""
-        self.light, lit, displacement, _ = light_and_motion(np.stack(self.images), self.b)
+        themselves (``stack``) stay for the pure-noise test, which rejects the blocks where the motion shows.
+        Returns the frames with the light's change out."""
+        self.light, lit, displacement, _ = light_and_motion(stack, self.b)
         steady = steady_run(lit, self.b, displacement)
         if steady is None and self.light is None:
-            return
+            return lit
         zero = np.zeros_like(self.s2)
         self.s1, self.s2_pixel = np.zeros_like(self.s1), np.zeros_like(self.s2_pixel)
         self.s2, self.s2_col, self.s2_row = zero, zero.copy(), zero.copy()
@@ -557,6 +555,7 @@ class _SegmentAccumulator:
             self.pixel_var = sum((_blocks(r, self.b) @ self.proj) ** 2 for r in steady.residual) / steady.dof
             self.dof = steady.dof
             self.motion_px = motion_rms(displacement[0])
+        return lit
 
     def finish(self, grid: tuple[int, int], shape: tuple[int, int] | None = None) -> list[_Full]:
         """The hold's measurement, or those of its parts when its noise changed (:mod:`.hold_change`)."""
@@ -599,7 +598,8 @@ class _SegmentAccumulator:
         return hold_change.cut(residuals, light, stepped)
 
     def _measure(self, grid: tuple[int, int], shape: tuple[int, int] | None) -> _Full:
-        self._steady()
+        stack = np.stack(self.images)
+        lit = self._steady(stack)
         b, k = self.b, len(self.frames)
         rm = self.s1 / k
         v = self.mean / k
@@ -664,8 +664,7 @@ class _SegmentAccumulator:
             # frame differences that do not fit pure noise: residual motion, flicker, a moving object
             # (blinking pixels are temporal noise, measured as temporal_spikes, not a scene change)
             blinking = self._blinking(k)
-            run = block_temporal(_without_line_noise(np.stack(self.images), self.light), b, exclude=blinking,
-                                 whiteness=True)
+            run = block_temporal(_without_line_noise(stack, lit), b, exclude=blinking, whiteness=True)
             changed = _largest_cluster(blinking, b) >= MIN_CHANGE_CLUSTER
             moving = keep & (~run.accepted | changed)
             still = keep & run.still & ~changed
@@ -777,12 +776,7 @@ def _specks_of_the_scene(f: _Full, b: int) -> bool:
         return False
     c, out = f.centred[f.keep].reshape(-1, b, b), f.is_out[f.keep].reshape(-1, b, b)
     sigma = np.broadcast_to(f.robust[f.keep][:, None, None], c.shape)
-    near, count = np.zeros(c.shape), np.zeros(c.shape)
-    valid = np.where(out, 0.0, c)
-    for axis in (1, 2):
-        for step in (1, -1):
-            near += np.roll(valid, step, axis=axis) * _inside(b, axis, step)
-            count += np.roll(~out, step, axis=axis) * _inside(b, axis, step)
+    near, count = (_neighbour_sum(np.where(out, 0.0, c)), _neighbour_sum((~out).astype(float)))
     sel = out & (count > 0)
     if not sel.any():
         return False
@@ -791,11 +785,10 @@ def _specks_of_the_scene(f: _Full, b: int) -> bool:
     return bool(share.mean() - NEIGHBOUR_SHARE > SCENE_SIGMAS * se)
 
 
-def _inside(b: int, axis: int, step: int) -> np.ndarray:
-    """(1, b, b) 1 where ``np.roll`` by ``step`` along ``axis`` brings a neighbour from inside the block, else 0."""
-    m = np.ones((1, b, b))
-    m[(slice(None), 0 if step == 1 else -1, slice(None)) if axis == 1 else (slice(None), slice(None), 0 if step == 1 else -1)] = 0.0
-    return m
+def _neighbour_sum(x: np.ndarray) -> np.ndarray:
+    """(N, b, b) per pixel, the sum of its 4-neighbours' values inside its block (N, b, b)."""
+    p = np.pad(x, ((0, 0), (1, 1), (1, 1)))
+    return p[:, :-2, 1:-1] + p[:, 2:, 1:-1] + p[:, 1:-1, :-2] + p[:, 1:-1, 2:]
 
 
 def _scene_in_single_view(f: _Full) -> np.ndarray | None:

@@ -178,7 +178,7 @@ def _scene_p(residual: np.ndarray, b: int) -> np.ndarray:
     smooth, noise is white; calibrated on white noise: ``WHITE_LAG``). A white texture moving under the
     block all hold long passes both: locally it is noise."""
     k = residual.shape[0]
-    energy, lag = _energy_and_lag(residual, b)
+    energy, lag = energy_and_lag(residual, b)
     energy = np.maximum(energy, 1e-12)
     nu = (b - 1) ** 2 - (N_REGRESSORS - 1)  # per frame, after the line means and the other regressors
     stat = nu * (k * np.log(energy.mean(axis=0)) - np.log(energy).sum(axis=0)) / (1.0 + (k + 1) / (3.0 * k * nu))
@@ -186,7 +186,7 @@ def _scene_p(residual: np.ndarray, b: int) -> np.ndarray:
     return np.minimum(chi2_dist.sf(stat, k - 1), norm_dist.sf((lag / energy.sum(axis=0) - mu) / sd))
 
 
-def _energy_and_lag(residual: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+def energy_and_lag(residual: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     """((k, N) energy of each frame's residual after its row and column means in each block, (N,) the sum over
     frames of its products with its right and lower neighbours) for ``residual`` (k, N, b*b)."""
     k = residual.shape[0]
@@ -214,7 +214,7 @@ def white_lag_monte_carlo(b: int, k: int = 64) -> tuple[float, float]:
     frames of b x b blocks (seeded Monte-Carlo through the same regressors, 4,096 blocks)."""
     x = np.random.default_rng(12345).normal(0.0, 1.0, (k, 64 * b, 64 * b)) + 100.0
     _, d, q, coef = _regression(x, b, np.ones((64 * 64, b * b), dtype=bool))
-    energy, lag = _energy_and_lag(d - np.einsum("knr,npr->knp", coef, q, optimize=True), b)
+    energy, lag = energy_and_lag(d - np.einsum("knr,npr->knp", coef, q, optimize=True), b)
     rho = lag / energy.sum(axis=0)
     return float(rho.mean()), float(rho.std() * math.sqrt(k - 1))
 
