@@ -60,17 +60,11 @@ def settings_key(settings: CampaignSettings) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def _duplicates(paths: list[str], todo: list[str], manifest: Manifest) -> dict[str, dict[str, Any]]:
-    """Manifest entries for the bags of ``todo`` whose content a bag before them in ``paths`` has (to be replayed
-    now, or finished before): ``duplicate_of`` names it. Only bags of a size another bag has are hashed here; the
-    others' content is hashed by the worker that replays them."""
-    known = {p: manifest.entries[p] for p in paths if p not in todo and p in manifest.entries}
-    sizes: dict[str, tuple[int, int]] = {}
-    for p in todo:
-        try:
-            sizes[p] = fingerprint(Path(p))
-        except OSError:
-            continue  # gone: its worker reports it
+def _duplicates(paths: list[str], sizes: dict[str, tuple[int, int]], manifest: Manifest) -> dict[str, dict[str, Any]]:
+    """Manifest entries for the bags to run (``sizes``: their fingerprints) whose content a bag before them in
+    ``paths`` has (to be replayed now, or finished before): ``duplicate_of`` names it. Only bags of a size another
+    bag has are hashed here; the others' content is hashed by the worker that replays them."""
+    known = {p: manifest.entries[p] for p in paths if p not in sizes and p in manifest.entries}
     by_size: dict[int, list[str]] = {}
     for p in paths:
         size = sizes[p][0] if p in sizes else known[p].get("size") if p in known else None
@@ -170,9 +164,10 @@ def run_campaign(
     paths = [str(b.resolve()) for b in bags]
     settings = replace(settings, key=settings_key(settings))  # the bags' outputs of these settings: their own folder
     manifest = Manifest(out, settings.key)
-    todo = [p for p in paths if not manifest.finished(p, *fingerprint(Path(p)))]
+    prints = {p: fingerprint(Path(p)) for p in paths}
+    todo = [p for p in paths if not manifest.finished(p, *prints[p])]
     resumed = len(paths) - len(todo)
-    for path, entry in _duplicates(paths, todo, manifest).items():  # the same content is replayed once
+    for path, entry in _duplicates(paths, {p: prints[p] for p in todo}, manifest).items():  # content replayed once
         manifest.record(entry)
         todo.remove(path)
     executor = _executor(backend, ray_address, workers, timeout_s, problems) if todo else None

@@ -307,8 +307,7 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     gaps += [f"{what}: {why}" for what, why in summary["measurement"].get("not_measured", {}).items()]
     if summary["measurement"].get("scene_in_partner_views"):
         gaps.append(scene_in_views_text(summary["measurement"]["scene_in_partner_views"]))
-    if line := scene_in_single_views_text(summary["measurement"].get("scene_in_single_views", {"fixed_pattern": 0,
-                                                                                              "outlier_pixels": 0})):
+    if line := scene_in_single_views_text(summary["measurement"]["scene_in_single_views"]):
         gaps.append(line)
     if gaps:
         parts.append("<p><b>Not measured</b><ul>" + "".join(f"<li>{html.escape(g)}</li>" for g in gaps) + "</ul></p>")

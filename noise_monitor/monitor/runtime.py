@@ -27,9 +27,9 @@ from .frame import Frame
 from .pipeline import RUNTIME_SETTABLE, Estimator, FrameResult, Monitor
 
 COLORS = ("luma", "green")
-#: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
 #: the node's parameters that ``ros2 param set`` may change while it runs (the monitor's settings and the black level)
 SETTABLE_PARAMETERS = (*RUNTIME_SETTABLE, "black_level_dn")
+#: Parameters of the runtime beyond MonitorConfig: name -> (default, description).
 RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "image_topic": ("image", "sensor_msgs/Image input (sensor-data QoS); relative names resolve in the node's "
                              "namespace and are remappable"),
