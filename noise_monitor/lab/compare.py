@@ -768,7 +768,7 @@ class Comparison:
                 err_total = math.sqrt(sum(e * e for e in cell.errors.values()))
                 model_total = sum(model[c] for c in MEASURED)
                 ms, mm = math.sqrt(max(meas_total, 0.0)), math.sqrt(max(model_total, 0.0))
-                below, above = sigma_error(ms, err_total, above=True), sigma_error(ms, err_total, above=False)
+                below, above = sigma_error(ms, err_total, below=True), sigma_error(ms, err_total, below=False)
                 rows.append({
                     "segment": seg.index,
                     "time_s": (seg.stamp_ns - t0) * 1e-9,
@@ -828,11 +828,11 @@ def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[st
     return rows
 
 
-def sigma_error(sigma: float, var_err: float, above: bool) -> float:
-    """The standard error (DN) of a measured sigma from that of its variance (DN^2), on one side: below it when the
-    measurement lies ``above`` the model, else above it. They differ where the variance's error is comparable to the
+def sigma_error(sigma: float, var_err: float, below: bool) -> float:
+    """The standard error (DN) of a measured sigma from that of its variance (DN^2), on one side: ``below`` it (the
+    side of a model under the measurement) or above it. They differ where the variance's error is comparable to the
     variance (a single view's scene: the sigma could be down to 0); var_err / (2 sigma) on either side elsewhere."""
-    if above:
+    if below:
         return sigma - math.sqrt(max(sigma * sigma - var_err, 0.0))
     return math.sqrt(sigma * sigma + var_err) - sigma
 

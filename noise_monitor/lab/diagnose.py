@@ -404,7 +404,7 @@ def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
         sigma = max(r["measured_sigma_dn"], MIN_SIGMA_DN)
         for c, m in r["measured_var_dn2"].items():
             d = sigma - math.sqrt(max(total - m + r["model_var_dn2"].get(c, 0.0), 0.0))
-            se = sigma_error(sigma, r["measured_var_err_dn2"][c], above=d >= 0.0)
+            se = sigma_error(sigma, r["measured_var_err_dn2"][c], below=d >= 0.0)
             out.setdefault(c, []).append(d * d - se * se)
     return {c: math.sqrt(max(float(np.mean(v)), 0.0)) for c, v in out.items()}
 

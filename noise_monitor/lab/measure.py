@@ -384,10 +384,9 @@ def _delined(r: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
 def _without_line_noise(stack: np.ndarray, lit: np.ndarray) -> np.ndarray:
     """The hold's frames (k x H x W) less each frame's column and row offsets: the medians over the rows (columns) of
     its deviation from the hold mean in ``lit`` (the frames with the light's change out). For the pure-noise test
-    alone: temporal column
-    or row noise (a noisy ADC reference) moves the block means from frame to frame as a scene change would, but it is
-    the camera's noise, measured as ``temporal_column`` / ``temporal_row`` (1 DN of column noise left a quarter of a
-    campaign's blocks out, 2026-11-29)."""
+    alone: temporal column or row noise (a noisy ADC reference) moves the block means from frame to frame as a scene
+    change would, but it is the camera's noise, measured as ``temporal_column`` / ``temporal_row`` (1 DN of column
+    noise left a quarter of a campaign's blocks out, 2026-11-29)."""
     dev = lit - lit.mean(axis=0)
     col = np.median(dev, axis=1, keepdims=True)
     row = np.median(dev - col, axis=2, keepdims=True)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from noise_monitor.bag.reader import open_bag
 from noise_monitor.lab.compare import Comparison, baseline_effects
 from noise_monitor.lab.measure import measure_frames
 from noise_monitor.lab.quantization import quantized_variance
@@ -187,8 +188,6 @@ def test_temporal_row_noise_leaves_no_block_out_of_the_temporal_noise(outside, t
     the pure-noise test left 127 blocks of a small campaign out for it (3 of its 18 cells), though the camera's own
     noise. With each frame's row and column offsets out of the test (not of the measurement), the same blocks and
     cells as the clean campaign."""
-    from noise_monitor.bag.reader import open_bag
-
     def measured(effect):
         bag = outside.campaign_bag(tmp_path / f"{effect}.mcap", effect, frames=64, width=160, height=128, seed=3)
         with open_bag(bag) as reader:
