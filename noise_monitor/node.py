@@ -130,16 +130,32 @@ class LatestJobWorker(Generic[J]):
         self._thread.join(timeout=timeout_s)
 
 
+def as_declared_types(params: list[Parameter]) -> list[Parameter]:
+    """The parameters with an integer given for one of the monitor's float parameters made a double (ROS keeps
+    the type it is given: ``ros2 param set ... xi_threshold_dn 3`` would store an INTEGER and ``ros2 param get``
+    show it so); anything else unchanged, for the set callback to validate."""
+    table = parameter_table()
+    return [Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+            if p.name in table and isinstance(table[p.name][0], float) and p.type_ == Parameter.Type.INTEGER else p
+            for p in params]
+
+
 class NoiseMonitorNode(Node):
     """The live monitor; see the module docstring."""
 
     def __init__(self, node_name: str = NODE_NAME, estimator: Any = None, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        p = {}
-        for name, (default, description) in parameter_table().items():  # the unsettable read-only while it runs
-            desc = ParameterDescriptor(description=description, dynamic_typing=True,
-                                       read_only=name not in SETTABLE_PARAMETERS)
+        p, table = {}, parameter_table()
+        for name, (default, description) in table.items():
+            desc = ParameterDescriptor(description=description, dynamic_typing=True)
             p[name] = coerce(name, self.declare_parameter(name, default, desc).value, default)
+        # a YAML or `ros2 param set` integer for a float parameter (3 for 3.0) is stored as the double it means
+        given = [self.get_parameter(k) for k in table]
+        self.set_parameters([q for q, g in zip(as_declared_types(given), given, strict=True) if q is not g])
+        self.add_pre_set_parameters_callback(as_declared_types)
+        for name in set(table) - set(SETTABLE_PARAMETERS):  # the unsettable read-only while it runs
+            self.set_descriptor(name, ParameterDescriptor(description=table[name][1], dynamic_typing=True,
+                                                          read_only=True))
         # a camera namespace names the camera: /cam1 and /cam2 report apart on /diagnostics
         p["camera_name"] = p["camera_name"] or self.get_namespace().strip("/").replace("/", "_")
         source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],

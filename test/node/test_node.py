@@ -355,6 +355,18 @@ def test_node_loads_the_estimator_itself_and_declares_described_parameters():
             assert node.get_parameter("xi_threshold_dn").value == 1.0
         finally:
             node.destroy_node()
+        # a params file's integer for a float parameter is stored as the double (read-only ones too)
+        node = node_class()(node_name="typed", context=context,
+                            parameter_overrides=[Parameter("camera_info_topic", value=""),
+                                                 Parameter("xi_threshold_dn", value=2),
+                                                 Parameter("max_rate_hz", value=5)])
+        try:
+            for name in ("xi_threshold_dn", "max_rate_hz"):
+                assert node.get_parameter(name).type_ == Parameter.Type.DOUBLE
+            assert node.monitor.config.xi_threshold_dn == 2.0
+            assert node.describe_parameter("max_rate_hz").read_only
+        finally:
+            node.destroy_node()
         with pytest.raises(ValueError, match="patches_per_frame"):
             node_class()(node_name="bad", context=context,
                          parameter_overrides=[Parameter("patches_per_frame", value="many")])
@@ -651,8 +663,12 @@ def test_run_time_parameter_changes_are_validated(rig_factory):
         assert rig.spin_until(fut.done, TIMEOUT_S)
         return fut.result().results
 
-    ok = set_(xi_threshold_dn=2.5, xi_hysteresis_dn=0.5)
+    ok = set_(xi_threshold_dn=3, xi_hysteresis_dn=0.5)  # an integer, as `ros2 param set ... 3` sends it
     assert all(r.successful for r in ok)
+    assert rig.node.monitor.alarm.threshold == 3.0 and rig.node.monitor.alarm.clear_level == 2.5
+    stored = rig.node.get_parameter("xi_threshold_dn")
+    assert stored.type_ == Parameter.Type.DOUBLE and stored.value == 3.0  # a double, as declared
+    assert all(r.successful for r in set_(xi_threshold_dn=2.5))
     assert rig.node.monitor.alarm.threshold == 2.5 and rig.node.monitor.alarm.clear_level == 2.0
     bad = set_(xi_hysteresis_dn=3.0)[0]
     assert not bad.successful and "xi_hysteresis_dn must be in [0, xi_threshold_dn)" in bad.reason
