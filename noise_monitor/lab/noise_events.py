@@ -9,8 +9,9 @@ model per component (a fault adding white noise of sigma s shows as +s^2 per pix
 A fault that starts and ends between holds (in pans, at metadata changes) shows no change inside one. It shows as
 noise no law of the conditions makes: every effect's temporal variance grows (in magnitude) with the gain, the
 exposure, the temperature and the signal, so a cell under conditions at least as high in every one as another's
-cannot hold much less excess over the model. The run of segments in time from the first to the last such louder
-segment is set apart (:func:`lawless`), with its neighbours alike to it.
+cannot hold much less excess over the model (but where the noise is small against a coarse quantization step, whose
+added variance follows where the signal falls between two levels: such cells order nothing). The run of segments in
+time from the first to the last such louder segment is set apart (:func:`lawless`), with its neighbours alike to it.
 """
 from __future__ import annotations
 
@@ -30,6 +31,11 @@ from .measure import BIN_WIDTH_DN, Measurements
 NOTABLE_DN2 = 0.1
 #: the conditions a law's temporal variance grows with (in magnitude), as the cell table names them
 CONDITIONS = ("gain_db", "exposure_time_s", "sensor_temperature_c", "intensity_dn")
+#: cells whose model temporal sigma lies below this fraction of a measured quantization step coarser than the output's
+#: are ordered by no condition: there the quantized variance follows where the signal falls between two levels (a
+#: 6-bit output's 4 DN step on noise of 1 DN adds anything from -1 to +3 DN^2); from it on the step adds its
+#: step^2 / 12 to every cell within 1 % of that
+QUANTIZED_SIGMA = 0.5
 
 
 @dataclass(frozen=True)
@@ -40,6 +46,12 @@ class Apart:
     segments: set[int]
     alike: set[int]
     lawless: set[int]
+
+
+def coarse_step(meas: Measurements) -> float:
+    """The measured quantization step (DN) when it is coarser than the output's own (0 otherwise or not measured)."""
+    step = meas.quant_step_dn
+    return step if math.isfinite(step) and step > max(meas.output_step_dn, 1.0) else 0.0
 
 
 def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
@@ -79,18 +91,20 @@ def set_apart(meas: Measurements, rows: Sequence[dict[str, Any]]) -> Apart:
                 alike.add(order[k])
     apart |= alike
     rest = [i for i in order if i not in apart]
-    run, like = lawless([r for r in rows if r["segment"] not in apart], rest, dict(zip(order, excess)))
+    run, like = lawless([r for r in rows if r["segment"] not in apart], rest, dict(zip(order, excess)), coarse_step(meas))
     return Apart(apart | run, alike | like, run)
 
 
-def quieter_than_conditions(rows: Sequence[dict[str, Any]]) -> set[tuple[int, int]]:
+def quieter_than_conditions(rows: Sequence[dict[str, Any]], step_dn: float = 0.0) -> set[tuple[int, int]]:
     """The pairs (segment a, segment b) of cells ``rows`` of one intensity bin where a's conditions
     (:data:`CONDITIONS`) are at least b's in every one and b's temporal excess variance over the model exceeds a's in
     magnitude beyond ``CHANGE_SIGMAS`` standard errors and by ``CHANGE_DN`` in sigma (at b's model): no law of the
     conditions makes them. One bin: a cell's intensity also says where its blocks lie (the scene's bright and dark
     parts), and a law of the position (an amplifier's glow in a corner) orders cells of other intensities by
-    where they are. A condition not stated (NaN) orders nothing."""
-    rows = [r for r in rows if "temporal" in r["measured_var_dn2"]]  # a recording without holds has none
+    where they are. A condition not stated (NaN) orders nothing; nor do cells whose model noise lies below
+    ``QUANTIZED_SIGMA`` of a coarse quantization step ``step_dn`` (:func:`coarse_step`)."""
+    rows = [r for r in rows if "temporal" in r["measured_var_dn2"]  # a recording without holds has none
+            and r["model_var_dn2"]["temporal"] >= (QUANTIZED_SIGMA * step_dn) ** 2]
     if not rows:
         return set()
     cond = np.array([[np.nan if r[c] is None else r[c] for c in CONDITIONS] for r in rows], dtype=float)
@@ -110,14 +124,14 @@ def quieter_than_conditions(rows: Sequence[dict[str, Any]]) -> set[tuple[int, in
     return pairs
 
 
-def lawless(rows: Sequence[dict[str, Any]], order: Sequence[int], excess: dict[int, float]
+def lawless(rows: Sequence[dict[str, Any]], order: Sequence[int], excess: dict[int, float], step_dn: float = 0.0
             ) -> tuple[set[int], set[int]]:
     """(the run of segments set apart as noise no law of the conditions makes, those of them set apart by likeness).
     The run: the segments of ``order`` (segment indices in time) from the first to the last louder segment of a pair
     of :func:`quieter_than_conditions` (the shortest run that leaves no pair outside it); then its neighbours whose
     ``excess`` (mean over their cells, DN^2) lies nearer the run's mean than the rest's median, until the first that
     does not. Empty without a pair."""
-    pairs = quieter_than_conditions(rows)
+    pairs = quieter_than_conditions(rows, step_dn)
     if not pairs:
         return set(), set()
     where = [order.index(b) for _, b in pairs]

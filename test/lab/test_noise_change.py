@@ -184,6 +184,31 @@ def test_only_noise_that_falls_as_the_conditions_rise_is_no_law() -> None:
     assert noise_events.quieter_than_conditions([_row(0, 6, 9.0, 100.0), _row(1, 12, 0.0, 120.0)]) == set()
 
 
+def test_noise_below_a_coarse_quantization_step_is_ordered_by_no_condition() -> None:
+    """A 6-bit output (4 DN steps) over 0.95 DN of noise adds 3 DN^2 here and 0.8 DN^2 at 12 dB: where the signal falls
+    between two levels, not a law broken. Such a cell pairs with none once the step is measured; under a step it is
+    not small against (0.75 DN for 1.5 DN) it still does."""
+    quiet = _row(1, 0, 3.0)
+    quiet["model_var_dn2"] = {"temporal": 0.9}
+    quiet["measured_var_dn2"] = {"temporal": 3.9}
+    rows = [_row(0, 12, 0.8), quiet]
+    assert noise_events.quieter_than_conditions(rows) == {(0, 1)}
+    assert noise_events.quieter_than_conditions(rows, step_dn=1.5) == {(0, 1)}
+    assert noise_events.quieter_than_conditions(rows, step_dn=4.0) == set()
+
+
+def test_a_coarse_quantization_campaign_sets_nothing_apart(tmp_path: Path) -> None:
+    """A field-like campaign (the lab bench's held-out scenario, seed 41) with a hidden 6-bit output: its darkest cell at
+    0 dB (0.96 DN of noise under 4 DN steps) read 2.4 DN^2 above the model against 0.8 at 5.75 dB, which set its
+    segment apart as noise no law makes; quantization is the one effect claimed, and nothing is set apart."""
+    bag = simulate_bag(tmp_path / "q6.mcap", "ev76c661", "campaign_heldout", effects=["quantization=6"],
+                       frames=120, width=320, height=256, fps=10.0, seed=41)
+    out = analyze(bag, "ev76c661", estimator=None)
+    assert out["measurement"]["quantization_step_dn"] == 4.0
+    assert out["set_apart"] == []
+    assert [c["effect"] for c in out["candidates"] if c["significant"]] == ["quantization"]
+
+
 @pytest.mark.parametrize("lo,hi,cut,lone", [(15, 32, 15, 15), (16, 33, 33, 32)])
 def test_a_change_that_leaves_one_frame_at_a_holds_edge_drops_that_frame_and_keeps_the_change(
         lo: int, hi: int, cut: int, lone: int) -> None:
