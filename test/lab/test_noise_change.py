@@ -186,8 +186,8 @@ def test_only_noise_that_falls_as_the_conditions_rise_is_no_law() -> None:
 
 def test_noise_below_a_coarse_quantization_step_is_ordered_by_no_condition() -> None:
     """A 6-bit output (4 DN steps) over 0.95 DN of noise adds 3 DN^2 here and 0.8 DN^2 at 12 dB: where the signal falls
-    between two levels, not a law broken. Such a cell pairs with none once the step is measured; under a step it is
-    not small against (0.75 DN for 1.5 DN) it still does."""
+    between two levels, not a law broken. Such a cell pairs with none once the step is measured; under a 1.5 DN step,
+    half of which (0.75 DN) its noise exceeds, it still does."""
     quiet = _row(1, 0, 3.0)
     quiet["model_var_dn2"] = {"temporal": 0.9}
     quiet["measured_var_dn2"] = {"temporal": 3.9}
