@@ -96,6 +96,10 @@ CROSS_VIEW = ("fixed", "column", "row")
 #: chance over the recording's ~10^3 cells x views: the scene repeats under the views' shifts (a periodic
 #: texture), and every cell's errors of that component take the views' spread (Birge ratio)
 PARTNER_NEGATIVE_P = 1e-6
+#: a block whose own white variance exceeds this multiple of its neighbours' shows the scene's texture (a fixed
+#: pattern's realization over a block's 49 degrees of freedom does that with p ~ 1e-5): the cross-view exclusion
+#: takes its own there, its neighbours' elsewhere (:func:`_texture_white`)
+TEXTURED_WHITE = 2.0
 #: largest standard error of a block's cross-view fixed variance, relative to its temporal variance
 CROSS_SE_MAX = 0.5
 #: an outlier pixel is confirmed when a partner view shows it beyond this many robust sigmas, same sign
@@ -811,7 +815,26 @@ def _cross_energies(a: np.ndarray, c: np.ndarray, b: int) -> tuple[np.ndarray, n
     return np.sum(a * c, axis=1), col, row
 
 
-def _cross_views(fulls: list[_Full], b: int) -> int:
+def _texture_white(g: _Full, grid: tuple[int, int]) -> np.ndarray:
+    """Per block, its white variance for the cross-view exclusion: as its neighbours see it (the bin's typical
+    white variance times the median over the 8 neighbouring flat blocks, 1 without one, of their white variance
+    over their bins' typical: the scene's texture around it and the view's noise), or its own where that exceeds
+    ``TEXTURED_WHITE`` times theirs (the block's own texture). Not the block's own elsewhere: its fixed pattern's
+    realization and its hold mean's noise enter its cross energies too."""
+    bins = np.floor(g.v / BIN_WIDTH_DN).astype(int)
+    typical = np.maximum(_typical(g.white, bins, g.flat), MIN_VAR_ERR_DN2)
+    gy, gx = grid
+    ratio = np.pad(np.where(g.flat, g.white / typical, np.nan).reshape(gy, gx), 1, constant_values=np.nan)
+    around = np.stack([ratio[1 + dy:1 + dy + gy, 1 + dx:1 + dx + gx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)
+                       if dy or dx]).reshape(8, -1)
+    seen = np.isfinite(around).any(axis=0)
+    factor = np.ones(g.v.size)
+    factor[seen] = np.nanmedian(around[:, seen], axis=0)
+    around_it = typical * factor
+    return np.where(g.white > TEXTURED_WHITE * around_it, g.white, around_it)
+
+
+def _cross_views(fulls: list[_Full], b: int, grid: tuple[int, int]) -> int:
     """Fixed-pattern, column and row components from what stays in sensor coordinates while the scene
     moves: per block, the cross energies of the hold-mean residuals of this hold and of up to
     ``MAX_PARTNERS`` holds (nearest in time) seen from a camera pose at least ``MIN_PARTNER_SHIFT_PX``
@@ -819,6 +842,9 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
     views and cancel in expectation; a fixed pattern ``a_s * P(x)`` gives ``a_s * a_p`` per pixel.
     Returns the number of segments measured this way (the others keep the single-view estimate)."""
     done = 0
+    # the exclusion below must not see a block's own realization: from its own white variance it left out the
+    # blocks whose pattern came out large (PRNU 1.2 % low in variance)
+    texture = {g.index: _texture_white(g, grid) for g in fulls if "temporal" in g.values}
     for f in fulls:
         if "temporal" not in f.values:
             continue
@@ -855,8 +881,8 @@ def _cross_views(fulls: list[_Full], b: int) -> int:
         f.values["outlier"] = np.sum(np.where(f.is_out, f.centred**2, 0.0), axis=1) / (b * b)
         # noise of the cross estimate (Gaussian): white_s / (d * sum(1 / white_p)); a block whose scene
         # texture (white_s) or partners' noise make it large against its own temporal noise is left out
-        se = np.sqrt(f.white * np.sum(weight * np.stack([g.white for g in cands], axis=1) * weight, axis=1)
-                     / (b - 1) ** 2)
+        white_p = np.stack([texture[g.index] for g in cands], axis=1)
+        se = np.sqrt(texture[f.index] * np.sum(weight * white_p * weight, axis=1) / (b - 1) ** 2)
         lost = f.keep & ((count == 0) | (se > CROSS_SE_MAX * np.maximum(f.values["temporal"], MIN_VAR_ERR_DN2)))
         f.excluded["no_partner_view"] = int(lost.sum())
         f.keep = f.keep & ~lost
@@ -1117,7 +1143,7 @@ def measure_frames(
         for j, s in enumerate(held):
             s.index = j
         segments = held
-        if not _cross_views(segments, block):
+        if not _cross_views(segments, block, grid):
             not_measured["fixed_pattern_separation"] = (
                 "one camera pose only: fixed pattern, column and row offsets are the hold mean's residual in "
                 "blocks flat on that mean (scene texture finer than a block cannot be told from fixed pattern)")

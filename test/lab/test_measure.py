@@ -129,13 +129,11 @@ def test_short_noisy_holds_are_not_selected_on_their_own_noise() -> None:
     assert abs(float(temporal.mean()) - truth) < 3.0 * se
 
 
-@pytest.mark.xfail(strict=True, reason="open: the cross-view weights and exclusion see each block's own white variance "
-                   "(README, 'Separating the scene from the noise': 0.988, -6.6 standard errors)")
 def test_cross_view_fixed_pattern_is_not_weighted_by_its_own_realization() -> None:
     """PRNU 3 % seen from ten 3-frame holds at gains 0-24 dB: each block's cross energies with its partner views,
-    weighted, are (0.03 v_here)(0.03 v_there) on average. Weights and the exclusion taken from each block's own
-    white variance (its pattern and its view's noise, which enter the cross energies too) read 1.2 % low
-    (-6.6 standard errors over three seeds); from the bins' typical white variances 1.001 (+0.6)."""
+    weighted, are (0.03 v_here)(0.03 v_there) on average. An exclusion taken from each block's own white variance
+    (its pattern and its view's noise, which enter the cross energies too) read 1.2 % low (-6.6 standard errors
+    over these three seeds); from its neighbours' (``measure._texture_white``) 0.998 over six."""
     gains = (0.0, 24.0, 6.0, 18.0, 12.0) * 2
     ratios = []
     for seed in (1, 2, 3):
