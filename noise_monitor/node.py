@@ -153,9 +153,10 @@ class NoiseMonitorNode(Node):
         given = [self.get_parameter(k) for k in table]
         self.set_parameters([q for q, g in zip(as_declared_types(given), given, strict=True) if q is not g])
         self.add_pre_set_parameters_callback(as_declared_types)
-        for name in set(table) - set(SETTABLE_PARAMETERS):  # the unsettable read-only while it runs
-            self.set_descriptor(name, ParameterDescriptor(description=table[name][1], dynamic_typing=True,
-                                                          read_only=True))
+        for name, (_, description) in table.items():  # the unsettable read-only while it runs
+            if name not in SETTABLE_PARAMETERS:
+                self.set_descriptor(name, ParameterDescriptor(description=description, dynamic_typing=True,
+                                                              read_only=True))
         # a camera namespace names the camera: /cam1 and /cam2 report apart on /diagnostics
         p["camera_name"] = p["camera_name"] or self.get_namespace().strip("/").replace("/", "_")
         source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],
