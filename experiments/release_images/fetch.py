@@ -46,7 +46,8 @@ CT_SHAPE = (512, 512)
 def _download(spec: tuple[str, ...], into: Path) -> Path:
     """The wheel of ``spec`` (requirement and target platform) downloaded into ``into``."""
     cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary", ":all:", "-d", str(into), *spec]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    if subprocess.run(cmd, stdout=subprocess.DEVNULL).returncode:
+        raise SystemExit(f"pip could not download {spec[0]} (no network to the package index?): {' '.join(cmd)}")
     name = spec[0].split("==")[0].replace("-", "_")
     wheels = sorted(into.glob(f"{name}-{spec[0].split('==')[1]}-*.whl"))
     if not wheels:
