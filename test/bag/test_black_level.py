@@ -147,7 +147,8 @@ def test_under_every_field_condition_the_pair_replaces_a_weaker_single_claim(tmp
     """The same two hidden under vibration, PWM light, flicker and auto-exposure hunting at once (held-out seed 74):
     the forward selection alone claims a dark-current law (rank 3, 13 % of the chi-square); the pedestal with a
     partner fitted together explains far more and replaces it. Beside the pedestal, the read noise and a dark-current
-    law fit these data equally well here (the two pairs' joint chi-squares 665.1 / 665.2, 2026-11-29): the lab claims
+    law fit these data equally well here (the two pairs' joint chi-squares within 0.1: 665.1 / 665.2 with the model at
+    16 blocks per cell, 735.0 / 734.9 at 32, 2026-11-29): the lab claims
     one and names the other as the alternative the data cannot tell apart; the pedestal near 16 DN and the read
     noise, claimed or named, near 8 e-."""
     bag = simulate_bag(tmp_path / "field.mcap", pedestal, "campaign_heldout", effects=["extra_read_noise=8"],
