@@ -23,6 +23,7 @@ import estimator_per_image as epi  # noqa: E402
 from noise_monitor.estimator.data import metas_of  # noqa: E402
 from noise_monitor.estimator.evaluate import score  # noqa: E402
 from noise_monitor.monitor.config import MonitorConfig  # noqa: E402
+from noise_monitor.monitor.patches import _HIGH, _LOW, _reject_reasons  # noqa: E402
 
 CACHE = Path("out/estimator_eval")
 YY, XX = np.mgrid[0:64, 0:64].astype(np.float32)
@@ -65,7 +66,7 @@ def main() -> None:
         p = est.predict(noisy, metas_of(d))
         truth = np.asarray(d["truth_sigma_image"], float)
         rel = (np.asarray(p["sigma_image"], float) - truth) / truth
-        clipped = ((noisy <= 0.5) | (noisy >= 254.5)).reshape(len(noisy), -1).mean(axis=1) > 0.01
+        clipped = ((noisy <= _LOW) | (noisy >= _HIGH)).reshape(len(noisy), -1).mean(axis=1) > MonitorConfig().max_clipped_fraction
         for k, name in enumerate(epi.NAMES["photos"]):
             on = d["source_index"] == k
             cells = [f"{lab} {rel[on & sel].mean():+.3f} ({int((on & sel).sum())})" for lab, sel in
@@ -75,13 +76,15 @@ def main() -> None:
 
 
 def usable(noisy: np.ndarray, cfg: MonitorConfig) -> np.ndarray:
-    """Per patch: the node's selection would measure it (mean, clipped and flat rules; no black level)."""
-    flat = noisy.reshape(len(noisy), -1)
-    equal = ((noisy[:, :, 1:] == noisy[:, :, :-1]).reshape(len(noisy), -1).sum(axis=1)
-             + (noisy[:, 1:] == noisy[:, :-1]).reshape(len(noisy), -1).sum(axis=1)) / (2.0 * flat.shape[1])
-    return ((flat.mean(axis=1) >= cfg.min_patch_mean_dn) & (flat.mean(axis=1) <= cfg.max_patch_mean_dn)
-            & ((flat <= 0.5).mean(axis=1) <= cfg.max_clipped_fraction) & ((flat >= 254.5).mean(axis=1) <= cfg.max_clipped_fraction)
-            & (equal <= cfg.max_flat_fraction))
+    """Per patch: the node's selection would measure it (``patches._reject_reasons`` on each patch's statistics as
+    the selection computes them over a frame; no black level)."""
+    n = len(noisy)
+    flat = noisy.reshape(n, -1)
+    equal = ((noisy[:, :, 1:] == noisy[:, :, :-1]).reshape(n, -1).sum(axis=1)
+             + (noisy[:, 1:] == noisy[:, :-1]).reshape(n, -1).sum(axis=1)) / (2.0 * flat.shape[1])
+    stats = {"mean": flat.mean(axis=1), "low": (flat <= _LOW).mean(axis=1), "high": (flat >= _HIGH).mean(axis=1),
+             "equal": equal}
+    return _reject_reasons(stats, cfg) < 0
 
 
 def selected_scores(est) -> None:
