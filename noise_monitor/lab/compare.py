@@ -43,6 +43,8 @@ AMPLITUDE_SYSTEMATIC = 0.05
 #: around its every-block value, noise in the fit's regressor that pulled the fits low (PRNU 1.5 % read 1.489,
 #: seed-to-seed spread 0.0049; at 32 1.4955 and 0.0032, as with every block)
 MAX_MODEL_BLOCKS = 32
+#: half the temperature step (degC) of a fixed pattern's slope with the temperature (:meth:`Views.drift`)
+DRIFT_STEP_C = 0.5
 #: blocks a region (3 x 3 grid) needs for its contrast to be an observable
 MIN_REGION_BLOCKS = 6
 #: smallest per-block spread (DN^2) of a regional contrast
@@ -176,8 +178,11 @@ class Views:
     """
 
     def __init__(self, segments: Sequence[tuple[CameraMetadata, np.ndarray, np.ndarray, np.ndarray,
-                                                Sequence[Partner]]]) -> None:
-        """``segments``: per segment (metadata, v, sigma, positions (B, 2), partners)."""
+                                                Sequence[Partner]]],
+                 drift: Sequence[tuple[float, int]] = ()) -> None:
+        """``segments``: per segment (metadata, v, sigma, positions (B, 2), partners); ``drift``: per segment (the
+        variance of its frames' sensor temperatures, degC^2, and its number of frames), for :meth:`drift` (none
+        without)."""
         group_of: dict[int, int] = {}
         self.metas: list[CameraMetadata] = []
         chunks: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
@@ -225,6 +230,8 @@ class Views:
         self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(self.partner_weight > 0, axis=0)), 1)
         self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
         self._pos = pos
+        self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
+        self.frames = np.repeat([max(d[1], 1) for d in drift], sizes) if drift else np.ones(self.own.size)
 
     def split(self, arrays: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
         """Per segment: its part of the component arrays."""
@@ -279,11 +286,44 @@ class Views:
         if slope is not None:
             out = {c: a * slope**2 for c, a in out.items()}
         out = {c: out[c] + cross[c] for c in MEASURED} | counts
+        for c, a in self.drift(effects).items():
+            out[c] = out[c] + a
         own_conds = [conds[g] for g in self.group_of_segment]
         added, fixed, spread = self._quantization(effects, own_conds, out["temporal"], span)
         out["temporal"] = out["temporal"] + added
         out["fixed"] = out["fixed"] + np.where(self.lone, fixed, 0.0)
         out[QUANT_SPREAD] = spread
+        return out
+
+    def drift(self, effects: Sequence[Effect]) -> dict[str, np.ndarray]:
+        """Per component, over the segments' own blocks: what a fixed pattern whose size follows the sensor
+        temperature (a DSNU) adds to the temporal noise of a hold whose temperature moved from frame to frame (its
+        size's slope with the temperature, squared, times the variance of the frames' temperatures), and takes from
+        a single view's fixed component (measured as the hold mean's minus temporal / k); across views the hold
+        means' cross energy holds none of it. Linear over a hold (``SegmentTolerance``: within 3 degC). Mixtures
+        (hot pixels: a few pixels far off, left out of the temporal noise as blinking when they move much) are not
+        included."""
+        fixed = [e for e in effects if component_of(e) is not None and e.distribution not in ("mixture", "quantization")
+                 and not (e.temporal and type(e).temporal_share is _Effect.temporal_share)]
+        if not fixed or not np.any(self.temperature_var > 0.0):
+            return {}
+        size: list[list[np.ndarray]] = []
+        for step in (-DRIFT_STEP_C, DRIFT_STEP_C):
+            metas = [m.replace(sensor_temperature_c=m.sensor_temperature_c + step) for m in self.metas]
+            conds = [_conditions(effects, m, p) for m, p in zip(metas, self._pos)]
+            lins = [_linear(effects, c, v) for c, v in zip(conds, self.v)]
+            slopes = [_slope(effects, c, v) for c, v in zip(conds, self.v)]
+            size.append([np.concatenate([
+                np.sqrt(np.maximum((1.0 - np.clip(np.asarray(e.temporal_share(lin, c), dtype=float), 0.0, 1.0))
+                                   * np.asarray(e.variance_dn2(lin, c), dtype=float), 0.0))
+                * (1.0 if sl is None else sl) * np.ones(v.shape)
+                for c, lin, v, sl in zip(conds, lins, self.v, slopes)])[self.own] for e in fixed])
+        out: dict[str, np.ndarray] = {}
+        for e, lo, hi in zip(fixed, *size):
+            var = ((hi - lo) / (2.0 * DRIFT_STEP_C)) ** 2 * self.temperature_var
+            comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
+            out[comp_t] = out.get(comp_t, 0.0) + var
+            out[comp_f] = out.get(comp_f, 0.0) - np.where(self.lone, var / self.frames, 0.0)
         return out
 
     def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],
@@ -669,10 +709,12 @@ class Comparison:
                 sb = _SegmentBase(seg, by_seg[seg.index])
                 sb.set_partners(metas)
                 self.segments.append(sb)
-        self.views = Views([(sb.seg.meta, sb.v, sb.sigma, sb.pos, sb.partners) for sb in self.segments])
+        self.views = Views([(sb.seg.meta, sb.v, sb.sigma, sb.pos, sb.partners) for sb in self.segments],
+                           [(sb.seg.temperature_var_c2, sb.seg.n_frames) for sb in self.segments])
         self.span = np.concatenate([sb.span for sb in self.segments]) if self.segments else np.zeros(0)
         unclipped_rest = self.views.split(self.views.components([e for e in rest if e.distribution != "quantization"]))
-        for sb, comps in zip(self.segments, unclipped_rest):
+        drift = self.views.split(self.views.drift(clip_model.effects))  # the analytic effects' (the rest's is in theirs)
+        for sb, comps, drifted in zip(self.segments, unclipped_rest, drift, strict=True):
             seg = sb.seg
             pred = clip_model.predict(sb.v, seg.meta)
             comps = dict(comps)
@@ -686,6 +728,8 @@ class Comparison:
                     var = here**2
                 name = component_of(e)
                 assert name is not None  # analytic effects are poisson or gaussian: a measured component
+                comps[name] = comps[name] + var
+            for name, var in drifted.items():
                 comps[name] = comps[name] + var
             added, fixed, comps[QUANT_SPREAD] = quantization_variance(
                 self.effects, clip_model.conditions(seg.meta), comps["temporal"], sb.v, sb.span)

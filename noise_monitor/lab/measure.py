@@ -221,6 +221,9 @@ class SegmentMeasurement:
     #: False where a single view's outlier pixels show the scene (:func:`_specks_of_the_scene`): their count,
     #: amplitude and energy are not a measurement of the sensor's outlier pixels
     outliers_measured: bool = True
+    #: the sample variance (ddof 1) of the hold's frames' sensor temperatures (degC^2): a fixed pattern that follows
+    #: the temperature (a DSNU) changes by that much from frame to frame and shows in the temporal noise
+    temperature_var_c2: float = 0.0
 
     @property
     def n_frames(self) -> int:
@@ -683,7 +686,9 @@ class _SegmentAccumulator:
                      v, region, values, robust, span, is_out, centred,
                      keep, flat_mask, excluded, clean, np.maximum(white, 0.0), position, spikes,
                      light_pct=0.0 if self.light is None else self.light.percent(), motion_px=self.motion_px,
-                     last_stamp_ns=self.stamps[-1], still=still, lag1=_lag1_excess(clean, b))
+                     last_stamp_ns=self.stamps[-1], still=still, lag1=_lag1_excess(clean, b),
+                     temperature_var_c2=float(np.var([m.sensor_temperature_c for m in self.metas], ddof=1))
+                     if k >= 2 else 0.0)
 
 
 @dataclass
@@ -726,6 +731,7 @@ class _Full:
     #: noise is read on: :mod:`.hold_change`); empty for a single frame
     still: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     lone: bool = False  # a hold's edge frame alone on its side of a noise change (not measured: ``LONE``)
+    temperature_var_c2: float = 0.0  # see SegmentMeasurement
     #: (N,) the hold mean's lag-1 excess per block (:func:`_lag1_excess`), the scene's signature in a single view
     lag1: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -763,6 +769,7 @@ def _select(f: _Full, b: int) -> SegmentMeasurement:
         fixed_fourth=None if f.fourth is None else f.fourth[keep],
         fixed_square=None if f.square is None else f.square[keep],
         light_pct=f.light_pct,
+        temperature_var_c2=f.temperature_var_c2,
         motion_px=f.motion_px,
         last_stamp_ns=f.last_stamp_ns,
         scene_dn2=_scene_in_single_view(f),

@@ -44,17 +44,20 @@ def simulate_frames(
     height: int = 128,
     seed: int = 0,
     frame_period_ns: int = 50_000_000,
+    temperature_drift_c: float = 0.0,
 ) -> list[Frame]:
     """Frames of a camera (paper model + ``effects``) viewing a static scene; the camera moves between
-    conditions (integer shifts) and is still within one. Output rounded to 8 bit like a mono8 camera."""
+    conditions (integer shifts) and is still within one, its sensor warming by ``temperature_drift_c`` (degC,
+    evenly) over each condition's frames. Output rounded to 8 bit like a mono8 camera."""
     model = NoiseModel(extra=effects)
     rng = np.random.default_rng(seed)
     scene = tiled_scene(height, width, seed)
     frames: list[Frame] = []
     for c, (gain_db, exposure, temp) in enumerate(conditions):
-        meta = profile.metadata(gain_db=gain_db, exposure_time_s=exposure, sensor_temperature_c=temp)
         clean = np.roll(scene, (3 * c, 5 * c), axis=(0, 1))
-        for _ in range(frames_per_condition):
+        for j in range(frames_per_condition):
+            warming = temperature_drift_c * j / max(frames_per_condition - 1, 1)
+            meta = profile.metadata(gain_db=gain_db, exposure_time_s=exposure, sensor_temperature_c=temp + warming)
             noisy, _ = model.simulate(clean, meta, rng, mode="joint")
             i = len(frames)
             frames.append(Frame(i * frame_period_ns, np.rint(np.clip(noisy, 0, 255)).astype(np.float32), meta, index=i))
