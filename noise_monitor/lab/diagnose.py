@@ -101,9 +101,10 @@ MASKED_P = 0.05
 #: together when each is significant beyond the other's joint fit: two missing effects that partly cancel (an unstated
 #: pedestal's phantom shot noise against extra read noise) leave a residual neither reproduces alone
 PAIR_ROUNDS = 2
-#: ... and the two must leave at most this share of the camera's model's rms error (net of the measurement's scatter):
-#: a pair that cancels explains the residual; a wrong lead with a second effect bent to make up for it does not
-#: (a cubic compression read as a gain error of 0.36 with 70 e- of extra read noise: 1.04 -> 0.60 DN)
+#: ... and the two must leave at most this share of the camera's model's rms error (net of the measurement's scatter) in
+#: the components they change (:func:`_share_left`; other effects' errors elsewhere, e.g. hot pixels' outliers, are not
+#: theirs to explain): a pair that cancels explains the residual; a wrong lead with a second effect bent to make up for
+#: it does not (a cubic compression read as a gain error of 0.36 with 70 e- of extra read noise: 1.04 -> 0.60 DN)
 MAX_PAIR_ERROR = 0.2
 #: ... and a partner passing the screen (F-test and explained fraction beyond the lead's own fit, least squares from
 #: its defaults) is refitted jointly only if its full fit beyond the lead leaves at most this share (on the pedestal
@@ -668,7 +669,7 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         return None  # claimed: the forward selection's
     spec = EffectSpec.fit_all(type(fitted))
     on_first = Given.of(comp, [fitted], len(first.params))
-    error = rms_error(comp.cell_table())
+    rows0 = comp.cell_table()
     pairs: list[tuple[float, tuple[Candidate, Assessment], tuple[Candidate, Assessment]]] = []
     for other, other_fit in usable:
         if other is first:
@@ -679,7 +680,7 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         if p >= SIGNIFICANCE_P or explained < MIN_EXPLAINED_FRACTION:
             continue
         b = assess(comp, on_first, other_spec)
-        if rms_error(b.rows) > PAIR_SCREEN * error:
+        if _share_left(rows0, b.rows) > PAIR_SCREEN:
             continue
         for _ in range(PAIR_ROUNDS):  # alternately, to start the joint fit near its optimum
             a = assess(comp, Given.of(comp, [b.effect], len(other.params)), spec)
@@ -687,7 +688,7 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         joint = fit(comp, [spec, other_spec], start=[a.effect, b.effect])
         a = assess(comp, Given.of(comp, [joint.effects[1]], len(other.params)), spec)
         b = assess(comp, Given.of(comp, [joint.effects[0]], len(first.params)), other_spec)
-        if a.significant and b.significant and rms_error(b.rows) <= MAX_PAIR_ERROR * error:
+        if a.significant and b.significant and _share_left(rows0, b.rows) <= MAX_PAIR_ERROR:
             pairs.append((joint.chi2, (first, a), (other, b)))
     if not pairs:
         return None
@@ -700,6 +701,16 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
             return None  # no better than what the forward selection claimed
     limit = best + EQUIVALENT_CHI2 * max(1.0, best / max(on_first.n_obs - len(first.params), 1))
     return pairs[0][1], pairs[0][2], [p[2][1] for p in pairs[1:] if p[0] <= limit]
+
+
+def _share_left(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> float:
+    """The share of the model's rms error (``rows0``; net of the measurement's scatter, summed in quadrature over the
+    components) that the model with a pair (``rows1``) leaves in the components the pair changes: an error elsewhere
+    (hot pixels' outliers beside a PRNU and a DSNU) is no part of what the pair must explain."""
+    e0, e1 = component_errors(rows0), component_errors(rows1)
+    own = own_components(rows0, rows1)
+    before = math.sqrt(sum(e0[c] ** 2 for c in own))
+    return math.sqrt(sum(e1[c] ** 2 for c in own)) / before if before > 0.0 else math.inf
 
 
 def _together(other: Candidate, a: Assessment, alternatives: Sequence[Assessment] = ()) -> dict[str, Any]:
