@@ -232,6 +232,7 @@ class Views:
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
         self.frames = np.repeat([max(d[1], 1) for d in drift], sizes) if drift else np.ones(self.own.size)
+        self._warmer_cache: list[tuple[list[Conditions | None], list[np.ndarray]]] | None = None
 
     def split(self, arrays: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
         """Per segment: its part of the component arrays."""
@@ -276,6 +277,8 @@ class Views:
                 part, part_cross = store[id(e)]
             else:
                 part, part_cross = self._effect_parts(e, conds, lins, slope_all)
+                for c, a in self._effect_drift(e, effects, bends).items():
+                    part[c] = part.get(c, 0.0) + a
                 if store is not None:
                     store[id(e)] = (part, part_cross)
             for c, a in part.items():
@@ -286,8 +289,6 @@ class Views:
         if slope is not None:
             out = {c: a * slope**2 for c, a in out.items()}
         out = {c: out[c] + cross[c] for c in MEASURED} | counts
-        for c, a in self.drift(effects).items():
-            out[c] = out[c] + a
         own_conds = [conds[g] for g in self.group_of_segment]
         added, fixed, spread = self._quantization(effects, own_conds, out["temporal"], span)
         out["temporal"] = out["temporal"] + added
@@ -296,34 +297,57 @@ class Views:
         return out
 
     def drift(self, effects: Sequence[Effect]) -> dict[str, np.ndarray]:
-        """Per component, over the segments' own blocks: what a fixed pattern whose size follows the sensor
-        temperature (a DSNU) adds to the temporal noise of a hold whose temperature moved from frame to frame (its
-        size's slope with the temperature, squared, times the variance of the frames' temperatures), and takes from
-        a single view's fixed component (measured as the hold mean's minus temporal / k); across views the hold
-        means' cross energy holds none of it. Linear over a hold (``SegmentTolerance``: within 3 degC). Mixtures
-        (hot pixels: a few pixels far off, left out of the temporal noise as blinking when they move much) are not
-        included."""
-        fixed = [e for e in effects if component_of(e) is not None and e.distribution not in ("mixture", "quantization")
-                 and not (e.temporal and type(e).temporal_share is _Effect.temporal_share)]
-        if not fixed or not np.any(self.temperature_var > 0.0):
-            return {}
-        size: list[list[np.ndarray]] = []
-        for step in (-DRIFT_STEP_C, DRIFT_STEP_C):
-            metas = [m.replace(sensor_temperature_c=m.sensor_temperature_c + step) for m in self.metas]
-            conds = [_conditions(effects, m, p) for m, p in zip(metas, self._pos)]
-            lins = [_linear(effects, c, v) for c, v in zip(conds, self.v)]
-            slopes = [_slope(effects, c, v) for c, v in zip(conds, self.v)]
-            size.append([np.concatenate([
-                np.sqrt(np.maximum((1.0 - np.clip(np.asarray(e.temporal_share(lin, c), dtype=float), 0.0, 1.0))
-                                   * np.asarray(e.variance_dn2(lin, c), dtype=float), 0.0))
-                * (1.0 if sl is None else sl) * np.ones(v.shape)
-                for c, lin, v, sl in zip(conds, lins, self.v, slopes)])[self.own] for e in fixed])
+        """Per component, over the segments' own blocks: what the fixed patterns of ``effects`` whose size follows the
+        sensor temperature (a DSNU) add to the temporal noise of holds whose temperature moved from frame to frame and
+        take from a single view's fixed component (:meth:`_effect_drift`), response slopes included."""
         out: dict[str, np.ndarray] = {}
-        for e, lo, hi in zip(fixed, *size):
-            var = ((hi - lo) / (2.0 * DRIFT_STEP_C)) ** 2 * self.temperature_var
-            comp_t, comp_f = str(component_of(e, True)), str(component_of(e, False))
-            out[comp_t] = out.get(comp_t, 0.0) + var
-            out[comp_f] = out.get(comp_f, 0.0) - np.where(self.lone, var / self.frames, 0.0)
+        bends = any(e.distribution in ("modifier", "response") for e in effects)
+        for e in effects:
+            for c, a in self._effect_drift(e, effects, bends).items():
+                out[c] = out.get(c, 0.0) + a
+        if out and any(e.distribution == "response" for e in effects):
+            conds = [_conditions(effects, m, p) for m, p in zip(self.metas, self._pos)]
+            slopes = [(_slope(effects, c, v), v) for c, v in zip(conds, self.v)]
+            slope = np.concatenate([np.ones(v.shape) if sl is None else sl for sl, v in slopes])
+            out = {c: a * slope[self.own] ** 2 for c, a in out.items()}
+        return out
+
+    def _effect_drift(self, e: Effect, effects: Sequence[Effect], bends: bool) -> dict[str, np.ndarray]:
+        """One effect's part of :meth:`drift` (before the response slope): a fixed pattern whose size ``a`` follows the
+        temperature changes between a hold's frames by its slope ``da/dT`` (central difference over +-DRIFT_STEP_C in
+        the conditions ``effects`` make) times the frames' temperature deviations: ``(da/dT)^2`` times their variance
+        in the temporal component of its structure, and ``/ k`` less in a single view's fixed component (measured as
+        the hold mean's minus temporal / k); across views the hold means' cross energy holds none of it. Linear over a
+        hold (``SegmentTolerance``: within 3 degC). Nothing for temporal effects and mixtures (hot pixels: a few
+        pixels far off, left out of the temporal noise as blinking when they move much)."""
+        if (component_of(e) is None or e.distribution in ("mixture", "quantization")
+                or (e.temporal and type(e).temporal_share is _Effect.temporal_share)
+                or not np.any(self.temperature_var > 0.0)):
+            return {}
+        size = []
+        for conds, lins in self._warmer(effects, bends):
+            size.append(np.concatenate([
+                np.sqrt(np.maximum((1.0 - np.clip(np.asarray(e.temporal_share(lin, c), dtype=float), 0.0, 1.0))
+                                   * np.asarray(e.variance_dn2(lin, c), dtype=float), 0.0)) * np.ones(lin.shape)
+                if c is not None else np.zeros(lin.shape) for c, lin in zip(conds, lins)])[self.own])
+        var = ((size[1] - size[0]) / (2.0 * DRIFT_STEP_C)) ** 2 * self.temperature_var
+        return {str(component_of(e, True)): var,
+                str(component_of(e, False)): -np.where(self.lone, var / self.frames, 0.0)}
+
+    def _warmer(self, effects: Sequence[Effect], bends: bool
+                ) -> list[tuple[list[Conditions | None], list[np.ndarray]]]:
+        """The conditions (None for a group with no segment's own view) and linear signals of every metadata group
+        DRIFT_STEP_C colder and warmer; without modifiers or responses computed once."""
+        if not bends and self._warmer_cache is not None:
+            return self._warmer_cache
+        own = set(self.group_of_segment)
+        out = []
+        for step in (-DRIFT_STEP_C, DRIFT_STEP_C):
+            conds = [_conditions(effects, m.replace(sensor_temperature_c=m.sensor_temperature_c + step), p)
+                     if g in own else None for g, (m, p) in enumerate(zip(self.metas, self._pos))]
+            out.append((conds, [_linear(effects, c, v) if c is not None else v for c, v in zip(conds, self.v)]))
+        if not bends:
+            self._warmer_cache = out
         return out
 
     def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],
