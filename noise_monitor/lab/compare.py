@@ -231,7 +231,7 @@ class Views:
         self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
-        self.frames = np.repeat([max(d[1], 1) for d in drift], sizes) if drift else np.ones(self.own.size)
+        self.hold_frames = np.repeat([max(d[1], 1) for d in drift], sizes) if drift else np.ones(self.own.size)
         self._warmer_cache: list[tuple[list[Conditions | None], list[np.ndarray]]] | None = None
 
     def split(self, arrays: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
@@ -327,12 +327,11 @@ class Views:
         size = []
         for conds, lins in self._warmer(effects, bends):
             size.append(np.concatenate([
-                np.sqrt(np.maximum((1.0 - np.clip(np.asarray(e.temporal_share(lin, c), dtype=float), 0.0, 1.0))
-                                   * np.asarray(e.variance_dn2(lin, c), dtype=float), 0.0)) * np.ones(lin.shape)
+                np.sqrt(np.maximum((1.0 - _temporal_share(e, lin, c, lin.shape)) * e.variance_dn2(lin, c), 0.0))
                 if c is not None else np.zeros(lin.shape) for c, lin in zip(conds, lins)])[self.own])
         var = ((size[1] - size[0]) / (2.0 * DRIFT_STEP_C)) ** 2 * self.temperature_var
         return {str(component_of(e, True)): var,
-                str(component_of(e, False)): -np.where(self.lone, var / self.frames, 0.0)}
+                str(component_of(e, False)): -np.where(self.lone, var / self.hold_frames, 0.0)}
 
     def _warmer(self, effects: Sequence[Effect], bends: bool
                 ) -> list[tuple[list[Conditions | None], list[np.ndarray]]]:
@@ -356,8 +355,7 @@ class Views:
         :meth:`components` (single-view parts before the response slope)."""
         shares, variances, detected, visible, offsets, fracs = [], [], [], [], [], []
         for cond, lin, v, sigma in zip(conds, lins, self.v, self.sigma):
-            shares.append(np.broadcast_to(np.clip(np.asarray(e.temporal_share(lin, cond), dtype=float), 0.0, 1.0),
-                                          v.shape))
+            shares.append(_temporal_share(e, lin, cond, v.shape))
             if e.distribution == "mixture":
                 variances.append(_mixture_var(e, cond, lin, v))
                 frac, off, p_out, p_beyond = _detection(e, cond, v, sigma)
@@ -416,6 +414,11 @@ class Views:
                                                None if span is None else span[m])
             added[m], fixed[m], spread[m] = a, f, s
         return added, fixed, spread
+
+
+def _temporal_share(effect: Effect, lin: np.ndarray, cond: Conditions, shape: tuple[int, ...]) -> np.ndarray:
+    """The share of an effect's variance that is temporal at linear signals ``lin`` (0..1, broadcast to ``shape``)."""
+    return np.broadcast_to(np.clip(np.asarray(effect.temporal_share(lin, cond), dtype=float), 0.0, 1.0), shape)
 
 
 def _mixture_var(effect: Effect, cond: Conditions, lin: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -424,10 +424,16 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     """Whether an added effect cuts the rms model error (DN, net of the measurement's scatter) by
     MIN_OWN_REDUCTION in every measured component it changes (an error within the scatter cannot be cut);
     and those components' errors before and after."""
+    errors = own_errors(rows0, rows1)
+    comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
+    return bool(errors) and all(e0 > 0.0 and e1 <= (1.0 - MIN_OWN_REDUCTION) * e0 for e0, e1 in errors.values()), comps
+
+
+def own_errors(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> dict[str, tuple[float, float]]:
+    """Per measured component a change from ``rows0`` to ``rows1`` touches (:func:`own_components`), its rms model error
+    (:func:`component_errors`) before and after."""
     e0, e1 = component_errors(rows0), component_errors(rows1)
-    own = own_components(rows0, rows1)
-    comps = {c: {"rms_error_before_dn": round(e0[c], 5), "rms_error_after_dn": round(e1[c], 5)} for c in own}
-    return bool(own) and all(e0[c] > 0.0 and e1[c] <= (1.0 - MIN_OWN_REDUCTION) * e0[c] for c in own), comps
+    return {c: (e0[c], e1[c]) for c in own_components(rows0, rows1)}
 
 
 def shapes_position(comp: Comparison, patterns: Mapping[str, dict[str, Any] | None], extra: Sequence[Effect],
@@ -707,10 +713,9 @@ def _share_left(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> flo
     """The share of the model's rms error (``rows0``; net of the measurement's scatter, summed in quadrature over the
     components) that the model with a pair (``rows1``) leaves in the components the pair changes: an error elsewhere
     (hot pixels' outliers beside a PRNU and a DSNU) is no part of what the pair must explain."""
-    e0, e1 = component_errors(rows0), component_errors(rows1)
-    own = own_components(rows0, rows1)
-    before = math.sqrt(sum(e0[c] ** 2 for c in own))
-    return math.sqrt(sum(e1[c] ** 2 for c in own)) / before if before > 0.0 else math.inf
+    errors = own_errors(rows0, rows1).values()
+    before = math.sqrt(sum(e0**2 for e0, _ in errors))
+    return math.sqrt(sum(e1**2 for _, e1 in errors)) / before if before > 0.0 else math.inf
 
 
 def _together(other: Candidate, a: Assessment, alternatives: Sequence[Assessment] = ()) -> dict[str, Any]:
