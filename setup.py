@@ -42,7 +42,6 @@ setup(
     maintainer_email="dev@noise-monitor.invalid",
     description="Online camera noise source estimation and diagnosis for ROS 2",
     license="MIT",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "noise-monitor = noise_monitor.cli:main",
