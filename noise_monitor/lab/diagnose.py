@@ -54,11 +54,14 @@ refitted jointly: the refit then changes only the candidate, so the components i
 position pattern and a contradiction are its own (refitted jointly, a temperature or exposure error on
 top of a DSNU shifts the DSNU to make up for the dark signal it changes in the fixed-pattern noise and
 passes the own-component cut, where it is read noise that is missing), and it is one fit of the
-candidate's own parameters. Claims can only be withdrawn by this rule, never added, with one exception: two missing
+candidate's own parameters. Claims can only be withdrawn by this rule, never added, with two exceptions: two missing
 effects that partly cancel (an unstated pedestal's phantom shot noise against extra read noise) may leave a residual
-neither reproduces alone. When the best candidate whose fit alone passed the F-test and the explained fraction is
-not claimed (nothing is, or something ranked below it), it is fitted jointly with each other one (:func:`_pair`);
-the pair leaving the smallest chi-square with each member significant beyond the other's joint fit (all the tests
+neither reproduces alone; and the first claim's fit alone may have taken up a second effect's residual (a DSNU the
+PRNU's pattern, when both are missing), which its fit alone then also finds but not beyond the first. When the best
+candidate whose fit alone passed the F-test and the explained fraction is not claimed (nothing is, or something
+ranked below it), it is fitted jointly with each other one (:func:`_pair`); when it is claimed, with each other one
+whose fit alone passed them too but that was not claimed beside it (a partner found only once the lead is bent to
+make room for it, e.g. a PRNU beside the plug-in for random telegraph pixels, is not); the pair leaving the smallest chi-square with each member significant beyond the other's joint fit (all the tests
 above) and most of the model's error explained is claimed if it fits better than what the forward selection
 claimed by the BIC, partners that fit as well named as alternatives, and the forward selection goes on beyond the
 two (what it claimed before is tested beyond them).
@@ -604,12 +607,13 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     pair = _pair(comp, ranked, model, sum(len(c.params) for c in claimed))
     if pair is not None:  # the pair replaces what the forward selection claimed, which is then tested beyond it
         (first, a), (second, b), alternatives = pair
+        absorbed = first.significant  # claimed alone before: its fit had taken up part of the partner's residual
         model.clear()
         claimed.clear()
         for c in ranked:
             c.significant, c.beyond, c.explained_by = c.significant_alone, None, []
-        for lead, fitted, beyond in ((first, a.effect, _together(second, a)),
-                                     (second, b.effect, _together(first, b, alternatives))):
+        for lead, fitted, beyond in ((first, a.effect, _together(second, a, absorbed)),
+                                     (second, b.effect, _together(first, b, absorbed, alternatives))):
             for c in ranked:
                 if c.rank == lead.rank:
                     c.significant, c.beyond = True, beyond
@@ -657,9 +661,10 @@ def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], cla
 
 def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (), n_params: int = 0
           ) -> tuple[tuple[Candidate, Assessment], tuple[Candidate, Assessment], list[Assessment]] | None:
-    """Two candidates claimed together where the best group lead whose fit alone passed the F-test and the explained
-    fraction is not claimed (the forward selection's ``model``, ``n_params`` fitted, claimed nothing or something
-    ranked below it), and the other group lead that (past :data:`PAIR_SCREEN`), fitted jointly with it
+    """Two candidates claimed together: the best group lead whose fit alone passed the F-test and the explained
+    fraction (the forward selection's ``model``, ``n_params`` fitted; if it claimed that lead, the partners are only the
+    leads whose fit alone passed them too and that it did not claim), and the other group lead that (past
+    :data:`PAIR_SCREEN`), fitted jointly with it
     (from :data:`PAIR_ROUNDS` rounds of each beyond the other), leaves the smallest chi-square with each significant
     beyond the other's joint fit and the two leaving at most :data:`MAX_PAIR_ERROR` of the model's rms error; each with
     that assessment, then the partners that fit as well (within ``EQUIVALENT_CHI2``, scaled like the equivalence
@@ -671,8 +676,10 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
     if not found:
         return None
     first, fitted = found[0]
-    if first.significant:
-        return None  # claimed: the forward selection's
+    if first.significant:  # claimed alone: its fit may have taken up a partner's residual (a DSNU the PRNU's pattern),
+        # a partner whose own fit found something alone too but which the forward selection did not claim beside it (a
+        # partner found only once the lead is bent to make room for it, a PRNU beside telegraph pixels, is not)
+        usable = [(c, f) for c, f in found if not c.significant]
     spec = EffectSpec.fit_all(type(fitted))
     on_first = Given.of(comp, [fitted], len(first.params))
     rows0 = comp.cell_table()
@@ -718,15 +725,19 @@ def _share_left(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> flo
     return math.sqrt(sum(e1**2 for _, e1 in errors)) / before if before > 0.0 else math.inf
 
 
-def _together(other: Candidate, a: Assessment, alternatives: Sequence[Assessment] = ()) -> dict[str, Any]:
+def _together(other: Candidate, a: Assessment, absorbed: bool, alternatives: Sequence[Assessment] = ()
+              ) -> dict[str, Any]:
     """:attr:`Candidate.beyond` of a candidate claimed with ``other`` (:func:`_pair`): its fit beyond the other's,
-    and the ``alternatives`` to it that fit as well beside the other."""
+    why the two are fitted jointly (``absorbed``: the lead claimed alone had taken up part of the partner's residual;
+    else the two partly cancel), and the ``alternatives`` to it that fit as well beside the other."""
     figures = (f"fitted jointly with it: chi-square {a.chi2_given:.1f} -> {min(a.fit.chi2, a.chi2_given):.1f} "
                f"beyond it, p = {a.p_value:.2g}, {a.explained_fraction:.1%} of what it leaves")
     alt = [b.effect.name for b in alternatives]
-    reading = (f"claimed together with {other.effect}, not alone (the two partly cancel): significant beyond it "
-               f"({figures})" + (f"; {', '.join(alt)} would fit as well in its place" if alt else ""))
-    return {**_refit(a, [other.effect], reading), "together": True,
+    why = ("fitted jointly: alone, the first took up part of the other's residual" if absorbed else
+           "not alone (the two partly cancel)")
+    reading = (f"claimed together with {other.effect}, {why}: significant beyond it ({figures})"
+               + (f"; {', '.join(alt)} would fit as well in its place" if alt else ""))
+    return {**_refit(a, [other.effect], reading), "together": True, "absorbed": absorbed,
             "alternatives": [{"effect": b.effect.name, "params": b.fit.values[b.effect.name],
                               "fitted_reading": b.effect.reading()} for b in alternatives]}
 
@@ -826,11 +837,13 @@ def diagnosis_line(candidates: Sequence[Mapping[str, Any]]) -> str:
     best = claimed[0]
     seen = {best["rank"]}
     together = (best.get("beyond") or {}).get("together")
-    if together:  # two effects that each mask the other alone (:func:`_pair`)
+    if together:  # two effects fitted jointly (:func:`_pair`)
         partner = next(c for c in claimed if c["effect"] == best["beyond"]["given"][0])
         seen.add(partner["rank"])
         others = [x["effect"] for x in partner["beyond"]["alternatives"]]
-        line = (f"most likely missing effects, together (alone, each is masked by the other): "
+        why = (f"alone, {best['effect']} takes up part of the other's residual" if best["beyond"].get("absorbed") else
+               "alone, each is masked by the other")
+        line = (f"most likely missing effects, together ({why}): "
                 f"{best['beyond']['fitted_reading']}; and {partner['beyond']['fitted_reading']}"
                 + (f" (or {', '.join(others)} in its place: these data cannot tell them apart)" if others else ""))
     elif not best.get("equivalent_to"):
