@@ -22,7 +22,7 @@ from .compare import (
     rms_error,
     rms_error_raw,
 )
-from .diagnose import EffectSpec, candidate_names, component_errors, diagnose, diagnosis_line, fit
+from .diagnose import EffectSpec, candidate_names, component_errors, diagnose, diagnosis_line, fit, fitted_reading
 from .estimate import estimator_views
 from .measure import Measurements, SegmentTolerance, measure_frames
 from .noise_events import events, set_apart, without_segments
@@ -174,7 +174,7 @@ def analyze(
                 {"effect": e.name, "params": dict(e.values), "fitted": res.values[e.name],
                  "param_errors": res.errors[e.name], "degenerate": (res.degenerate or {}).get(e.name, []),
                  "param_ranges": {k: list(v) for k, v in (res.ranges or {}).get(e.name, {}).items()},
-                 "reading": e.reading()}
+                 "reading": fitted_reading(res, e)}
                 for e in res.effects
             ],
             "rms_error_before_dn": out["rms_error_dn"],

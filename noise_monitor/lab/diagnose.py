@@ -224,6 +224,17 @@ class EffectSpec:
         return cls(effect_cls, {}, tuple(p.name for p in effect_cls.params if p.fittable))
 
 
+def fitted_reading(res: FitResult, effect: Effect) -> str:
+    """A fitted effect's plain reading, naming the parameters these data do not identify with the range of values that
+    fit as well (hot pixels that saturate: any dark multiplier above a few hundred), so no reader takes the value the
+    fit stopped at for a measurement."""
+    ranges = (res.ranges or {}).get(effect.name, {})
+    if not ranges:
+        return effect.reading()
+    spans = "; ".join(f"{name} anywhere from {lo:.3g} to {hi:.3g}" for name, (lo, hi) in ranges.items())
+    return f"{effect.reading()} (not identified by these data: {spans} fits as well)"
+
+
 def _scan_values(p: Param) -> np.ndarray:
     """Coarse scan of a parameter: its default plus log-spaced magnitudes, SCAN_PER_DECADE per decade
     (both signs if allowed)."""
@@ -572,7 +583,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
             delta_bic=a.delta_bic,
             p_value=a.p_value,
             significant=a.significant,
-            reading=a.effect.reading(),
+            reading=fitted_reading(a.fit, a.effect),
             rms_error_after_dn=rms_error(a.rows),
             rms_error_after_raw_dn=rms_error_raw(a.rows),
             contradicted=a.contradicted,
@@ -739,15 +750,19 @@ def _together(other: Candidate, a: Assessment, absorbed: bool, alternatives: Seq
                + (f"; {', '.join(alt)} would fit as well in its place" if alt else ""))
     return {**_refit(a, [other.effect], reading), "together": True, "absorbed": absorbed,
             "alternatives": [{"effect": b.effect.name, "params": b.fit.values[b.effect.name],
-                              "fitted_reading": b.effect.reading()} for b in alternatives]}
+                              "fitted_reading": fitted_reading(b.fit, b.effect)} for b in alternatives]}
 
 
 def _refit(a: Assessment, given: list[str], reading: str) -> dict[str, Any]:
     """A refit beyond the ``given`` explanations as :attr:`Candidate.beyond` records it, with its plain ``reading``."""
+    name = a.effect.name
     return {"given": given, "significant": a.significant, "chi2_given": round(a.chi2_given, 3),
             "chi2": round(a.fit.chi2, 3), "p_value": a.p_value, "explained_fraction": round(a.explained_fraction, 6),
-            "params": a.fit.values[a.effect.name], "components": a.components, "contradicted": a.contradicted,
-            "failed": a.failed, "reading": reading, "fitted_reading": a.effect.reading()}
+            "params": a.fit.values[name], "param_errors": a.fit.errors[name],
+            "degenerate": (a.fit.degenerate or {}).get(name, []),
+            "param_ranges": {k: list(v) for k, v in (a.fit.ranges or {}).get(name, {}).items()},
+            "components": a.components, "contradicted": a.contradicted, "failed": a.failed, "reading": reading,
+            "fitted_reading": fitted_reading(a.fit, a.effect)}
 
 
 def _beyond(claimed: Sequence[Candidate], a: Assessment, alone: bool = True) -> dict[str, Any]:

@@ -37,7 +37,7 @@ def test_hot_pixels_partly_saturated_are_fitted(tmp_path: Path) -> None:
 
 def test_hot_pixels_saturated_everywhere_give_a_lower_bound(tmp_path: Path) -> None:
     """1000 x the dark current: 255 DN in every hold, so only a lower bound of the dark current is known;
-    the fraction is fitted and the multiplier reported as not identified, with the range that fits."""
+    the fraction is fitted and the multiplier reported as not identified, with the range that fits, in the readings too."""
     s = _fit(tmp_path, 1000.0)
     added = s["added_effects"][0]
     assert added["fitted"]["fraction"] == pytest.approx(FRACTION, rel=0.15)
@@ -45,3 +45,9 @@ def test_hot_pixels_saturated_everywhere_give_a_lower_bound(tmp_path: Path) -> N
     low, high = added["param_ranges"]["dark_multiplier"]
     assert 100.0 < low < 1000.0 and high == pytest.approx(1e7)
     assert s["rms_error_after_dn"] <= 0.4 * s["rms_error_before_dn"]
+    # the readings say so: the value the fit stopped at is no measurement
+    span = f"(not identified by these data: dark_multiplier anywhere from {low:.3g} to {high:.3g} fits as well)"
+    assert added["reading"].endswith(span)
+    (cand,) = s["candidates"]
+    assert cand["significant"] and cand["degenerate"] == ["dark_multiplier"]
+    assert s["diagnosis"].startswith("most likely missing effect: ") and "dark_multiplier anywhere from" in s["diagnosis"]
