@@ -115,6 +115,8 @@ MAX_PAIR_ERROR = 0.2
 PAIR_SCREEN = 0.5
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
+#: a fitted parameter within this fraction of its upper bound is read as pushed to the limit (:func:`fitted_reading`)
+AT_LIMIT = 1e-6
 #: smallest total sigma (DN) a component's variance mismatch is scaled by (8-bit rounding alone: 0.29)
 MIN_SIGMA_DN = 0.1
 #: a direction in parameter space is unidentified if crossing the whole allowed range along it changes
@@ -226,13 +228,20 @@ class EffectSpec:
 
 def fitted_reading(res: FitResult, effect: Effect) -> str:
     """A fitted effect's plain reading, naming the parameters these data do not identify with the range of values that
-    fit as well (hot pixels that saturate: any dark multiplier above a few hundred), so no reader takes the value the
-    fit stopped at for a measurement."""
+    fit as well (hot pixels that saturate: any dark multiplier above a few hundred), and those the fit pushed to the
+    upper limit of their allowed range (hot pixels at 20 % of the pixels: the effect stretched, perhaps standing for
+    another), so no reader takes the value the fit stopped at for a measurement."""
     ranges = (res.ranges or {}).get(effect.name, {})
-    if not ranges:
-        return effect.reading()
-    spans = "; ".join(f"{name} anywhere from {lo:.3g} to {hi:.3g}" for name, (lo, hi) in ranges.items())
-    return f"{effect.reading()} (not identified by these data: {spans} fits as well)"
+    notes = []
+    if ranges:
+        spans = "; ".join(f"{name} anywhere from {lo:.3g} to {hi:.3g}" for name, (lo, hi) in ranges.items())
+        notes.append(f"not identified by these data: {spans} fits as well")
+    free = res.values.get(effect.name, {})
+    for p in type(effect).params:
+        if p.name in free and p.name not in ranges and free[p.name] >= p.bounds[1] * (1.0 - AT_LIMIT):
+            notes.append(f"{p.name} at the upper limit of its allowed range, {p.bounds[1]:g}: the data would take more; "
+                         "the effect may stand for another")
+    return effect.reading() + "".join(f" ({n})" for n in notes)
 
 
 def _scan_values(p: Param) -> np.ndarray:

@@ -46,3 +46,8 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
     assert cands["dsnu"]["beyond"]["absorbed"] and cands["prnu"]["beyond"]["given"] == ["dsnu"]
     assert "alone, the first took up part of the other's residual" in cands["prnu"]["beyond"]["reading"]
     assert s["diagnosis"].startswith("most likely missing effects, together (alone, dsnu takes up part of the other's")
+    # alone, the hot pixels' fit stretches to the limit of its fraction to stand for the DSNU, and its reading says so
+    alone = cands["hot_pixels"]
+    assert alone["params"]["fraction"] == pytest.approx(0.2) and alone["params"]["dark_multiplier"] < 2.0
+    assert "(fraction at the upper limit of its allowed range, 0.2: the data would take more" in alone["reading"]
+    assert "upper limit" not in cands["hot_pixels"]["beyond"]["fitted_reading"]  # beyond the pair: 0.1 % x ~1000
