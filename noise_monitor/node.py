@@ -553,10 +553,30 @@ def run(args: argparse.Namespace) -> int:
     return spin(argv, overrides, args.duration, args.json, args.foxglove, args.foxglove_host)
 
 
+def node_help() -> str:
+    """``noise_monitor_node --help``: how to run it the ROS way, its parameters (default, description) and outputs."""
+    lines = ["usage: ros2 run noise_monitor noise_monitor_node [--ros-args [--params-file FILE] [-p NAME:=VALUE] "
+             "[-r __ns:=/NS] [-r image:=TOPIC] ...]",
+             "", "Online camera noise diagnosis: per frame PN, DCSN, RN and the residual xi; alarms on /diagnostics.",
+             "(`noise-monitor node --help`: the same node with plain command-line options.)", "",
+             "parameters (ROS parameters; defaults of config/node.yaml may differ):"]
+    for name, (default, description) in parameter_table().items():
+        lines.append(f"  {name} ({type(default).__name__}, default {default!r}): {description}")
+    lines += ["", "publishes (in the default namespace; -r __ns:=/NS moves all but /diagnostics):"]
+    lines += [f"  {topic} [{kind}]" for topic, kind in output_topics().items()]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Console script ``noise_monitor_node`` (ROS style: configure with --ros-args)."""
+    """Console script ``noise_monitor_node`` (ROS style: configure with --ros-args; ``--help`` before them prints
+    :func:`node_help`)."""
     from .cli import USER_ERRORS, error_line
 
+    args = list(sys.argv[1:] if argv is None else argv)
+    own = args[:args.index("--ros-args")] if "--ros-args" in args else args
+    if {"-h", "--help"} & set(own):
+        print(node_help())
+        return 0
     try:
         return spin(list(sys.argv if argv is None else ["noise_monitor_node", *argv]), {})
     except USER_ERRORS as exc:  # the same one-line errors as `noise-monitor node`

@@ -180,8 +180,10 @@ def test_colcon_build_installs_what_ros2_run_and_ros2_launch_look_up(tmp_path: P
         assert Path(share_found) == share and Path(profile) == share / "config" / "cameras" / "icx285.yaml"
         cli = _run(_sourced(ws, str(prefix / "lib" / "noise_monitor" / "noise-monitor"), "--help"), cwd=ws, env=run_env)
         assert cli.returncode == 0 and "usage: noise-monitor" in cli.stdout, cli.stderr[-2000:]
+        helped = _run(_sourced(ws, node, "--help"), cwd=ws, env=run_env)
+        assert helped.returncode == 0 and helped.stdout.startswith("usage: ros2 run noise_monitor"), helped.stderr[-2000:]
         # `ros2 run noise_monitor noise_monitor_node --ros-args --params-file <share>/config/node.yaml`: it runs
-        # until Ctrl-C (no --help of its own), so: started, its first log line, SIGINT, exit 0
+        # until Ctrl-C, so: started, its first log line, SIGINT, exit 0
         log = tmp_path / "node.log"
         with log.open("w") as out:
             proc = subprocess.Popen(_sourced(ws, node, "--ros-args", "--params-file", str(share / "config" / "node.yaml")),

@@ -386,6 +386,20 @@ def test_cli_rejects_bad_parameters_with_exit_code_2(tmp_path, capsys):
     assert "xi_threshold_dn must be > 0" in capsys.readouterr().err
 
 
+def test_node_help_lists_every_parameter_and_output_without_starting(capsys):
+    """``ros2 run noise_monitor noise_monitor_node --help`` prints the parameters (default, description) and the
+    outputs and exits 0 (it used to start the node, which ran until Ctrl-C); after --ros-args, --help is ROS's."""
+    from msg_adapters.outputs import output_topics
+    from noise_monitor.node import main as node_main
+
+    assert node_main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: ros2 run noise_monitor noise_monitor_node [--ros-args")
+    for name, (default, _) in parameter_table().items():
+        assert f"  {name} ({type(default).__name__}, default {default!r}): " in out
+    assert all(f"  {topic} [{kind}]" in out for topic, kind in output_topics().items())
+
+
 def test_a_robots_params_file_with_sections_for_other_nodes_and_use_sim_time(tmp_path, capfd):
     """A launch's one params file: a camera driver's section first, every node's (``/**``: rclpy's use_sim_time, a
     key of other nodes, and monitor settings), QoS overrides of the image input, and the monitor's own sections per
