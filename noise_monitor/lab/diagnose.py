@@ -61,10 +61,11 @@ PRNU's pattern, when both are missing), which its fit alone then also finds but 
 candidate whose fit alone passed the F-test and the explained fraction is not claimed (nothing is, or something
 ranked below it), it is fitted jointly with each other one (:func:`_pair`); when it is claimed, with each other one
 whose fit alone passed them too but that was not claimed beside it (a partner found only once the lead is bent to
-make room for it, e.g. a PRNU beside the plug-in for random telegraph pixels, is not); the pair leaving the smallest chi-square with each member significant beyond the other's joint fit (all the tests
-above) and most of the model's error explained is claimed if it fits better than what the forward selection
-claimed by the BIC, partners that fit as well named as alternatives, and the forward selection goes on beyond the
-two (what it claimed before is tested beyond them).
+make room for it, e.g. a PRNU beside the plug-in for random telegraph pixels, is not); the pair leaving the smallest
+chi-square with each member significant beyond the other's joint fit (all the tests above) and most of the model's
+error explained is claimed if it fits better than what the forward selection claimed by the BIC, partners that fit
+as well named as alternatives, and the forward selection goes on beyond the two (what it claimed before is tested
+beyond them).
 """
 from __future__ import annotations
 
@@ -115,7 +116,8 @@ MAX_PAIR_ERROR = 0.2
 PAIR_SCREEN = 0.5
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
-#: a fitted parameter within this fraction of its upper bound is read as pushed to the limit (:func:`fitted_reading`)
+#: a fitted parameter within this fraction of its allowed range from its upper bound is read as pushed to the limit
+#: (:func:`fitted_reading`)
 AT_LIMIT = 1e-6
 #: smallest total sigma (DN) a component's variance mismatch is scaled by (8-bit rounding alone: 0.29)
 MIN_SIGMA_DN = 0.1
@@ -238,8 +240,9 @@ def fitted_reading(res: FitResult, effect: Effect) -> str:
         notes.append(f"not identified by these data: {spans} fits as well")
     free = res.values.get(effect.name, {})
     for p in type(effect).params:
-        if p.name in free and p.name not in ranges and free[p.name] >= p.bounds[1] * (1.0 - AT_LIMIT):
-            notes.append(f"{p.name} at the upper limit of its allowed range, {p.bounds[1]:g}: the data would take more; "
+        lo, hi = p.bounds
+        if p.name in free and p.name not in ranges and free[p.name] >= hi - AT_LIMIT * (hi - lo):
+            notes.append(f"{p.name} at the upper limit of its allowed range, {hi:g}: the data would take more; "
                          "the effect may stand for another")
     return effect.reading() + "".join(f" ({n})" for n in notes)
 
