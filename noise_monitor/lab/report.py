@@ -288,7 +288,10 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     un = summary.get("unexplained") or {}
     if un.get("significant") and un.get("dominant_component") in ("temporal", "fixed", "single"):
         images["Unexplained residual on the sensor"] = _excess_map_plot(comp, un["dominant_component"])
-    cand_rows = [{**c.as_dict(), "params": c.params} for c in candidates]
+    # "params": each candidate's fit alone; "claimed_params": the values claimed (refitted beyond or with the others)
+    cand_rows = [{**c.as_dict(), "params": c.params,
+                  "claimed_params": (c.beyond["params"] if c.beyond else c.params) if c.significant else ""}
+                 for c in candidates]
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>noise_monitor analysis</title>",
         "<style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;"
@@ -353,7 +356,8 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
             f"<li>{html.escape(c.effect)}: {html.escape(c.contradicted)}</li>" for c in contradicted) + "</ul></p>")
     parts.append(_table(cand_rows, ["rank", "effect", "equivalent_to", "significant", "significant_alone",
                                     "explained_by", "explained_fraction", "delta_bic",
-                                    "p_value", "params", "param_errors", "degenerate", "param_ranges", "rms_error_after_dn",
+                                    "p_value", "params", "claimed_params", "param_errors", "degenerate", "param_ranges",
+                                    "rms_error_after_dn",
                                     "reading"]))
     parts.append(_unexplained_html(summary.get("unexplained")))
     for title, b64 in images.items():

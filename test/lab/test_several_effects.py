@@ -6,12 +6,14 @@ touch. Found in one pass, each at its value. Where the DSNU's fit alone is claim
 found much of the residual, is then explained by it), the two are fitted jointly too."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 import torch
 
 from noise_monitor.bag.simulate import simulate_bag
+from noise_monitor.cli import main
 from noise_monitor.lab import analyze
 
 torch.set_num_threads(1)
@@ -31,12 +33,17 @@ def test_four_effects_missing_at_once_are_claimed_in_one_pass(tmp_path: Path) ->
     assert claimed["hot_pixels"]["fraction"] == pytest.approx(0.001, rel=0.2)
 
 
-def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_path: Path) -> None:
+def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture) -> None:
     """Seed 660: the DSNU alone is claimed at 0.34 and nothing beyond it (the PRNU's own fit alone explains 61 % of the
-    residual, but not beyond the DSNU's); fitted jointly, both are significant beyond the other and the rest follows."""
+    residual, but not beyond the DSNU's); fitted jointly, both are significant beyond the other and the rest follows.
+    The CLI's table and the report show the claimed values beside the fits alone."""
     bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
                        width=320, height=256, fps=10.0, seed=660)
-    s = analyze(bag, profile="ev76c661", estimator=None)
+    report = tmp_path / "report"
+    assert main(["analyze", str(bag), "--profile", "ev76c661", "--no-estimator", "--quiet", "--report", str(report)]) == 0
+    out = capsys.readouterr().out
+    s = json.loads((report / "summary.json").read_text())
     cands = {c["effect"]: c for c in s["candidates"]}
     assert cands["dsnu"]["significant_alone"] and cands["dsnu"]["params"]["fraction"] > 0.33  # alone: too high
     claimed = {c["effect"]: (c["beyond"] or {}).get("params") or c["params"] for c in s["candidates"] if c["significant"]}
@@ -51,3 +58,8 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
     assert alone["params"]["fraction"] == pytest.approx(0.2) and alone["params"]["dark_multiplier"] < 2.0
     assert "(fraction at the upper limit of its allowed range, 0.2: the data would take more" in alone["reading"]
     assert "upper limit" not in cands["hot_pixels"]["beyond"]["fitted_reading"]  # beyond the pair: 0.1 % x ~1000
+    dsnu_line = next(line for line in out.splitlines() if line.startswith(" * ") and " dsnu " in line)
+    assert dsnu_line.endswith(f"fraction={claimed['dsnu']['fraction']:.4g}  "
+                              f"(alone: fraction={cands['dsnu']['params']['fraction']:.4g})")
+    html = (report / "report.html").read_text()
+    assert "<th>claimed_params</th>" in html and f"fraction={claimed['dsnu']['fraction']:.4g}" in html
