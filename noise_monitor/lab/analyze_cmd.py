@@ -74,8 +74,8 @@ def run(args: argparse.Namespace) -> int:
         mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "
         params = ", ".join(_param_text(k, v, c["param_ranges"].get(k)) for k, v in c["params"].items())
         if c["significant"] and c["beyond"]:  # claimed as refitted beyond (or with) the others: those values
-            ranges = c["beyond"].get("param_ranges", {})
-            params = (", ".join(_param_text(k, v, ranges.get(k)) for k, v in c["beyond"]["params"].items())
+            ranges = c["beyond"]["param_ranges"]
+            params = (", ".join(_param_text(k, v, ranges.get(k)) for k, v in c["claimed_params"].items())
                       + f"  (alone: {params})")
         same = f"  (indistinguishable from {', '.join(c['equivalent_to'])})" if c["equivalent_to"] else ""
         print(f" {mark} {c['rank']:2d} {c['effect']:{width}s} explained {c['explained_fraction']:6.1%}  {params}{same}")

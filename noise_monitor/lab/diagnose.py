@@ -189,6 +189,13 @@ class Candidate:
     #: the fitted effect instance
     fitted: Effect | None = field(default=None, repr=False, compare=False)
 
+    @property
+    def claimed_params(self) -> dict[str, float] | None:
+        """The values claimed (its refit beyond or with the other claims, else its fit alone); None: not claimed."""
+        if not self.significant:
+            return None
+        return self.beyond["params"] if self.beyond else self.params
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "effect": self.effect,
@@ -201,6 +208,7 @@ class Candidate:
             "beyond": self.beyond,
             "explained_fraction": round(self.explained_fraction, 6),
             "params": self.params,
+            "claimed_params": self.claimed_params,
             "param_errors": self.param_errors,
             "delta_bic": round(self.delta_bic, 3),
             "p_value": self.p_value,

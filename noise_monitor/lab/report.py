@@ -288,10 +288,7 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     un = summary.get("unexplained") or {}
     if un.get("significant") and un.get("dominant_component") in ("temporal", "fixed", "single"):
         images["Unexplained residual on the sensor"] = _excess_map_plot(comp, un["dominant_component"])
-    # "params": each candidate's fit alone; "claimed_params": the values claimed (refitted beyond or with the others)
-    cand_rows = [{**c.as_dict(), "params": c.params,
-                  "claimed_params": (c.beyond["params"] if c.beyond else c.params) if c.significant else ""}
-                 for c in candidates]
+    cand_rows = [{**c.as_dict(), "params": c.params} for c in candidates]  # params: the fit alone
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>noise_monitor analysis</title>",
         "<style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;"
