@@ -6,8 +6,9 @@ parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - 
 fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
 chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction and
 a minimum relative drop of the model error (DN, net of the measurement's scatter) where the effect acts:
-in the measured components the effect changes (temporal, fixed, rows, columns, ...). A floor of scene
-texture in other components then cannot hide a correct fit, and an effect that only bends the model
+in the measured components the effect changes (temporal, fixed, rows, columns, ...); where one cell far
+noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges
+(:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an effect that only bends the model
 towards a residual it cannot shape (a uniform dark-current change for a glowing corner) is not claimed;
 nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
 excess (towards a corner, along a gradient, beyond an intensity law per segment:
@@ -60,10 +61,13 @@ neither reproduces alone; and the first claim's fit alone may have taken up a se
 PRNU's pattern, when both are missing), which its fit alone then also finds but not beyond the first. When the best
 candidate whose fit alone passed the F-test and the explained fraction is not claimed (nothing is, or something
 ranked below it), it is fitted jointly with each other one (:func:`_pair`); when it is claimed, with each other one
-whose fit alone passed them too but that was not claimed beside it (a partner found only once the lead is bent to
-make room for it, e.g. a PRNU beside the plug-in for random telegraph pixels, is not); the pair leaving the smallest
+whose fit alone passed them too (a partner found only once the lead is bent to make room for it, e.g. a PRNU beside
+the plug-in for random telegraph pixels, is not), one the forward selection claimed beside it only if the joint fit
+moves the lead by more than MIN_PAIR_MOVE of its standard errors (held at its fit alone, a DSNU that took up the PRNU's
+pattern leaves an excess a dark-current law would make up); the pair leaving the smallest
 chi-square with each member significant beyond the other's joint fit (all the tests above) and most of the model's
-error explained is claimed if it fits better than what the forward selection claimed by the BIC, partners that fit
+error explained is claimed if it fits better than what the forward selection claimed by the BIC (with a partner
+claimed beside the lead: than the two as it fitted them), partners that fit
 as well named as alternatives, and the forward selection goes on beyond the two (what it claimed before is tested
 beyond them).
 """
@@ -77,6 +81,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
 
 from ..physics import Effect, EffectError, Param, available
@@ -114,6 +119,10 @@ MAX_PAIR_ERROR = 0.2
 #: its defaults) is refitted jointly only if its full fit beyond the lead leaves at most this share (on the pedestal
 #: camera: 0 with extra read noise; the cubic compression's gain error with read noise: 0.57)
 PAIR_SCREEN = 0.5
+#: where the lead was claimed alone and the forward selection claimed a partner beside it (held at the lead's fit alone),
+#: the two are refitted jointly only if that moves the lead by more than this many of its standard errors: its fit alone
+#: took up the partner's residual (a DSNU the PRNU's pattern, 5-18 SE) rather than sharing a residual with it
+MIN_PAIR_MOVE = 3.0
 #: components an effect changes: those carrying at least this share of its total |variance change|
 OWN_COMPONENT_SHARE = 0.25
 #: a fitted parameter within this fraction of its allowed range from its upper bound is read as pushed to the limit
@@ -427,21 +436,32 @@ def candidate_names(extra: Iterable[str] = ()) -> list[str]:
     return names + [n for n in extra if n not in names]
 
 
-def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
-    """Per measured component: the rms over cells of the error its variance mismatch (measured - model)
-    makes in the cell's total sigma (DN: the measured total sigma minus what it would be with the model's
-    variance in that component), net of the measurement's scatter like :func:`.compare.rms_error` (a
-    component's cells can be noisy, even negative, where its variance is small: the rms of their square
-    roots would be their noise, not the model's error)."""
-    out: dict[str, list[float]] = {}
+def _component_cells(rows: list[dict[str, Any]]) -> dict[str, np.ndarray]:
+    """Per measured component, each cell's (error, standard error) in DN: the error its variance mismatch (measured -
+    model) makes in the cell's total sigma (the measured total sigma minus what it would be with the model's variance in
+    that component) and that error's standard error."""
+    out: dict[str, list[tuple[float, float]]] = {}
     for r in rows:
         total = sum(r["measured_var_dn2"].values())
         sigma = max(r["measured_sigma_dn"], MIN_SIGMA_DN)
         for c, m in r["measured_var_dn2"].items():
             d = sigma - math.sqrt(max(total - m + r["model_var_dn2"].get(c, 0.0), 0.0))
-            se = sigma_error(sigma, r["measured_var_err_dn2"][c], below=d >= 0.0)
-            out.setdefault(c, []).append(d * d - se * se)
-    return {c: math.sqrt(max(float(np.mean(v)), 0.0)) for c, v in out.items()}
+            out.setdefault(c, []).append((d, sigma_error(sigma, r["measured_var_err_dn2"][c], below=d >= 0.0)))
+    return {c: np.asarray(v) for c, v in out.items()}
+
+
+def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Per measured component: the rms over cells of the error its variance mismatch makes in the cell's total sigma
+    (DN, :func:`_component_cells`), net of the measurement's scatter like :func:`.compare.rms_error` (a component's
+    cells can be noisy, even negative, where its variance is small: the rms of their square roots would be their noise,
+    not the model's error)."""
+    return {c: math.sqrt(max(float(np.mean(v[:, 0] ** 2 - v[:, 1] ** 2)), 0.0))
+            for c, v in _component_cells(rows).items()}
+
+
+def component_chi2(rows: list[dict[str, Any]]) -> dict[str, tuple[float, int]]:
+    """Per measured component: the chi-square of its cells' errors (:func:`_component_cells`) and their number."""
+    return {c: (float(np.sum(np.square(v[:, 0] / v[:, 1]))), len(v)) for c, v in _component_cells(rows).items()}
 
 
 def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) -> list[str]:
@@ -457,10 +477,21 @@ def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) ->
 def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tuple[bool, dict[str, dict[str, float]]]:
     """Whether an added effect cuts the rms model error (DN, net of the measurement's scatter) by
     MIN_OWN_REDUCTION in every measured component it changes (an error within the scatter cannot be cut);
-    and those components' errors before and after."""
+    and those components' errors before and after. Where a component's pooled error is within the scatter
+    (a few cells far noisier than the rest can outweigh every other cell's error), its cells' chi-square
+    judges instead: the error exists if that chi-square is significant (SIGNIFICANCE_P), and the effect
+    must cut its excess over the cells' number as the rms error's square: to (1 - MIN_OWN_REDUCTION)^2."""
     errors = own_errors(rows0, rows1)
     comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
-    return bool(errors) and all(e0 > 0.0 and e1 <= (1.0 - MIN_OWN_REDUCTION) * e0 for e0, e1 in errors.values()), comps
+    x0, x1 = component_chi2(rows0), component_chi2(rows1)
+
+    def cut(c: str, e0: float, e1: float) -> bool:
+        if e0 > 0.0:
+            return e1 <= (1.0 - MIN_OWN_REDUCTION) * e0
+        (chi0, n), (chi1, _) = x0[c], x1[c]
+        return bool(chi2_dist.sf(chi0, n) < SIGNIFICANCE_P and chi1 - n <= (1.0 - MIN_OWN_REDUCTION) ** 2 * (chi0 - n))
+
+    return bool(errors) and all(cut(c, e0, e1) for c, (e0, e1) in errors.items()), comps
 
 
 def own_errors(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> dict[str, tuple[float, float]]:
@@ -694,13 +725,14 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
           ) -> tuple[tuple[Candidate, Assessment], tuple[Candidate, Assessment], list[Assessment]] | None:
     """Two candidates claimed together: the best group lead whose fit alone passed the F-test and the explained
     fraction (the forward selection's ``model``, ``n_params`` fitted; if it claimed that lead, the partners are only the
-    leads whose fit alone passed them too and that it did not claim), and the other group lead that (past
+    leads whose fit alone passed them too, one it claimed beside the lead only if the joint fit moves the lead by more
+    than :data:`MIN_PAIR_MOVE` of its standard errors), and the other group lead that (past
     :data:`PAIR_SCREEN`), fitted jointly with it
     (from :data:`PAIR_ROUNDS` rounds of each beyond the other), leaves the smallest chi-square with each significant
     beyond the other's joint fit and the two leaving at most :data:`MAX_PAIR_ERROR` of the model's rms error; each with
     that assessment, then the partners that fit as well (within ``EQUIVALENT_CHI2``, scaled like the equivalence
     test) as the alternatives these data cannot tell from it. None without such a pair, or when it does not fit
-    better than ``model`` by the BIC."""
+    better than ``model`` by the BIC (a partner claimed beside the lead: than the two as ``model`` holds them)."""
     leads = [next(g) for _, g in itertools.groupby(ranked, key=lambda c: c.rank)]
     usable = [(c, c.fitted) for c in leads if c.fitted is not None and not c.contradicted]
     found = [(c, f) for c, f in usable if c.p_value < SIGNIFICANCE_P and c.explained_fraction >= MIN_EXPLAINED_FRACTION]
@@ -710,7 +742,7 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
     if first.significant:  # claimed alone: its fit may have taken up a partner's residual (a DSNU the PRNU's pattern),
         # a partner whose own fit found something alone too but which the forward selection did not claim beside it (a
         # partner found only once the lead is bent to make room for it, a PRNU beside telegraph pixels, is not)
-        usable = [(c, f) for c, f in found if not c.significant]
+        usable = list(found)
     spec = EffectSpec.fit_all(type(fitted))
     on_first = Given.of(comp, [fitted], len(first.params))
     rows0 = comp.cell_table()
@@ -732,19 +764,33 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         joint = fit(comp, [spec, other_spec], start=[a.effect, b.effect])
         a = assess(comp, Given.of(comp, [joint.effects[1]], len(other.params)), spec)
         b = assess(comp, Given.of(comp, [joint.effects[0]], len(first.params)), other_spec)
+        if first.significant and other.significant and _moved(first, a) <= MIN_PAIR_MOVE:
+            continue
         if a.significant and b.significant and _share_left(rows0, b.rows) <= MAX_PAIR_ERROR:
             pairs.append((joint.chi2, (first, a), (other, b)))
     if not pairs:
         return None
     pairs.sort(key=lambda p: p[0])
     best = pairs[0][0]
-    if model:
+    if pairs[0][2][0].significant:  # claimed beside the lead: against the two as the forward selection fitted them
+        r = comp.residuals([e for e in model if e.name in (first.effect, pairs[0][2][0].effect)])
+        if best >= float(r @ r):
+            return None
+    elif model:
         r = comp.residuals(list(model))
         k = pairs[0][1][1].fit.n_free + pairs[0][2][1].fit.n_free
         if best + (k - n_params) * math.log(r.size) >= float(r @ r):
             return None  # no better than what the forward selection claimed
     limit = best + EQUIVALENT_CHI2 * max(1.0, best / max(on_first.n_obs - len(first.params), 1))
     return pairs[0][1], pairs[0][2], [p[2][1] for p in pairs[1:] if p[0] <= limit]
+
+
+def _moved(first: Candidate, a: Assessment) -> float:
+    """How far (in its standard errors, largest over its parameters) the joint fit ``a`` moves the lead from its fit
+    alone."""
+    alone, errors = first.params, first.param_errors
+    return max((abs(a.fit.values[first.effect][k] - v) / e for k, v in alone.items() if (e := errors.get(k))),
+               default=0.0)
 
 
 def _share_left(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> float:

@@ -15,6 +15,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
+from noise_monitor.lab.diagnose import component_errors, cuts_error
 
 torch.set_num_threads(1)
 
@@ -63,3 +64,43 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
                               f"(alone: fraction={cands['dsnu']['params']['fraction']:.4g})")
     html = (report / "report.html").read_text()
     assert "<th>claimed_params</th>" in html and f"fraction={claimed['dsnu']['fraction']:.4g}" in html
+
+
+def _rows(model_fixed: float) -> list[dict]:
+    """20 cells whose fixed-pattern variance (1 DN^2 measured, temporal 25 DN^2) the model puts at ``model_fixed``,
+    measured to 0.01 DN^2, and one cell measured to 20 DN^2 (a region of the scene far noisier than the rest)."""
+    return [{"measured_var_dn2": {"temporal": 25.0, "fixed": 1.0}, "model_var_dn2": {"temporal": 25.0, "fixed": model_fixed},
+             "measured_sigma_dn": 26.0 ** 0.5, "measured_var_err_dn2": {"temporal": 0.01, "fixed": err}}
+            for err in [0.01] * 20 + [20.0]]
+
+
+def test_one_cell_far_noisier_than_the_rest_does_not_hide_a_component_error() -> None:
+    """Seed 672's PRNU beyond the DSNU: the fixed component's pooled error net of scatter is 0 because one cell's
+    standard error (2.6 DN) outweighs twenty cells 0.1 DN off by 100 of theirs; its cells' chi-square shows the error,
+    and an effect must cut that as it would cut the rms error (its excess to a quarter), not a little."""
+    before = _rows(0.0)
+    assert component_errors(before)["fixed"] == 0.0
+    ok, comps = cuts_error(before, _rows(1.0))  # the missing variance put in: the error gone
+    assert ok and list(comps) == ["fixed"]
+    assert not cuts_error(before, _rows(0.3))[0]  # a third of it: each cell's error 0.099 -> 0.069 DN, not cut
+    assert cuts_error(before, _rows(0.6))[0]  # 0.099 -> 0.039 DN
+    quiet = [{**r, "measured_var_err_dn2": {"temporal": 0.01, "fixed": 20.0}} for r in before]
+    assert not cuts_error(quiet, [{**r, "measured_var_err_dn2": {"temporal": 0.01, "fixed": 20.0}}
+                                  for r in _rows(1.0)])[0]  # within every cell's scatter: nothing to cut
+
+
+def test_a_partner_claimed_beside_a_lead_that_took_up_its_residual_is_refitted_with_it(tmp_path: Path) -> None:
+    """Seed 672: the DSNU alone is claimed at 0.333 (it took up the PRNU's pattern); beyond it the PRNU explains 75 %
+    of the chi-square (its own-component cut needs the cells' chi-square: one very noisy cell), and held at 0.333
+    the DSNU leaves an excess that a dark-current law would make up. Refitted jointly (the DSNU moves by many of its
+    standard errors), both at their values, the hot pixels beyond them, no dark-current law."""
+    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
+                       width=320, height=256, fps=10.0, seed=672)
+    s = analyze(bag, profile="ev76c661", estimator=None)
+    cands = {c["effect"]: c for c in s["candidates"]}
+    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
+    assert cands["dsnu"]["params"]["fraction"] > 0.33  # alone: too high
+    assert {"prnu", "dsnu", "hot_pixels"} <= set(claimed) <= {"prnu", "dsnu", "hot_pixels", "column_offsets"}
+    assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
+    assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
+    assert cands["dsnu"]["beyond"]["absorbed"]
