@@ -15,7 +15,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
-from noise_monitor.lab.diagnose import component_errors, cuts_error
+from noise_monitor.lab.diagnose import MASKED_P, component_errors, cuts_error
 
 torch.set_num_threads(1)
 
@@ -104,3 +104,17 @@ def test_a_partner_claimed_beside_a_lead_that_took_up_its_residual_is_refitted_w
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert cands["dsnu"]["beyond"]["absorbed"]
+
+
+def test_an_effect_the_others_residual_dilutes_alone_is_refitted_beyond_them(tmp_path: Path) -> None:
+    """Seed 695: the column offsets' fit alone (0.44 DN) is no F-test success (p ~ 0.09) only because the PRNU and the
+    DSNU leave a chi-square of 16,000 beside it; judged against what the claimed model leaves, its drop is significant,
+    so it is refitted beyond the claims and claimed there at its value."""
+    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
+                       width=320, height=256, fps=10.0, seed=695)
+    s = analyze(bag, profile="ev76c661", estimator=None)
+    cands = {c["effect"]: c for c in s["candidates"]}
+    assert cands["column_offsets"]["p_value"] > MASKED_P and not cands["column_offsets"]["significant_alone"]
+    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
+    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
