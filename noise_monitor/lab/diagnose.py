@@ -8,8 +8,8 @@ chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum e
 a minimum relative drop of the model error (DN, net of the measurement's scatter) where the effect acts:
 in the measured components the effect changes (temporal, fixed, rows, columns, ...); where one cell far
 noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges
-(:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an effect that only bends the model
-towards a residual it cannot shape (a uniform dark-current change for a glowing corner) is not claimed;
+(:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
+effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a glowing corner) is not claimed;
 nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
 excess (towards a corner, along a gradient, beyond an intensity law per segment:
 :func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
@@ -756,8 +756,8 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         return None
     first, fitted = found[0]
     if first.significant:  # claimed alone: its fit may have taken up a partner's residual (a DSNU the PRNU's pattern),
-        # a partner whose own fit found something alone too but which the forward selection did not claim beside it (a
-        # partner found only once the lead is bent to make room for it, a PRNU beside telegraph pixels, is not)
+        # a partner whose own fit found something alone too (a partner found only once the lead is bent to make room for
+        # it, a PRNU beside telegraph pixels, is not); one claimed beside the lead only if the joint fit moves the lead
         usable = list(found)
     spec = EffectSpec.fit_all(type(fitted))
     on_first = Given.of(comp, [fitted], len(first.params))
