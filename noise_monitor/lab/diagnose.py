@@ -9,8 +9,8 @@ a minimum relative drop of the model error (DN, net of the measurement's scatter
 in the measured components the effect changes (temporal, fixed, rows, columns, ...); where one cell far
 noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges
 (:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
-effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a glowing corner) is not claimed;
-nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
+effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a
+glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
 excess (towards a corner, along a gradient, beyond an intensity law per segment:
 :func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
 amplitude. Nor is a fit that a direct observation contradicts (``contradicted``): a quantization step the
@@ -452,18 +452,17 @@ def _component_cells(rows: list[dict[str, Any]]) -> dict[str, np.ndarray]:
     return {c: np.asarray(v) for c, v in out.items()}
 
 
+def _net_rms(cells: np.ndarray) -> float:
+    """The rms of a component's cell errors (:func:`_component_cells`) net of their scatter (0 if within it)."""
+    return math.sqrt(max(float(np.mean(cells[:, 0] ** 2 - cells[:, 1] ** 2)), 0.0))
+
+
 def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
     """Per measured component: the rms over cells of the error its variance mismatch makes in the cell's total sigma
     (DN, :func:`_component_cells`), net of the measurement's scatter like :func:`.compare.rms_error` (a component's
     cells can be noisy, even negative, where its variance is small: the rms of their square roots would be their noise,
     not the model's error)."""
-    return {c: math.sqrt(max(float(np.mean(v[:, 0] ** 2 - v[:, 1] ** 2)), 0.0))
-            for c, v in _component_cells(rows).items()}
-
-
-def component_chi2(rows: list[dict[str, Any]]) -> dict[str, tuple[float, int]]:
-    """Per measured component: the chi-square of its cells' errors (:func:`_component_cells`) and their number."""
-    return {c: (float(np.sum(np.square(v[:, 0] / v[:, 1]))), len(v)) for c, v in _component_cells(rows).items()}
+    return {c: _net_rms(v) for c, v in _component_cells(rows).items()}
 
 
 def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) -> list[str]:
@@ -483,14 +482,16 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     (a few cells far noisier than the rest can outweigh every other cell's error), its cells' chi-square
     judges instead: the error exists if that chi-square is significant (SIGNIFICANCE_P), and the effect
     must cut its excess over the cells' number as the rms error's square: to (1 - MIN_OWN_REDUCTION)^2."""
-    errors = own_errors(rows0, rows1)
+    cells0, cells1 = _component_cells(rows0), _component_cells(rows1)
+    own = own_components(rows0, rows1)
+    errors = {c: (_net_rms(cells0[c]), _net_rms(cells1[c])) for c in own}
     comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
-    x0, x1 = component_chi2(rows0), component_chi2(rows1)
 
     def cut(c: str, e0: float, e1: float) -> bool:
         if e0 > 0.0:
             return e1 <= (1.0 - MIN_OWN_REDUCTION) * e0
-        (chi0, n), (chi1, _) = x0[c], x1[c]
+        n = len(cells0[c])
+        chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
         return bool(chi2_dist.sf(chi0, n) < SIGNIFICANCE_P and chi1 - n <= (1.0 - MIN_OWN_REDUCTION) ** 2 * (chi0 - n))
 
     return bool(errors) and all(cut(c, e0, e1) for c, (e0, e1) in errors.items()), comps
@@ -706,8 +707,7 @@ def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], cla
         masked = given is not None and not lead.contradicted and _masked_p(lead, chi_base, given) < MASKED_P
         if lead.fitted is None or not (lead.significant or masked):
             continue  # a fit that found nothing alone, or one a direct observation contradicts, is not refitted
-        if model:
-            assert given is not None
+        if given is not None:  # beyond the claimed model
             a = assess(comp, given, EffectSpec.fit_all(type(lead.fitted)))
             if not (a.significant or lead.significant):
                 continue  # nothing alone, nothing beyond: not reported as refitted
@@ -787,9 +787,9 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
     if not pairs:
         return None
     pairs.sort(key=lambda p: p[0])
-    best = pairs[0][0]
-    if pairs[0][2][0].significant:  # claimed beside the lead: against the two as the forward selection fitted them
-        r = comp.residuals([e for e in model if e.name in (first.effect, pairs[0][2][0].effect)])
+    best, partner = pairs[0][0], pairs[0][2][0]
+    if partner.significant:  # claimed beside the lead: against the two as the forward selection fitted them
+        r = comp.residuals([e for e in model if e.name in (first.effect, partner.effect)])
         if best >= float(r @ r):
             return None
     elif model:
