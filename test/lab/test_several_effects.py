@@ -15,7 +15,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
-from noise_monitor.lab.diagnose import MASKED_P, component_errors, cuts_error
+from noise_monitor.lab.diagnose import MASKED_P, MIN_EXPLAINED_FRACTION, component_errors, cuts_error
 
 torch.set_num_threads(1)
 
@@ -118,3 +118,23 @@ def test_an_effect_the_others_residual_dilutes_alone_is_refitted_beyond_them(tmp
     claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
     assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
+
+
+def test_an_effect_beyond_claims_that_leave_only_the_scatter_needs_no_share_of_it(tmp_path: Path) -> None:
+    """Seed 632: beyond the PRNU, the DSNU and the hot pixels, whose model leaves a chi-square within its degrees of
+    freedom (the measurement's stated scatter), the column offsets' drop is significant (F-test) and cuts the column
+    component's error, but is under a tenth of that residual: the explained fraction, a guard against texture leaking
+    into a structured residual, does not apply to one that is only scatter, so the column offsets are claimed."""
+    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
+                       width=320, height=256, fps=10.0, seed=632)
+    s = analyze(bag, profile="ev76c661", estimator=None)
+    cands = {c["effect"]: c for c in s["candidates"]}
+    beyond = cands["column_offsets"]["beyond"]
+    assert beyond["significant"] and beyond["within_scatter"]
+    assert beyond["explained_fraction"] < MIN_EXPLAINED_FRACTION
+    assert "a residual within the measurement's scatter" in beyond["reading"]
+    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
+    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.15)
+    assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
+    assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
