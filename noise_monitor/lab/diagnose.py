@@ -602,9 +602,10 @@ def _drop(given: Given, res: FitResult) -> tuple[float, float, float]:
 
 
 def _within_scatter(given: Given) -> bool:
-    """Whether the ``given`` model holds claimed effects and leaves a chi-square within its degrees of freedom: its
-    residual is no more than the scatter the measurement states, so a share of it is no yardstick for a candidate
-    beyond it (column offsets of 0.45 DN beside a PRNU, a DSNU and hot pixels explain 5-9 % of such a residual)."""
+    """Whether the ``given`` model holds effects (claimed ones, or a pair's partner) and leaves a chi-square within its
+    degrees of freedom: its residual is no more than the scatter the measurement states, so a share of it is no
+    yardstick for a candidate beyond it (column offsets of 0.45 DN beside a PRNU, a DSNU and hot pixels explain 5-9 %
+    of such a residual)."""
     return bool(given.effects) and given.chi2 <= given.n_obs - given.n_params
 
 
