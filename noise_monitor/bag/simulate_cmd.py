@@ -21,7 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", required=True, choices=sorted(SCENARIOS), metavar="NAME",
                         help="; ".join(f"{k}: {v.description}" for k, v in SCENARIOS.items()).replace("%", "%%"))
     parser.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                        help="switch on a registered effect (repeatable): NAME, NAME=VALUE or NAME:param=v,param=v")
+                        help="switch on a registered effect (repeatable): NAME, NAME=VALUE or NAME:param=v,param=v; "
+                             "a fixed pattern (PRNU, DSNU, line offsets, hot pixels) is drawn from its seed parameter, "
+                             "0 unless given (NAME:param=v,seed=S): bags differing only in --seed share one sensor")
     parser.add_argument("--effect-plugin", action="append", default=[], metavar="FILE", help="load effects from FILE")
     parser.add_argument("--replace-builtin-effects", action="store_true",
                         help="let --effect-plugin effects replace built-in effects of the same name (else an error)")
