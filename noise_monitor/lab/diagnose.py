@@ -10,8 +10,8 @@ in the measured components the effect changes (temporal, fixed, rows, columns, .
 noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges
 (:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
 effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a
-glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant position pattern of the
-excess (towards a corner, along a gradient, beyond an intensity law per segment:
+glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant
+position pattern of the excess (towards a corner, along a gradient, beyond an intensity law per segment:
 :func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
 amplitude. Nor is a fit that a direct observation contradicts (``contradicted``): a quantization step the
 output histogram does not show, or a Gaussian fixed pattern (PRNU, DSNU, line offsets, or an effect that
@@ -591,14 +591,18 @@ class Assessment:
         return not self.failed
 
 
+def _f_test(drop: float, k: int, chi_left: float, given: Given) -> float:
+    """F-test p-value of a chi-square ``drop`` by ``k`` more parameters beyond the ``given`` model, against ``chi_left``
+    per degree of freedom (what is left, net of every fitted parameter)."""
+    dof = max(given.n_obs - given.n_params - k, 1)
+    return float(f_dist.sf((drop / k) / max(chi_left / dof, 1e-12), k, dof)) if drop > 0 else 1.0
+
+
 def _drop(given: Given, res: FitResult) -> tuple[float, float, float]:
     """(F-test p-value, explained fraction, chi-square drop) of a fit beyond the ``given`` model."""
-    k = res.n_free
     chi1 = min(res.chi2, given.chi2)
     drop = given.chi2 - chi1
-    dof = max(given.n_obs - given.n_params - k, 1)
-    p = float(f_dist.sf((drop / k) / max(chi1 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
-    return p, (drop / given.chi2 if given.chi2 > 0 else 0.0), drop
+    return _f_test(drop, res.n_free, chi1, given), (drop / given.chi2 if given.chi2 > 0 else 0.0), drop
 
 
 def _within_scatter(given: Given) -> bool:
@@ -675,8 +679,7 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     beyond them then joins the claimed model. A group significant alone but not beyond them is
     ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None, and so do one
     whose fit alone found nothing (its drop alone against the claimed model's residual: F-test p >= MASKED_P; not
-    refitted) and one whose own fit a direct
-    observation contradicts (``contradicted``: refitted beyond a model with a
+    refitted) and one whose own fit a direct observation contradicts (``contradicted``: refitted beyond a model with a
     sparse fixed pattern of its own, a Gaussian pattern would escape the shape test and take up the part of
     the sparse pattern that model does not describe, e.g. PRNU beside telegraph pixels)."""
     for c in ranked:
@@ -745,10 +748,7 @@ def _masked_p(lead: Candidate, chi_base: float, given: Given) -> float:
     """The F-test p-value of a candidate's chi-square drop alone (from the camera's model's ``chi_base``) against the
     ``given`` model's residual chi-square per degree of freedom instead of its own: the residual the claimed effects
     explain would dilute it."""
-    k = max(len(lead.params), 1)
-    drop = chi_base - lead.chi2
-    dof = max(given.n_obs - given.n_params - k, 1)
-    return float(f_dist.sf((drop / k) / max(given.chi2 / dof, 1e-12), k, dof)) if drop > 0 else 1.0
+    return _f_test(chi_base - lead.chi2, max(len(lead.params), 1), given.chi2, given)
 
 
 def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (), n_params: int = 0
