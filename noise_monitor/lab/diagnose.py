@@ -67,10 +67,11 @@ the plug-in for random telegraph pixels, is not), one the forward selection clai
 moves the lead by more than MIN_PAIR_MOVE of its standard errors (held at its fit alone, a DSNU that took up the PRNU's
 pattern leaves an excess a dark-current law would make up); the pair leaving the smallest
 chi-square with each member significant beyond the other's joint fit (all the tests above) and most of the model's
-error explained is claimed if it fits better than what the forward selection claimed by the BIC (with a partner
-claimed beside the lead: than the two as it fitted them), partners that fit
-as well named as alternatives, and the forward selection goes on beyond the two (what it claimed before is tested
-beyond them).
+error explained is claimed (with a partner claimed beside the lead: if it fits better than the two as the forward
+selection fitted them), partners that fit as well named as alternatives, and the forward selection goes on beyond the
+two (what it claimed before is tested beyond them); the pair's claims, so completed, replace the forward selection's if
+their BIC is lower (a pair alone against a model that also holds hot pixels and column offsets would lose for lack of
+them).
 """
 from __future__ import annotations
 
@@ -687,10 +688,11 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     model: list[Effect] = []
     claimed: list[Candidate] = []  # the best member of each claimed group
     _forward(comp, ranked, model, claimed)
-    pair = _pair(comp, ranked, model, sum(len(c.params) for c in claimed))
+    pair = _pair(comp, ranked, model)
     if pair is not None:  # the pair replaces what the forward selection claimed, which is then tested beyond it
         (first, a), (second, b), alternatives = pair
         absorbed = first.significant  # claimed alone before: its fit had taken up part of the partner's residual
+        forward = _Claims.of(model, claimed, ranked)
         model.clear()
         claimed.clear()
         for c in ranked:
@@ -703,7 +705,36 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
             model.append(fitted)
             claimed.append(lead)
         _forward(comp, ranked, model, claimed, done={first.rank, second.rank})
+        if not forward.holds(second) and forward.model and forward.bic(comp) <= _Claims.of(model, claimed, ranked).bic(comp):
+            forward.restore(model, claimed, ranked)  # the forward selection's claims fit better, each complete
     return ranked
+
+
+@dataclass
+class _Claims:
+    """What :func:`claim`'s forward selection claimed (its ``model``, the ``claimed`` candidates and every candidate's
+    verdict), kept to compare with the pair's claims, each complete, and to restore."""
+
+    model: list[Effect]
+    claimed: list[Candidate]
+    verdicts: list[tuple[bool, dict[str, Any] | None, list[str]]]
+
+    @classmethod
+    def of(cls, model: list[Effect], claimed: list[Candidate], ranked: list[Candidate]) -> _Claims:
+        return cls(list(model), list(claimed), [(c.significant, c.beyond, list(c.explained_by)) for c in ranked])
+
+    def holds(self, c: Candidate) -> bool:
+        return any(x is c for x in self.claimed)
+
+    def bic(self, comp: Comparison) -> float:
+        """The claims' chi-square plus ln(n) per fitted parameter."""
+        r = comp.residuals(self.model)
+        return float(r @ r) + sum(len(c.params) for c in self.claimed) * math.log(r.size)
+
+    def restore(self, model: list[Effect], claimed: list[Candidate], ranked: list[Candidate]) -> None:
+        model[:], claimed[:] = self.model, self.claimed
+        for c, (significant, beyond, explained_by) in zip(ranked, self.verdicts, strict=True):
+            c.significant, c.beyond, c.explained_by = significant, beyond, explained_by
 
 
 def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate],
@@ -751,18 +782,19 @@ def _masked_p(lead: Candidate, chi_base: float, given: Given) -> float:
     return _f_test(chi_base - lead.chi2, max(len(lead.params), 1), given.chi2, given)
 
 
-def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (), n_params: int = 0
+def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = ()
           ) -> tuple[tuple[Candidate, Assessment], tuple[Candidate, Assessment], list[Assessment]] | None:
     """Two candidates claimed together: the best group lead whose fit alone passed the F-test and the explained
-    fraction (the forward selection's ``model``, ``n_params`` fitted; if it claimed that lead, the partners are only the
+    fraction (the forward selection's ``model`` fitted; if it claimed that lead, the partners are only the
     leads whose fit alone passed them too, one it claimed beside the lead only if the joint fit moves the lead by more
     than :data:`MIN_PAIR_MOVE` of its standard errors), and the other group lead that (past
     :data:`PAIR_SCREEN`), fitted jointly with it
     (from :data:`PAIR_ROUNDS` rounds of each beyond the other), leaves the smallest chi-square with each significant
     beyond the other's joint fit and the two leaving at most :data:`MAX_PAIR_ERROR` of the model's rms error; each with
     that assessment, then the partners that fit as well (within ``EQUIVALENT_CHI2``, scaled like the equivalence
-    test) as the alternatives these data cannot tell from it. None without such a pair, or when it does not fit
-    better than ``model`` by the BIC (a partner claimed beside the lead: than the two as ``model`` holds them)."""
+    test) as the alternatives these data cannot tell from it. None without such a pair, or when the lead's partner
+    is claimed in ``model`` and the pair fits no better than the two as ``model`` holds them (otherwise :func:`claim`
+    compares the two sets of claims, each complete, by the BIC)."""
     leads = [next(g) for _, g in itertools.groupby(ranked, key=lambda c: c.rank)]
     usable = [(c, c.fitted) for c in leads if c.fitted is not None and not c.contradicted]
     found = [(c, f) for c, f in usable if c.p_value < SIGNIFICANCE_P and c.explained_fraction >= MIN_EXPLAINED_FRACTION]
@@ -806,11 +838,6 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         r = comp.residuals([e for e in model if e.name in (first.effect, partner.effect)])
         if best >= float(r @ r):
             return None
-    elif model:
-        r = comp.residuals(list(model))
-        k = pairs[0][1][1].fit.n_free + pairs[0][2][1].fit.n_free
-        if best + (k - n_params) * math.log(r.size) >= float(r @ r):
-            return None  # no better than what the forward selection claimed
     limit = best + EQUIVALENT_CHI2 * max(1.0, best / max(on_first.n_obs - len(first.params), 1))
     return pairs[0][1], pairs[0][2], [p[2][1] for p in pairs[1:] if p[0] <= limit]
 
