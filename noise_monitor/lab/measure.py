@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -930,18 +930,19 @@ def _inliers(x: np.ndarray, symmetric: bool = False) -> np.ndarray:
 MIN_SPREAD_DOF = 10
 
 
-def _within_cell_spread(seg: SegmentMeasurement, bins: np.ndarray) -> dict[str, float]:
-    """Per component measured per cell (not pooled per segment): the standard deviation of the segment's blocks about
-    their intensity bin's mean, pooled over its bins (where its bins of two blocks or more give MIN_SPREAD_DOF degrees
-    of freedom). A cell's error is at least this over the square root of its blocks: the spread of a cell's own 6-10
-    blocks is uncertain by a third and can come out far too small (a hold at 54.6 degC whose 6-block cell read 7 of its
-    stated errors off with the true model: experiments/lab_several_effects/ section 11)."""
+def _within_cell_spread(values: Mapping[str, np.ndarray], bins: np.ndarray) -> dict[str, float]:
+    """Per component measured per cell (not pooled per segment; ``values``: per block): the standard deviation of a
+    segment's blocks about their intensity bin's mean (``bins``: per block), pooled over its bins (where its bins of two
+    blocks or more give MIN_SPREAD_DOF degrees of freedom). A cell's error is at least this over the square root of
+    its blocks: the spread of a cell's own 6-10 blocks is uncertain by a third and can come out far too small (a hold
+    at 54.6 degC whose 6-block cell read 7 of its stated errors off with the true model: experiments/lab_several_effects/
+    section 11)."""
     groups = [idx for k in np.unique(bins) if (idx := np.flatnonzero(bins == k)).size >= 2]
     dof = sum(idx.size - 1 for idx in groups)
     if dof < MIN_SPREAD_DOF:
         return {}
     return {comp: math.sqrt(sum(float(np.sum((arr[idx] - arr[idx].mean()) ** 2)) for idx in groups) / dof)
-            for comp, arr in seg.values.items() if comp not in POOLED}
+            for comp, arr in values.items() if comp not in POOLED}
 
 
 def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
@@ -951,7 +952,7 @@ def _cells(seg: SegmentMeasurement, b: int) -> list[Cell]:
     bins = np.floor(seg.intensity_dn / BIN_WIDTH_DN).astype(int)
     pooled = {comp: _inliers(arr, bool(seg.partners) and comp in CROSS_VIEW) if comp in TRIMMED else np.arange(arr.size)
               for comp, arr in seg.values.items() if comp in POOLED}
-    spread = _within_cell_spread(seg, bins)
+    spread = _within_cell_spread(seg.values, bins)
     for k in np.unique(bins):
         idx = np.flatnonzero(bins == k)
         if idx.size < MIN_BLOCKS_PER_CELL:

@@ -8,7 +8,7 @@ import torch
 
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.lab.compare import Comparison, baseline_effects
-from noise_monitor.lab.measure import measure_frames
+from noise_monitor.lab.measure import MIN_SPREAD_DOF, _within_cell_spread, measure_frames
 from noise_monitor.lab.quantization import quantized_variance
 from noise_monitor.lab.synthetic import simulate_frames
 from noise_monitor.monitor.frame import Frame
@@ -198,3 +198,19 @@ def test_temporal_row_noise_leaves_no_block_out_of_the_temporal_noise(outside, t
                                                                          abs=10)
     t_rows = np.mean([c.values["temporal_row"] for c in rows.cells])
     assert np.sqrt(t_rows) == pytest.approx(2.0, rel=0.1)  # the row noise is measured, not taken out
+
+
+def test_a_cell_of_few_blocks_takes_its_segments_within_cell_spread_as_its_error_floor() -> None:
+    """Six blocks that happen to agree to 0.001 DN^2 would state an error 1000 times too small: a cell's error is at
+    least its segment's pooled spread about the bins' means over the square root of its blocks (sum of squares 0 + 9
+    + 9 over 5 + 9 + 9 degrees of freedom); the pooled components keep their own, and fewer than MIN_SPREAD_DOF
+    degrees of freedom give no floor."""
+    rng = np.random.default_rng(5)
+    tight = 1.0 + 0.001 * rng.standard_normal(6)
+    wide = [2.0 + (z := rng.standard_normal(10)) / z.std(ddof=1), 3.0 + (z := rng.standard_normal(10)) / z.std(ddof=1)]
+    fixed = np.concatenate([tight, *wide])
+    bins = np.repeat([0, 1, 2], [6, 10, 10])
+    spread = _within_cell_spread({"fixed": fixed, "column": fixed}, bins)
+    ss = float(np.sum((tight - tight.mean()) ** 2))
+    assert spread == {"fixed": pytest.approx(np.sqrt((ss + 18.0) / 23.0))}
+    assert 5 + 3 < MIN_SPREAD_DOF and _within_cell_spread({"fixed": fixed[:10]}, bins[:10]) == {}
