@@ -21,8 +21,9 @@ energies of a block's hold-mean residual with the same sensor block seen from ot
 hold mean's own residual (temporal / K removed) and ``Measurements.not_measured`` says so; where that residual's
 neighbouring pixels are correlated (a sensor's fixed pattern is white, the optics' image of a scene is not) the
 view shows the scene, and those components' errors take the scene's variance. Outlier pixels count when another
-view confirms them; in a single view, unless their neighbours share their offset (the scene's specks). Every cell (segment x intensity bin) carries the
-standard error of its mean over blocks. The fixed pattern's *shape* (:class:`.shape.FixedShape`): its
+view confirms them; in a single view, unless their neighbours share their offset (the scene's specks). Every cell
+(segment x intensity bin) carries the standard error of its mean over blocks, from its blocks' spread but at least
+its segment's pooled within-cell spread (a few blocks' own spread can come out far too small). The fixed pattern's *shape* (:class:`.shape.FixedShape`): its
 kurtosis from four views of each sensor pixel at four camera poses (a Gaussian pattern such as PRNU has
 3; a few pixels far off, such as random telegraph pixels below the outlier threshold, far more).
 The temporal deviations are split like the residual: white temporal noise (``temporal``) and row/column
