@@ -147,10 +147,10 @@ def test_under_every_field_condition_the_pair_replaces_a_weaker_single_claim(tmp
     """The same two hidden under vibration, PWM light, flicker and auto-exposure hunting at once (held-out seed 74):
     the forward selection alone claims a dark-current law (rank 3, 13 % of the chi-square); the pedestal with a
     partner fitted together explains far more and replaces it. Beside the pedestal, the read noise and a dark-current
-    law fit these data equally well here (the two pairs' joint chi-squares within 0.1: 665.1 / 665.2 with the model at
-    16 blocks per cell, 735.0 / 734.9 at 32, 2026-11-29): the lab claims
-    one and names the other as the alternative the data cannot tell apart; the pedestal near 16 DN and the read
-    noise, claimed or named, near 8 e-."""
+    law fit these data about equally well (the two pairs' joint chi-squares within 0.1: 665.1 / 665.2 with the model
+    at 16 blocks per cell, 735.0 / 734.9 at 32, 2026-11-29; with each cell's error floored by its segment's spread the
+    read noise fits better, 621.6 / 626.8, 2026-11-30): the lab claims one and names the other as the alternative
+    where the data cannot tell them apart; the pedestal near 16 DN and the read noise, claimed or named, near 8 e-."""
     bag = simulate_bag(tmp_path / "field.mcap", pedestal, "campaign_heldout", effects=["extra_read_noise=8"],
                        frames=120, width=320, height=256, seed=74, vibration_px=0.3, vibration_hz=100.0,
                        flicker_pct=1.0, banding_pct=60.0, pwm_hz=400.0, pwm_duty=0.4, auto_exposure_pct=10.0)
@@ -164,7 +164,8 @@ def test_under_every_field_condition_the_pair_replaces_a_weaker_single_claim(tmp
     partner = (claimed - {"black_level"}).pop()
     assert cands["black_level"]["beyond"]["params"]["offset_dn"] == pytest.approx(BLACK, abs=2.0)
     named = cands[partner]["beyond"]["alternatives"]
-    assert [a["effect"] for a in named] == sorted(equivalent - {partner})
+    assert {a["effect"] for a in named} <= equivalent - {partner}
+    assert partner == "extra_read_noise" or named  # the law claimed only with the read noise named beside it
     read = cands[partner]["beyond"]["params"] if partner == "extra_read_noise" else named[0]["params"]
     assert read["sigma_e"] == pytest.approx(8.0, abs=1.0)
 
