@@ -85,6 +85,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
+from scipy.stats import norm
 
 from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
@@ -460,6 +461,14 @@ def _net_rms(cells: np.ndarray) -> float:
     return math.sqrt(max(float(np.mean(cells[:, 0] ** 2 - cells[:, 1] ** 2)), 0.0))
 
 
+def _beyond_noise(cells: np.ndarray) -> bool:
+    """Whether a component's net mean square error (:func:`_net_rms` squared) is significantly above 0 (SIGNIFICANCE_P)
+    against its own noise, sqrt(2 sum se^4) / n for cell errors d ~ N(0, se): a few imprecise cells make it noisy."""
+    ms = float(np.mean(cells[:, 0] ** 2 - cells[:, 1] ** 2))
+    sd = math.sqrt(2.0 * float(np.sum(cells[:, 1] ** 4))) / len(cells)
+    return ms > 0.0 and float(norm.sf(ms / max(sd, 1e-30))) < SIGNIFICANCE_P
+
+
 def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
     """Per measured component: the rms over cells of the error its variance mismatch makes in the cell's total sigma
     (DN, :func:`_component_cells`), net of the measurement's scatter like :func:`.compare.rms_error` (a component's
@@ -491,7 +500,7 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
 
     def cut(c: str, e0: float, e1: float) -> bool:
-        if e0 > 0.0:
+        if _beyond_noise(cells0[c]):
             return e1 <= (1.0 - MIN_OWN_REDUCTION) * e0
         n = len(cells0[c])
         chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
