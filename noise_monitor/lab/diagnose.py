@@ -6,9 +6,9 @@ parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - 
 fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
 chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction and
 a minimum relative drop of the model error (DN, net of the measurement's scatter) where the effect acts:
-in the measured components the effect changes (temporal, fixed, rows, columns, ...); where one cell far
-noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges
-(:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
+in the measured components the effect changes (temporal, fixed, rows, columns, ...); where that error is not
+significantly above 0 against its own noise (one cell far noisier than the rest puts it within the scatter, or a few
+imprecise cells make it), its cells' chi-square judges (:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
 effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a
 glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant
 position pattern of the excess (towards a corner, along a gradient, beyond an intensity law per segment:
@@ -490,10 +490,11 @@ def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) ->
 def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tuple[bool, dict[str, dict[str, float]]]:
     """Whether an added effect cuts the rms model error (DN, net of the measurement's scatter) by
     MIN_OWN_REDUCTION in every measured component it changes (an error within the scatter cannot be cut);
-    and those components' errors before and after. Where a component's pooled error is within the scatter
-    (a few cells far noisier than the rest can outweigh every other cell's error), its cells' chi-square
-    judges instead: the error exists if that chi-square is significant (SIGNIFICANCE_P), and the effect
-    must cut its excess over the cells' number as the rms error's square: to (1 - MIN_OWN_REDUCTION)^2."""
+    and those components' errors before and after. Where a component's pooled error is not significantly above 0
+    against its own noise (:func:`_beyond_noise`: a few cells far noisier than the rest can outweigh every other cell's
+    error, or make it), its cells' chi-square judges instead: the error exists if that chi-square is significant
+    (SIGNIFICANCE_P), and the effect must cut its excess over the cells' number as the rms error's square: to
+    (1 - MIN_OWN_REDUCTION)^2."""
     cells0, cells1 = _component_cells(rows0), _component_cells(rows1)
     own = own_components(rows0, rows1)
     errors = {c: (_net_rms(cells0[c]), _net_rms(cells1[c])) for c in own}
