@@ -19,15 +19,28 @@ from noise_monitor.lab.diagnose import MASKED_P, MIN_EXPLAINED_FRACTION, compone
 
 torch.set_num_threads(1)
 
-HIDDEN = ("prnu=1", "dsnu=0.3", "column_offsets=0.45", "hot_pixels:fraction=0.001,dark_multiplier=1000")
+HIDDEN = ("prnu:sigma_pct=1", "dsnu:fraction=0.3", "column_offsets:sigma_dn=0.45",
+          "hot_pixels:fraction=0.001,dark_multiplier=1000")
+FOUR = {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+
+
+def _bag(tmp_path: Path, seed: int, own_patterns: bool = False) -> Path:
+    """A 120-frame 320x256 ``campaign_heldout`` recording with the four effects hidden; ``own_patterns``: each effect's
+    fixed pattern drawn from ``seed`` too (else every such bag shares the effects' pattern seed 0, one sensor)."""
+    effects = [f"{e},seed={seed}" for e in HIDDEN] if own_patterns else list(HIDDEN)
+    return simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=effects, frames=120,
+                        width=320, height=256, fps=10.0, seed=seed)
+
+
+def _claimed(summary: dict) -> dict[str, dict[str, float]]:
+    """The lab's claimed effects and their claimed values."""
+    return {c["effect"]: c["claimed_params"] for c in summary["candidates"] if c["significant"]}
 
 
 def test_four_effects_missing_at_once_are_claimed_in_one_pass(tmp_path: Path) -> None:
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
-                       width=320, height=256, fps=10.0, seed=630)
-    s = analyze(bag, profile="ev76c661", estimator=None)
+    s = analyze(_bag(tmp_path, 630), profile="ev76c661", estimator=None)
     claimed = {c["effect"]: (c["beyond"] or {}).get("params") or c["params"] for c in s["candidates"] if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    assert set(claimed) == FOUR
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
@@ -39,8 +52,7 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
     """Seed 660: the DSNU alone is claimed at 0.34 and nothing beyond it (the PRNU's own fit alone explains 61 % of the
     residual, but not beyond the DSNU's); fitted jointly, both are significant beyond the other and the rest follows.
     The CLI's table and the report show the claimed values beside the fits alone."""
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
-                       width=320, height=256, fps=10.0, seed=660)
+    bag = _bag(tmp_path, 660)
     report = tmp_path / "report"
     assert main(["analyze", str(bag), "--profile", "ev76c661", "--no-estimator", "--quiet", "--report", str(report)]) == 0
     out = capsys.readouterr().out
@@ -48,7 +60,7 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
     cands = {c["effect"]: c for c in s["candidates"]}
     assert cands["dsnu"]["significant_alone"] and cands["dsnu"]["params"]["fraction"] > 0.33  # alone: too high
     claimed = {c["effect"]: (c["beyond"] or {}).get("params") or c["params"] for c in s["candidates"] if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    assert set(claimed) == FOUR
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
     assert cands["dsnu"]["beyond"]["absorbed"] and cands["prnu"]["beyond"]["given"] == ["dsnu"]
@@ -94,11 +106,9 @@ def test_a_partner_claimed_beside_a_lead_that_took_up_its_residual_is_refitted_w
     of the chi-square (its own-component cut needs the cells' chi-square: one very noisy cell), and held at 0.333
     the DSNU leaves an excess that a dark-current law would make up. Refitted jointly (the DSNU moves by many of its
     standard errors), both at their values, the hot pixels beyond them, no dark-current law."""
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
-                       width=320, height=256, fps=10.0, seed=672)
-    s = analyze(bag, profile="ev76c661", estimator=None)
+    s = analyze(_bag(tmp_path, 672), profile="ev76c661", estimator=None)
     cands = {c["effect"]: c for c in s["candidates"]}
-    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
+    claimed = _claimed(s)
     assert cands["dsnu"]["params"]["fraction"] > 0.33  # alone: too high
     assert {"prnu", "dsnu", "hot_pixels"} <= set(claimed) <= {"prnu", "dsnu", "hot_pixels", "column_offsets"}
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
@@ -110,13 +120,11 @@ def test_an_effect_the_others_residual_dilutes_alone_is_refitted_beyond_them(tmp
     """Seed 695: the column offsets' fit alone (0.44 DN) is no F-test success (p ~ 0.09) only because the PRNU and the
     DSNU leave a chi-square of 16,000 beside it; judged against what the claimed model leaves, its drop is significant,
     so it is refitted beyond the claims and claimed there at its value."""
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
-                       width=320, height=256, fps=10.0, seed=695)
-    s = analyze(bag, profile="ev76c661", estimator=None)
+    s = analyze(_bag(tmp_path, 695), profile="ev76c661", estimator=None)
     cands = {c["effect"]: c for c in s["candidates"]}
     assert cands["column_offsets"]["p_value"] > MASKED_P and not cands["column_offsets"]["significant_alone"]
-    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
 
 
@@ -125,16 +133,14 @@ def test_an_effect_beyond_claims_that_leave_only_the_scatter_needs_no_share_of_i
     freedom (the measurement's stated scatter), the column offsets' drop is significant (F-test) and cuts the column
     component's error, but is under a tenth of that residual: the explained fraction, a guard against texture leaking
     into a structured residual, does not apply to one that is only scatter, so the column offsets are claimed."""
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
-                       width=320, height=256, fps=10.0, seed=632)
-    s = analyze(bag, profile="ev76c661", estimator=None)
+    s = analyze(_bag(tmp_path, 632), profile="ev76c661", estimator=None)
     cands = {c["effect"]: c for c in s["candidates"]}
     beyond = cands["column_offsets"]["beyond"]
     assert beyond["significant"] and beyond["within_scatter"]
     assert beyond["explained_fraction"] < MIN_EXPLAINED_FRACTION
     assert "a residual within the measurement's scatter" in beyond["reading"]
-    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.15)
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
@@ -145,11 +151,9 @@ def test_cells_of_few_blocks_do_not_leave_a_floor_the_prnu_cannot_cut(tmp_path: 
     component; the PRNU, which removes most of the chi-square, then failed the own-component cut and only the DSNU was
     claimed (0.335). With each cell's error at least its segment's pooled within-cell spread over the square root of
     its blocks, all four are claimed at their values (2026-11-30)."""
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=list(HIDDEN), frames=120,
-                       width=320, height=256, fps=10.0, seed=778)
-    s = analyze(bag, profile="ev76c661", estimator=None)
-    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    s = analyze(_bag(tmp_path, 778), profile="ev76c661", estimator=None)
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
     assert claimed["hot_pixels"]["fraction"] == pytest.approx(0.001, rel=0.2)
@@ -161,14 +165,10 @@ def test_a_pair_is_weighed_with_what_the_forward_selection_then_claims_beyond_it
     offsets. Fitted jointly the PRNU and the DSNU are each significant beyond the other, but the two alone fit worse
     than those three claims; completed as the lab completes them (the hot pixels and column offsets beyond the two)
     they fit better by the BIC and replace them: all four at their values (before 2026-11-30 the DSNU was missed)."""
-    effects = [f"{e},seed=834" for e in ("prnu:sigma_pct=1", "dsnu:fraction=0.3", "column_offsets:sigma_dn=0.45",
-                                         "hot_pixels:fraction=0.001,dark_multiplier=1000")]
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=effects, frames=120,
-                       width=320, height=256, fps=10.0, seed=834)
-    s = analyze(bag, profile="ev76c661", estimator=None)
+    s = analyze(_bag(tmp_path, 834, own_patterns=True), profile="ev76c661", estimator=None)
     cands = {c["effect"]: c for c in s["candidates"]}
-    claimed = {e: c["claimed_params"] for e, c in cands.items() if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
     assert cands["prnu"]["beyond"]["together"] and cands["dsnu"]["beyond"]["together"]
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
@@ -204,12 +204,8 @@ def test_a_prnu_whose_cut_only_imprecise_cells_would_judge_is_claimed(tmp_path: 
     chi-square, but the fixed component's net rms error rises 0.096 -> 0.104 DN: a few imprecise cells at 24 and 14.75
     dB make that error, 1.9 of its own noise above 0 (the true model leaves 0.065 DN there). Judged on the cells'
     chi-square, the PRNU is claimed: all four at their values (before 2026-11-30 the PRNU was missed)."""
-    effects = [f"{e},seed=829" for e in ("prnu:sigma_pct=1", "dsnu:fraction=0.3", "column_offsets:sigma_dn=0.45",
-                                         "hot_pixels:fraction=0.001,dark_multiplier=1000")]
-    bag = simulate_bag(tmp_path / "four.mcap", "ev76c661", "campaign_heldout", effects=effects, frames=120,
-                       width=320, height=256, fps=10.0, seed=829)
-    s = analyze(bag, profile="ev76c661", estimator=None)
-    claimed = {c["effect"]: c["claimed_params"] for c in s["candidates"] if c["significant"]}
-    assert set(claimed) == {"prnu", "dsnu", "column_offsets", "hot_pixels"}
+    s = analyze(_bag(tmp_path, 829, own_patterns=True), profile="ev76c661", estimator=None)
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
