@@ -6,9 +6,9 @@ parameters are scanned on their grid. Ranking: the BIC gain ``chi2_0 - chi2_1 - 
 fraction: ``1 - chi2_1 / chi2_0``; significance: F-test of the chi-square drop against the remaining
 chi-square per degree of freedom (robust to mis-scaled errors), plus a minimum explained fraction and
 a minimum relative drop of the model error (DN, net of the measurement's scatter) where the effect acts:
-in the measured components the effect changes (temporal, fixed, rows, columns, ...); where that error is not
-significantly above 0 against its own noise (one cell far noisier than the rest puts it within the scatter, or a few
-imprecise cells make it), its cells' chi-square judges (:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
+in the measured components the effect changes (temporal, fixed, rows, columns, ...); where one cell far
+noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges
+(:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
 effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a
 glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant
 position pattern of the excess (towards a corner, along a gradient, beyond an intensity law per segment:
@@ -85,7 +85,6 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
-from scipy.stats import norm
 
 from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
@@ -461,14 +460,6 @@ def _net_rms(cells: np.ndarray) -> float:
     return math.sqrt(max(float(np.mean(cells[:, 0] ** 2 - cells[:, 1] ** 2)), 0.0))
 
 
-def _beyond_noise(cells: np.ndarray) -> bool:
-    """Whether a component's net mean square error (:func:`_net_rms` squared) is significantly above 0 (SIGNIFICANCE_P)
-    against its own noise, sqrt(2 sum se^4) / n for cell errors d ~ N(0, se): a few imprecise cells make it noisy."""
-    ms = float(np.mean(cells[:, 0] ** 2 - cells[:, 1] ** 2))
-    sd = math.sqrt(2.0 * float(np.sum(cells[:, 1] ** 4))) / len(cells)
-    return ms > 0.0 and float(norm.sf(ms / max(sd, 1e-30))) < SIGNIFICANCE_P
-
-
 def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
     """Per measured component: the rms over cells of the error its variance mismatch makes in the cell's total sigma
     (DN, :func:`_component_cells`), net of the measurement's scatter like :func:`.compare.rms_error` (a component's
@@ -490,18 +481,17 @@ def own_components(before: list[dict[str, Any]], after: list[dict[str, Any]]) ->
 def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tuple[bool, dict[str, dict[str, float]]]:
     """Whether an added effect cuts the rms model error (DN, net of the measurement's scatter) by
     MIN_OWN_REDUCTION in every measured component it changes (an error within the scatter cannot be cut);
-    and those components' errors before and after. Where a component's pooled error is not significantly above 0
-    against its own noise (:func:`_beyond_noise`: a few cells far noisier than the rest can outweigh every other cell's
-    error, or make it), its cells' chi-square judges instead: the error exists if that chi-square is significant
-    (SIGNIFICANCE_P), and the effect must cut its excess over the cells' number as the rms error's square: to
-    (1 - MIN_OWN_REDUCTION)^2."""
+    and those components' errors before and after. Where a component's pooled error is within the scatter
+    (a few cells far noisier than the rest can outweigh every other cell's error), its cells' chi-square
+    judges instead: the error exists if that chi-square is significant (SIGNIFICANCE_P), and the effect
+    must cut its excess over the cells' number as the rms error's square: to (1 - MIN_OWN_REDUCTION)^2."""
     cells0, cells1 = _component_cells(rows0), _component_cells(rows1)
     own = own_components(rows0, rows1)
     errors = {c: (_net_rms(cells0[c]), _net_rms(cells1[c])) for c in own}
     comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
 
     def cut(c: str, e0: float, e1: float) -> bool:
-        if _beyond_noise(cells0[c]):
+        if e0 > 0.0:
             return e1 <= (1.0 - MIN_OWN_REDUCTION) * e0
         n = len(cells0[c])
         chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
