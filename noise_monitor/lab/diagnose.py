@@ -705,7 +705,7 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
             model.append(fitted)
             claimed.append(lead)
         _forward(comp, ranked, model, claimed, done={first.rank, second.rank})
-        if not forward.holds(second) and forward.model and forward.bic(comp) <= _Claims.of(model, claimed, ranked).bic(comp):
+        if not forward.holds(second) and forward.model and forward.bic(comp) <= _bic(comp, model, claimed):
             forward.restore(model, claimed, ranked)  # the forward selection's claims fit better, each complete
     return ranked
 
@@ -727,14 +727,18 @@ class _Claims:
         return any(x is c for x in self.claimed)
 
     def bic(self, comp: Comparison) -> float:
-        """The claims' chi-square plus ln(n) per fitted parameter."""
-        r = comp.residuals(self.model)
-        return float(r @ r) + sum(len(c.params) for c in self.claimed) * math.log(r.size)
+        return _bic(comp, self.model, self.claimed)
 
     def restore(self, model: list[Effect], claimed: list[Candidate], ranked: list[Candidate]) -> None:
         model[:], claimed[:] = self.model, self.claimed
         for c, (significant, beyond, explained_by) in zip(ranked, self.verdicts, strict=True):
             c.significant, c.beyond, c.explained_by = significant, beyond, explained_by
+
+
+def _bic(comp: Comparison, model: list[Effect], claimed: list[Candidate]) -> float:
+    """The claims' chi-square (``model``, the fits of the ``claimed`` candidates) plus ln(n) per fitted parameter."""
+    r = comp.residuals(model)
+    return float(r @ r) + sum(len(c.params) for c in claimed) * math.log(r.size)
 
 
 def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate],
