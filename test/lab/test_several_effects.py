@@ -175,3 +175,46 @@ def test_a_pair_is_weighed_with_what_the_forward_selection_then_claims_beyond_it
     assert claimed["hot_pixels"]["fraction"] == pytest.approx(0.001, rel=0.2)
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
 
+
+
+def _mixed_rows(model_fixed: float) -> list[dict]:
+    """20 cells as :func:`_rows` (fixed 1 DN^2 measured to 0.01) and three measured to 4 DN^2 whose fixed variance
+    reads 5 DN^2 above or below the true 1 (imprecise cells at a high gain)."""
+    precise = [{"measured_var_dn2": {"temporal": 25.0, "fixed": 1.0}, "model_var_dn2": {"temporal": 25.0, "fixed": model_fixed},
+                "measured_sigma_dn": 26.0 ** 0.5, "measured_var_err_dn2": {"temporal": 0.01, "fixed": 0.01}}] * 20
+    noisy = [{"measured_var_dn2": {"temporal": 25.0, "fixed": f}, "model_var_dn2": {"temporal": 25.0, "fixed": model_fixed},
+              "measured_sigma_dn": (25.0 + f) ** 0.5, "measured_var_err_dn2": {"temporal": 0.01, "fixed": 4.0}}
+             for f in (6.0, -4.0, 6.0)]
+    return precise + noisy
+
+
+def test_an_error_within_its_own_noise_may_be_cut_on_the_cells_chi_square() -> None:
+    """Seed 829's PRNU beyond the DSNU and the hot pixels: three imprecise cells (se 0.4 DN) put the fixed component's
+    net rms error above 0 but within its own noise (sqrt(2 sum se^4) / n), where twenty precise cells read 0.1 DN off by
+    100 of their errors; the missing variance put in leaves the imprecise cells' scatter, which no effect can cut by
+    half, so its cells' chi-square may pass the cut instead (its excess cut to a quarter); not where the error is
+    significant at WITHIN_NOISE_P (the pedestal's black level alone, 4.6 of its noise, made it larger). An error halved
+    passes as before even where its chi-square is not significant (a telegraph plug-in taking a small fixed error to 0)."""
+    before, after = _mixed_rows(0.0), _mixed_rows(1.0)
+    e0, e1 = component_errors(before)["fixed"], component_errors(after)["fixed"]
+    assert e0 > 0.0 and e1 > 0.5 * e0  # the rms test alone would refuse it
+    assert cuts_error(before, after)[0]
+    assert not cuts_error(before, _mixed_rows(0.3))[0]  # a third of the missing variance: the excess not cut
+    # the same cells eight times: the error 4.3 of its own noise above 0 (p 1e-5) is there, and not cut by half
+    assert not cuts_error(before * 8, after * 8)[0]
+    small = [{**r, "measured_var_err_dn2": {"temporal": 0.01, "fixed": 0.5}} for r in _rows(0.4)[:20]]
+    e_small = component_errors(small)["fixed"]
+    assert e_small > 0.0  # 0.033 DN, chi-square 29 for 20 cells: no significant error by the cells
+    fixed = [{**r, "model_var_dn2": {"temporal": 25.0, "fixed": 1.0}} for r in small]
+    assert component_errors(fixed)["fixed"] == 0.0 and cuts_error(small, fixed)[0]
+
+
+def test_a_prnu_whose_cut_only_imprecise_cells_would_judge_is_claimed(tmp_path: Path) -> None:
+    """Seed 829, each effect's pattern drawn from it: beyond the DSNU and the hot pixels the PRNU halves the
+    chi-square, but the fixed component's net rms error rises 0.096 -> 0.104 DN: a few imprecise cells at 24 and 14.75
+    dB make that error, 1.9 of its own noise above 0 (the true model leaves 0.065 DN there). Its cells' chi-square
+    passes the cut, and the PRNU is claimed: all four at their values (before 2026-11-30 the PRNU was missed)."""
+    claimed = _claimed(analyze(_bag(tmp_path, 829, own_patterns=True), profile="ev76c661", estimator=None))
+    assert set(claimed) == FOUR
+    assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
+    assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
