@@ -176,6 +176,18 @@ def test_a_pair_is_weighed_with_what_the_forward_selection_then_claims_beyond_it
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
 
 
+def test_a_group_judged_before_a_later_claim_is_judged_again_beyond_it(tmp_path: Path) -> None:
+    """Seed 918, each effect's pattern drawn from it: beyond the PRNU and the DSNU (claimed together) the hot pixels'
+    F-test gives p 1.4e-6, just short of 1e-6, before the column offsets join the claims; judged again beyond all three
+    (p 2e-10) they are claimed: all four at their values (before 2026-11-30 the hot pixels were missed)."""
+    s = analyze(_bag(tmp_path, 918, own_patterns=True), profile="ev76c661", estimator=None)
+    hot = next(c for c in s["candidates"] if c["effect"] == "hot_pixels")
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
+    assert hot["beyond"]["given"] == ["prnu", "dsnu", "column_offsets"] and hot["beyond"]["p_value"] < 1e-6
+    assert claimed["hot_pixels"]["fraction"] == pytest.approx(0.001, rel=0.2)
+    assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.15)
+
 
 def _mixed_rows(model_fixed: float) -> list[dict]:
     """20 cells as :func:`_rows` (fixed 1 DN^2 measured to 0.01) and three measured to 4 DN^2 whose fixed variance
