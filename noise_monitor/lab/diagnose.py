@@ -9,9 +9,9 @@ a minimum relative drop of the model error (DN, net of the measurement's scatter
 in the measured components the effect changes (temporal, fixed, rows, columns, ...); where one cell far
 noisier than the rest puts a component's pooled error within the scatter, its cells' chi-square judges, and where a
 few imprecise cells make that error (not significantly above 0 against its own noise) its cells' chi-square may pass
-an effect the error's cut does not (:func:`cuts_error`). A floor of scene texture in other components then cannot hide a correct fit, and an
-effect that only bends the model towards a residual it cannot shape (a uniform dark-current change for a
-glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant
+an effect the error's cut does not (:func:`cuts_error`). A floor of scene texture in other components then cannot
+hide a correct fit, and an effect that only bends the model towards a residual it cannot shape (a uniform
+dark-current change for a glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant
 position pattern of the excess (towards a corner, along a gradient, beyond an intensity law per segment:
 :func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
 amplitude. Nor is a fit that a direct observation contradicts (``contradicted``): a quantization step the
