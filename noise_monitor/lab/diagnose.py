@@ -11,9 +11,9 @@ noisier than the rest puts a component's pooled error within the scatter, its ce
 few imprecise cells make that error (not significantly above 0 against its own noise) its cells' chi-square may pass
 an effect the error's cut does not (:func:`cuts_error`). A floor of scene texture in other components then cannot
 hide a correct fit, and an effect that only bends the model towards a residual it cannot shape (a uniform
-dark-current change for a glowing corner) is not claimed; nor is one that leaves where on the sensor the residual sits: a significant
-position pattern of the excess (towards a corner, along a gradient, beyond an intensity law per segment:
-:func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
+dark-current change for a glowing corner) is not claimed; nor is one that leaves where on the sensor the residual
+sits: a significant position pattern of the excess (towards a corner, along a gradient, beyond an intensity law per
+segment: :func:`.signature.position_pattern`) in a component it changes must lose MIN_OWN_REDUCTION of its
 amplitude. Nor is a fit that a direct observation contradicts (``contradicted``): a quantization step the
 output histogram does not show, or a Gaussian fixed pattern (PRNU, DSNU, line offsets, or an effect that
 rescales them) standing for a measured fixed pattern that is sparse (a few pixels far off, kurtosis well
