@@ -92,6 +92,7 @@ from ..physics import Effect, EffectError, Param, available
 from ..physics.effects import PAPER_EFFECTS
 from .compare import REGIONAL, Comparison, gaussian_fixed, rms_error, rms_error_raw, sigma_error
 from .equivalence import explain
+from .measure import POOLED
 from .signature import position_pattern
 
 #: F-test p-value below which a candidate's improvement counts as real
@@ -474,6 +475,15 @@ def _beyond_noise(cells: np.ndarray) -> bool:
     return ms > 0.0 and float(norm.sf(ms / max(sd, 1e-30))) < WITHIN_NOISE_P
 
 
+def _segment_chi2(rows: list[dict[str, Any]], c: str, cells: np.ndarray) -> tuple[float, int]:
+    """A pooled component's chi-square with each segment counted once (its one value is repeated in each of the
+    segment's intensity cells): the sum over segments of the mean of their cells' (d/se)^2, and the segments' number."""
+    segments = np.asarray([r["segment"] for r in rows if c in r["measured_var_dn2"]])
+    z2 = np.square(cells[:, 0] / cells[:, 1])
+    means = [float(np.mean(z2[segments == s])) for s in np.unique(segments)]
+    return float(np.sum(means)), len(means)
+
+
 def component_errors(rows: list[dict[str, Any]]) -> dict[str, float]:
     """Per measured component: the rms over cells of the error its variance mismatch makes in the cell's total sigma
     (DN, :func:`_component_cells`), net of the measurement's scatter like :func:`.compare.rms_error` (a component's
@@ -500,20 +510,27 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     judges instead: the error exists if that chi-square is significant (SIGNIFICANCE_P), and the effect
     must cut its excess over the cells' number as the rms error's square: to (1 - MIN_OWN_REDUCTION)^2. Where the
     pooled error is above 0 but within its own noise (not :func:`_beyond_noise`: a few imprecise cells make it), an
-    effect that does not cut it passes if it cuts the chi-square so."""
+    effect that does not cut it passes if it cuts the chi-square so. A pooled component (one value per segment,
+    repeated in each of its cells: the rms over cells weighs a segment by its cells' number, and a few imprecise
+    segments sharing one sensor pattern's realization can dominate it) is judged so on its chi-square with each segment
+    counted once (:func:`_segment_chi2`) wherever its rms cut fails."""
     cells0, cells1 = _component_cells(rows0), _component_cells(rows1)
     own = own_components(rows0, rows1)
     errors = {c: (_net_rms(cells0[c]), _net_rms(cells1[c])) for c in own}
     comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
 
     def cut(c: str, e0: float, e1: float) -> bool:
+        pooled = c in POOLED
         if e0 > 0.0:
             if e1 <= (1.0 - MIN_OWN_REDUCTION) * e0:
                 return True
-            if _beyond_noise(cells0[c]):
+            if not pooled and _beyond_noise(cells0[c]):
                 return False
-        n = len(cells0[c])
-        chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
+        if pooled:
+            (chi0, n), (chi1, _) = _segment_chi2(rows0, c, cells0[c]), _segment_chi2(rows1, c, cells1[c])
+        else:
+            n = len(cells0[c])
+            chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
         return bool(chi2_dist.sf(chi0, n) < SIGNIFICANCE_P and chi1 - n <= (1.0 - MIN_OWN_REDUCTION) ** 2 * (chi0 - n))
 
     return bool(errors) and all(cut(c, e0, e1) for c, (e0, e1) in errors.items()), comps

@@ -221,6 +221,42 @@ def test_an_error_within_its_own_noise_may_be_cut_on_the_cells_chi_square() -> N
     assert component_errors(fixed)["fixed"] == 0.0 and cuts_error(small, fixed)[0]
 
 
+def _column_rows(model_column: float) -> list[dict]:
+    """Cells of twelve segments with the pooled column component (one value per segment, repeated in its cells): ten
+    precise segments of five cells reading the true 0.2 DN^2 to 0.01, two imprecise ones of ten cells reading -0.6 to
+    0.3 (a strong white pattern's realized line part, the same sign in both: long exposures at a high gain)."""
+    def cell(segment: int, column: float, err: float) -> dict:
+        return {"segment": segment, "measured_var_dn2": {"temporal": 25.0, "column": column},
+                "model_var_dn2": {"temporal": 25.0, "column": model_column}, "measured_sigma_dn": (25.0 + column) ** 0.5,
+                "measured_var_err_dn2": {"temporal": 0.01, "column": err}}
+    return ([cell(s, 0.2, 0.01) for s in range(10) for _ in range(5)]
+            + [cell(s, -0.6, 0.3) for s in (10, 11) for _ in range(10)])
+
+
+def test_a_pooled_components_cut_counts_each_segment_once() -> None:
+    """Seed 963's column offsets beyond the PRNU, the DSNU and the hot pixels: the true column variance fits every
+    precise segment, but two imprecise segments whose values read low (the DSNU's realized column part times their
+    cross energy) are repeated in ten cells each, dominate the rms over cells and put it beyond its own noise: the rms
+    cut refuses. Judged on its chi-square with each segment counted once, the true value passes; a quarter of it not."""
+    before, after = _column_rows(0.0), _column_rows(0.2)
+    e0, e1 = component_errors(before)["column"], component_errors(after)["column"]
+    assert e1 > e0 > 0.0  # the rms over cells grows: the imprecise segments' error, repeated in twenty cells
+    ok, comps = cuts_error(before, after)
+    assert ok and list(comps) == ["column"]
+    assert not cuts_error(before, _column_rows(0.05))[0]
+
+
+def test_column_offsets_beside_a_strong_dsnu_are_claimed(tmp_path: Path) -> None:
+    """Seed 963, each effect's pattern drawn from it: beyond the PRNU, the DSNU and the hot pixels the column offsets
+    pass the F-test, but their rms error over cells falls only 0.0185 -> 0.0138 DN: the three long-exposure segments,
+    where the DSNU's realized column part times the cross energy reads the column 0.7 DN^2 low, dominate it. Judged with
+    each segment counted once, they are claimed: all four at their values (before 2026-11-30 the column was missed)."""
+    claimed = _claimed(analyze(_bag(tmp_path, 963, own_patterns=True), profile="ev76c661", estimator=None))
+    assert set(claimed) == FOUR
+    assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
+    assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
+
+
 def test_a_prnu_whose_cut_only_imprecise_cells_would_judge_is_claimed(tmp_path: Path) -> None:
     """Seed 829, each effect's pattern drawn from it: beyond the DSNU and the hot pixels the PRNU halves the
     chi-square, but the fixed component's net rms error rises 0.096 -> 0.104 DN: a few imprecise cells at 24 and 14.75
