@@ -512,28 +512,31 @@ def cuts_error(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> tupl
     pooled error is above 0 but within its own noise (not :func:`_beyond_noise`: a few imprecise cells make it), an
     effect that does not cut it passes if it cuts the chi-square so. A pooled component (one value per segment,
     repeated in each of its cells: the rms over cells weighs a segment by its cells' number, and a few imprecise
-    segments sharing one sensor pattern's realization can dominate it) is judged so on its chi-square with each segment
-    counted once (:func:`_segment_chi2`) wherever its rms cut fails."""
+    segments sharing one sensor pattern's realization can dominate it) also passes where it cuts so its chi-square with
+    each segment counted once (:func:`_segment_chi2`)."""
     cells0, cells1 = _component_cells(rows0), _component_cells(rows1)
     own = own_components(rows0, rows1)
     errors = {c: (_net_rms(cells0[c]), _net_rms(cells1[c])) for c in own}
     comps = {c: {"rms_error_before_dn": round(e0, 5), "rms_error_after_dn": round(e1, 5)} for c, (e0, e1) in errors.items()}
 
     def cut(c: str, e0: float, e1: float) -> bool:
-        pooled = c in POOLED
-        if e0 > 0.0:
-            if e1 <= (1.0 - MIN_OWN_REDUCTION) * e0:
-                return True
-            if not pooled and _beyond_noise(cells0[c]):
-                return False
-        if pooled:
-            (chi0, n), (chi1, _) = _segment_chi2(rows0, c, cells0[c]), _segment_chi2(rows1, c, cells1[c])
-        else:
-            n = len(cells0[c])
-            chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
-        return bool(chi2_dist.sf(chi0, n) < SIGNIFICANCE_P and chi1 - n <= (1.0 - MIN_OWN_REDUCTION) ** 2 * (chi0 - n))
+        if e0 > 0.0 and e1 <= (1.0 - MIN_OWN_REDUCTION) * e0:
+            return True
+        if c in POOLED and _chi_cut(_segment_chi2(rows0, c, cells0[c]), _segment_chi2(rows1, c, cells1[c])[0]):
+            return True
+        if e0 > 0.0 and _beyond_noise(cells0[c]):
+            return False
+        chi0, chi1 = (float(np.sum(np.square(v[c][:, 0] / v[c][:, 1]))) for v in (cells0, cells1))
+        return _chi_cut((chi0, len(cells0[c])), chi1)
 
     return bool(errors) and all(cut(c, e0, e1) for c, (e0, e1) in errors.items()), comps
+
+
+def _chi_cut(before: tuple[float, int], chi1: float) -> bool:
+    """Whether a chi-square of ``before`` = (chi-square, its number of terms) is significant (SIGNIFICANCE_P) and an
+    effect cuts its excess over that number to (1 - MIN_OWN_REDUCTION)^2, as the rms error's square (``chi1``: after)."""
+    chi0, n = before
+    return bool(chi2_dist.sf(chi0, n) < SIGNIFICANCE_P and chi1 - n <= (1.0 - MIN_OWN_REDUCTION) ** 2 * (chi0 - n))
 
 
 def own_errors(rows0: list[dict[str, Any]], rows1: list[dict[str, Any]]) -> dict[str, tuple[float, float]]:
