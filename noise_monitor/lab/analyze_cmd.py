@@ -80,10 +80,13 @@ def run(args: argparse.Namespace) -> int:
         same = f"  (indistinguishable from {', '.join(c['equivalent_to'])})" if c["equivalent_to"] else ""
         print(f" {mark} {c['rank']:2d} {c['effect']:{width}s} explained {c['explained_fraction']:6.1%}  {params}{same}")
     print(summary["diagnosis"])
-    refits = {c["rank"]: c["beyond"] for c in summary["candidates"] if c["beyond"]}  # one per group
-    for rank, beyond in refits.items():
-        names = ", ".join(c["effect"] for c in summary["candidates"] if c["rank"] == rank)
-        print(f"{'*' if beyond['significant'] else '~'} {names}: {beyond['reading']}")
+    refits: dict[tuple[int, str], list[str]] = {}  # one per group (a group parted beyond the claims: per member)
+    for c in summary["candidates"]:
+        if c["beyond"]:
+            refits.setdefault((c["rank"], c["beyond"]["reading"]), []).append(c["effect"])
+    for c in summary["candidates"]:
+        if c["beyond"] and (names := refits.pop((c["rank"], c["beyond"]["reading"]), None)):
+            print(f"{'*' if c['beyond']['significant'] else '~'} {', '.join(names)}: {c['beyond']['reading']}")
     shown = next((c["rank"] for c in summary["candidates"] if c["significant"] and c["equivalent_to"]), None)
     for rank, text in dict.fromkeys((c["rank"], c["indistinguishable"]) for c in top if c["equivalent_to"]):
         if rank != shown:

@@ -714,9 +714,9 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
 def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     """Claim explanations by forward selection over the groups (ranked best first, significance per
     group from each candidate's own fit): the first group significant alone is claimed; each later one
-    (significant alone or not) is refitted (its best member) with the claimed explanations at their fitted
-    values and claimed only if it is significant beyond them by the same tests (:func:`assess`); its fit
-    beyond them then joins the claimed model. A group significant alone but not beyond them is
+    (significant alone or not) is refitted (its best member, then the others in turn: :func:`_refit_group`) with the
+    claimed explanations at their fitted values and claimed only if it is significant beyond them by the same tests
+    (:func:`assess`); its fit beyond them then joins the claimed model. A group significant alone but not beyond them is
     ``explained_by`` them; one significant neither alone nor beyond them keeps ``beyond`` None, and so do one
     whose fit alone found nothing (its drop alone against the claimed model's residual: F-test p >= MASKED_P; not
     refitted) and one whose own fit a direct observation contradicts (``contradicted``: refitted beyond a model with a
@@ -808,23 +808,26 @@ def _forward_pass(comp: Comparison, ranked: list[Candidate], model: list[Effect]
         waiting.add(rank)
         if model and given is None:
             given = Given.of(comp, model, n_params)
-        masked = given is not None and not lead.contradicted and _masked_p(lead, chi_base, given) < MASKED_P
-        if lead.fitted is None or not (lead.significant or masked):
-            continue  # a fit that found nothing alone, or one a direct observation contradicts, is not refitted
-        if given is not None:  # beyond the claimed model
-            a = assess(comp, given, EffectSpec.fit_all(type(lead.fitted)))
-            if not (a.significant or lead.significant):
+        if given is None:  # alone
+            if lead.fitted is None or not lead.significant:
+                continue
+            fitted = lead.fitted
+        else:  # beyond the claimed model
+            tried = _refit_group(comp, group, given, chi_base)
+            if not tried or not (tried[-1][1].significant or lead.significant):
                 continue  # nothing alone, nothing beyond: not reported as refitted
-            beyond = _beyond(claimed, a, alone=lead.significant)
-            for c in group:
-                c.significant = a.significant
-                c.beyond = beyond
-                c.explained_by = [] if a.significant else beyond["given"]
+            beyond = {id(m): _beyond(claimed, a, alone=lead.significant) for m, a in tried}
+            lead, a = tried[-1]
+            parted = a.significant and len(tried) > 1  # alike alone; beyond the claims only ``lead`` is significant
+            for c in group:  # a group claimed whole, or each member by its own refit (else the first one's)
+                c.significant = a.significant and (c is lead or not parted)
+                c.beyond = beyond[id(lead)] if a.significant and not parted else beyond.get(id(c), beyond[id(tried[0][0])])
+                c.explained_by = [] if c.significant else c.beyond["given"]
             if not a.significant:
                 continue
+            if parted:
+                _part(group, lead, beyond[id(lead)])
             fitted = a.effect
-        else:
-            fitted = lead.fitted
         model.append(fitted)
         claimed.append(lead)
         n_params += len(lead.params)
@@ -833,6 +836,34 @@ def _forward_pass(comp: Comparison, ranked: list[Candidate], model: list[Effect]
         stale |= waiting
         waiting = set()
     return stale
+
+
+def _refit_group(comp: Comparison, group: list[Candidate], given: Given, chi_base: float
+                 ) -> list[tuple[Candidate, Assessment]]:
+    """A group refitted beyond the ``given`` claimed model: its members in turn (grouped by their fits alone, which
+    beyond the claims can part: hot pixels at the limit of their fraction standing for a DSNU alone, 0.1 % at 1000 x
+    the dark current beyond a PRNU) until one is significant; each member refitted and its assessment (the last one
+    significant, if any). A member whose fit found nothing alone (significant neither alone nor by :func:`_masked_p`),
+    or one a direct observation contradicts, is not refitted."""
+    tried = []
+    for m in group:
+        masked = not m.contradicted and _masked_p(m, chi_base, given) < MASKED_P
+        if m.fitted is None or not (m.significant or masked):
+            continue
+        tried.append((m, assess(comp, given, EffectSpec.fit_all(type(m.fitted)))))
+        if tried[-1][1].significant:
+            break
+    return tried
+
+
+def _part(group: list[Candidate], claimed: Candidate, beyond: dict[str, Any]) -> None:
+    """A group whose fits alone the data could not tell apart, of which beyond the claims only ``claimed`` is
+    significant (``beyond``: its refit): no longer alternatives, and its reading says so."""
+    others = [c.effect for c in group if c is not claimed]
+    for c in group:
+        c.equivalent_to, c.indistinguishable = [], ""
+    beyond["reading"] += (f"; alone indistinguishable from {', '.join(others)}, which {'is' if len(others) == 1 else 'are'}"
+                          " not significant beyond")
 
 
 def _masked_p(lead: Candidate, chi_base: float, given: Given) -> float:
