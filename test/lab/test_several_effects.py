@@ -257,6 +257,30 @@ def test_column_offsets_beside_a_strong_dsnu_are_claimed(tmp_path: Path) -> None
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
 
 
+def test_a_group_alike_alone_is_refitted_member_by_member_beyond_the_claims(tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture) -> None:
+    """Seed 1023, each effect's pattern drawn from it: alone, the hot pixels' fit stretches to the limit of its fraction
+    and stands for the DSNU (the two grouped: the data cannot tell those fits apart); beyond the claimed PRNU the DSNU's
+    refit is not significant, the hot pixels' is (0.1 % of pixels far above the dark current, the outliers' 3.7 DN of
+    error): they are claimed alone, no longer the DSNU's alternative (before 2026-11-30 the group's lead alone was
+    refitted, and the hot pixels were missed)."""
+    bag = _bag(tmp_path, 1023, own_patterns=True)
+    assert main(["analyze", str(bag), "--profile", "ev76c661", "--no-estimator", "--quiet", "--json",
+                 str(tmp_path / "s.json")]) == 0
+    out = capsys.readouterr().out
+    s = json.loads((tmp_path / "s.json").read_text())
+    cands = {c["effect"]: c for c in s["candidates"]}
+    hot, dsnu = cands["hot_pixels"], cands["dsnu"]
+    assert hot["rank"] == dsnu["rank"] and hot["params"]["fraction"] == pytest.approx(0.2)  # alike alone
+    assert hot["significant"] and not dsnu["significant"] and dsnu["significant_alone"]
+    assert hot["equivalent_to"] == [] == dsnu["equivalent_to"]
+    assert hot["claimed_params"]["fraction"] == pytest.approx(0.001, rel=0.5)
+    assert {"prnu", "hot_pixels", "column_offsets"} <= set(_claimed(s))
+    assert "alone indistinguishable from dsnu, which is not significant beyond" in hot["beyond"]["reading"]
+    assert dsnu["beyond"]["given"] == hot["beyond"]["given"] == ["prnu"]
+    assert f"* hot_pixels: {hot['beyond']['reading']}" in out and f"~ dsnu: {dsnu['beyond']['reading']}" in out
+
+
 def test_a_prnu_whose_cut_only_imprecise_cells_would_judge_is_claimed(tmp_path: Path) -> None:
     """Seed 829, each effect's pattern drawn from it: beyond the DSNU and the hot pixels the PRNU halves the
     chi-square, but the fixed component's net rms error rises 0.096 -> 0.104 DN: a few imprecise cells at 24 and 14.75
