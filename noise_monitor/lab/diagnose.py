@@ -826,7 +826,7 @@ def _forward_pass(comp: Comparison, ranked: list[Candidate], model: list[Effect]
             if not a.significant:
                 continue
             if parted:
-                _part(group, lead, beyond[id(lead)])
+                _part(group, lead, beyond[id(lead)], [m for m, _ in tried[:-1]])
             fitted = a.effect
         model.append(fitted)
         claimed.append(lead)
@@ -856,14 +856,26 @@ def _refit_group(comp: Comparison, group: list[Candidate], given: Given, chi_bas
     return tried
 
 
-def _part(group: list[Candidate], claimed: Candidate, beyond: dict[str, Any]) -> None:
+def _part(group: list[Candidate], claimed: Candidate, beyond: dict[str, Any], refitted: Sequence[Candidate]) -> None:
     """A group whose fits alone the data could not tell apart, of which beyond the claims only ``claimed`` is
-    significant (``beyond``: its refit): no longer alternatives, and its reading says so."""
-    others = [c.effect for c in group if c is not claimed]
+    significant (``beyond``: its refit; ``refitted``: the members refitted before it, none significant): no longer
+    alternatives, and its reading says so, naming as not significant beyond only the members refitted."""
+    others = [c for c in group if c is not claimed]
     for c in group:
         c.equivalent_to, c.indistinguishable = [], ""
-    beyond["reading"] += (f"; alone indistinguishable from {', '.join(others)}, which {'is' if len(others) == 1 else 'are'}"
-                          " not significant beyond")
+    tried = [c.effect for c in others if any(c is r for r in refitted)]
+    untried = [c.effect for c in others if not any(c is r for r in refitted)]
+    reading = f"; alone indistinguishable from {', '.join(c.effect for c in others)}, "
+    if not untried:
+        reading += f"which {_is(tried)} not significant beyond"
+    else:
+        reading += (f"of which {', '.join(tried)} {_is(tried)} not significant beyond and {', '.join(untried)}"
+                    f" {'was' if len(untried) == 1 else 'were'} not refitted")
+    beyond["reading"] += reading
+
+
+def _is(names: Sequence[str]) -> str:
+    return "is" if len(names) == 1 else "are"
 
 
 def _masked_p(lead: Candidate, chi_base: float, given: Given) -> float:

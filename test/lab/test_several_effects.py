@@ -15,7 +15,7 @@ import torch
 from noise_monitor.bag.simulate import simulate_bag
 from noise_monitor.cli import main
 from noise_monitor.lab import analyze
-from noise_monitor.lab.diagnose import MASKED_P, MIN_EXPLAINED_FRACTION, component_errors, cuts_error
+from noise_monitor.lab.diagnose import MASKED_P, MIN_EXPLAINED_FRACTION, Candidate, _part, component_errors, cuts_error
 
 torch.set_num_threads(1)
 
@@ -244,6 +244,28 @@ def test_a_pooled_components_cut_counts_each_segment_once() -> None:
     ok, comps = cuts_error(before, after)
     assert ok and list(comps) == ["column"]
     assert not cuts_error(before, _column_rows(0.05))[0]
+
+
+def _candidate(effect: str) -> Candidate:
+    return Candidate(effect=effect, params={}, param_errors={}, chi2=0.0, explained_fraction=0.5, delta_bic=-10.0,
+                     p_value=1e-9, significant=False, reading="", rms_error_after_dn=0.0, rank=2,
+                     equivalent_to=["x"], indistinguishable="alike")
+
+
+@pytest.mark.parametrize(("claimed", "said"), [
+    (1, "alone indistinguishable from dsnu, exposure, of which dsnu is not significant beyond and exposure was not"
+        " refitted"),
+    (2, "alone indistinguishable from dsnu, hot_pixels, which are not significant beyond"),
+])
+def test_a_parted_group_reads_not_significant_only_for_the_members_refitted(claimed: int, said: str) -> None:
+    """A group of three alike alone, parted beyond the claims by one member's refit: the members before it were
+    refitted and are not significant; one after it was never refitted (the refits stop at the first significant one),
+    so the reading must not call it not significant beyond."""
+    group = [_candidate(e) for e in ("dsnu", "hot_pixels", "exposure")]
+    beyond = {"reading": "fitted 0.1 %"}
+    _part(group, group[claimed], beyond, group[:claimed])
+    assert beyond["reading"] == f"fitted 0.1 %; {said}"
+    assert all(c.equivalent_to == [] and c.indistinguishable == "" for c in group)
 
 
 def test_column_offsets_beside_a_strong_dsnu_are_claimed(tmp_path: Path) -> None:
