@@ -783,9 +783,10 @@ def _bic(comp: Comparison, model: list[Effect], claimed: list[Candidate]) -> flo
 def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate],
              done: Collection[int] = ()) -> None:
     """:func:`claim`'s forward selection over the groups not in ``done``, on top of ``model`` (the fits of the
-    ``claimed`` candidates), both extended in place; repeated over the groups judged (or passed over) before a later
-    claim, beyond the model that claim completed, until a pass claims nothing (hot pixels at p 1.4e-6 beside a PRNU and a
-    DSNU, tested before the column offsets joined them)."""
+    ``claimed`` candidates), both extended in place; repeated over the unclaimed groups judged (or passed over) before a
+    pass's last claim, in that pass or an earlier one, beyond the model that claim completed, until a pass claims nothing
+    (hot pixels at p 1.4e-6 beside a PRNU and a DSNU, tested before the column offsets joined them; hot pixels judged
+    beyond a DSNU in the first pass, before the second claimed the PRNU)."""
     done = set(done)
     while stale := _forward_pass(comp, ranked, model, claimed, done):
         done = {c.rank for c in ranked} - stale
@@ -793,12 +794,13 @@ def _forward(comp: Comparison, ranked: list[Candidate], model: list[Effect], cla
 
 def _forward_pass(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate],
                   done: Collection[int]) -> set[int]:
-    """One pass of :func:`_forward`; the groups it left unclaimed before its last claim."""
+    """One pass of :func:`_forward`; the unclaimed groups judged before its last claim (in ``done``: in an earlier pass)."""
     n_params = sum(len(c.params) for c in claimed)
     given: Given | None = None
     r = comp.residuals([])
     chi_base = float(r @ r)
-    waiting: set[int] = set()  # groups left unclaimed since the last claim
+    held = {c.rank for c in claimed}
+    waiting = {rank for rank in done if rank not in held}  # groups left unclaimed since the last claim
     stale: set[int] = set()
     for rank, members in itertools.groupby(ranked, key=lambda c: c.rank):
         group = list(members)
