@@ -189,6 +189,20 @@ def test_a_group_judged_before_a_later_claim_is_judged_again_beyond_it(tmp_path:
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.15)
 
 
+def test_groups_judged_before_a_later_pass_claims_are_judged_again_beyond_it(tmp_path: Path) -> None:
+    """Seed 1032, each effect's pattern drawn from it: the first pass claims the DSNU alone (the PRNU, ranked above
+    it, is not significant alone) and judges the hot pixels and the column offsets beyond the DSNU alone, where
+    neither is claimed; the second pass claims the PRNU beyond the DSNU. Judged again beyond both, the hot pixels and
+    the column offsets are claimed: all four at their values (before 2026-11-30 those two were missed)."""
+    s = analyze(_bag(tmp_path, 1032, own_patterns=True), profile="ev76c661", estimator=None)
+    claimed = _claimed(s)
+    assert set(claimed) == FOUR
+    hot = next(c for c in s["candidates"] if c["effect"] == "hot_pixels")
+    assert {"prnu", "dsnu"} <= set(hot["beyond"]["given"])
+    assert claimed["hot_pixels"]["fraction"] == pytest.approx(0.001, rel=0.3)
+    assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.15)
+
+
 def _mixed_rows(model_fixed: float) -> list[dict]:
     """20 cells as :func:`_rows` (fixed 1 DN^2 measured to 0.01) and three measured to 4 DN^2 whose fixed variance
     reads 5 DN^2 above or below the true 1 (imprecise cells at a high gain)."""
