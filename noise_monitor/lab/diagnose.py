@@ -721,32 +721,48 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     whose fit alone found nothing (its drop alone against the claimed model's residual: F-test p >= MASKED_P; not
     refitted) and one whose own fit a direct observation contradicts (``contradicted``: refitted beyond a model with a
     sparse fixed pattern of its own, a Gaussian pattern would escape the shape test and take up the part of
-    the sparse pattern that model does not describe, e.g. PRNU beside telegraph pixels)."""
+    the sparse pattern that model does not describe, e.g. PRNU beside telegraph pixels). A pair claimed together
+    (:func:`_pair`) replaces those claims where its claims, completed by the forward selection, fit better by the BIC;
+    of partners that fit as well beside the pair's lead, each is completed so and the best kept."""
     for c in ranked:
         c.significant_alone = c.significant
     model: list[Effect] = []
     claimed: list[Candidate] = []  # the best member of each claimed group
     _forward(comp, ranked, model, claimed)
-    pair = _pair(comp, ranked, model)
-    if pair is not None:  # the pair replaces what the forward selection claimed, which is then tested beyond it
-        (first, a), (second, b), alternatives = pair
-        absorbed = first.significant  # claimed alone before: its fit had taken up part of the partner's residual
+    options = _pair(comp, ranked, model)
+    if options:  # the pair replaces what the forward selection claimed, which is then tested beyond it
+        absorbed = options[0][0][0].significant  # claimed alone before: its fit had taken up part of the partner's residual
         forward = _Claims.of(model, claimed, ranked)
-        model.clear()
-        claimed.clear()
-        for c in ranked:
-            c.significant, c.beyond, c.explained_by = c.significant_alone, None, []
-        for lead, fitted, beyond in ((first, a.effect, _together(second, a, absorbed)),
-                                     (second, b.effect, _together(first, b, absorbed, alternatives))):
-            for c in ranked:
-                if c.rank == lead.rank:
-                    c.significant, c.beyond = True, beyond
-            model.append(fitted)
-            claimed.append(lead)
-        _forward(comp, ranked, model, claimed, done={first.rank, second.rank})
-        if not forward.holds(second) and forward.model and forward.bic(comp) <= _bic(comp, model, claimed):
+        best: tuple[_Claims, Candidate] | None = None
+        for option in options:  # partners that fit as well: the claims completed with each, the best by the BIC
+            _claim_pair(comp, ranked, model, claimed, absorbed, *option)
+            if best is None or _bic(comp, model, claimed) < best[0].bic(comp):
+                best = _Claims.of(model, claimed, ranked), option[1][0]
+        assert best is not None
+        best[0].restore(model, claimed, ranked)
+        if not forward.holds(best[1]) and forward.model and forward.bic(comp) <= _bic(comp, model, claimed):
             forward.restore(model, claimed, ranked)  # the forward selection's claims fit better, each complete
     return ranked
+
+
+def _claim_pair(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate], absorbed: bool,
+                first: tuple[Candidate, Assessment], second: tuple[Candidate, Assessment],
+                alternatives: Sequence[Assessment]) -> None:
+    """Claim a pair of :func:`_pair` in place of every claim (``model`` and ``claimed`` replaced, the verdicts reset),
+    then the forward selection beyond it (``absorbed``: the pair's lead was claimed alone before, see :func:`_together`)."""
+    (lead1, a), (lead2, b) = first, second
+    model.clear()
+    claimed.clear()
+    for c in ranked:
+        c.significant, c.beyond, c.explained_by = c.significant_alone, None, []
+    for lead, fitted, beyond in ((lead1, a.effect, _together(lead2, a, absorbed)),
+                                 (lead2, b.effect, _together(lead1, b, absorbed, alternatives))):
+        for c in ranked:
+            if c.rank == lead.rank:
+                c.significant, c.beyond = True, beyond
+        model.append(fitted)
+        claimed.append(lead)
+    _forward(comp, ranked, model, claimed, done={lead1.rank, lead2.rank})
 
 
 @dataclass
@@ -888,7 +904,7 @@ def _masked_p(lead: Candidate, chi_base: float, given: Given) -> float:
 
 
 def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = ()
-          ) -> tuple[tuple[Candidate, Assessment], tuple[Candidate, Assessment], list[Assessment]] | None:
+          ) -> list[tuple[tuple[Candidate, Assessment], tuple[Candidate, Assessment], list[Assessment]]]:
     """Two candidates claimed together: the best group lead whose fit alone passed the F-test and the explained
     fraction (the forward selection's ``model`` fitted; if it claimed that lead, the partners are only the
     leads whose fit alone passed them too, one it claimed beside the lead only if the joint fit moves the lead by more
@@ -896,15 +912,18 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
     :data:`PAIR_SCREEN`), fitted jointly with it
     (from :data:`PAIR_ROUNDS` rounds of each beyond the other), leaves the smallest chi-square with each significant
     beyond the other's joint fit and the two leaving at most :data:`MAX_PAIR_ERROR` of the model's rms error; each with
-    that assessment, then the partners that fit as well (within ``EQUIVALENT_CHI2``, scaled like the equivalence
-    test) as the alternatives these data cannot tell from it. None without such a pair, or when the lead's partner
-    is claimed in ``model`` and the pair fits no better than the two as ``model`` holds them (otherwise :func:`claim`
-    compares the two sets of claims, each complete, by the BIC)."""
+    that assessment; then as options too the pairs with the partners that fit as well (within ``EQUIVALENT_CHI2``,
+    scaled like the equivalence test), best first, each with the other options' partners as the alternatives these
+    data cannot tell from its own (:func:`claim` completes each and keeps the best by the BIC: beside a PRNU, hot
+    pixels stretched to the limit of their fraction fit as well as the DSNU they stand for, but leave the real hot
+    pixels unexplained). Empty without such a pair, or when the lead's partner is claimed in ``model`` and the pair
+    fits no better than the two as ``model`` holds them (otherwise :func:`claim` compares the two sets of claims, each
+    complete, by the BIC)."""
     leads = [next(g) for _, g in itertools.groupby(ranked, key=lambda c: c.rank)]
     usable = [(c, c.fitted) for c in leads if c.fitted is not None and not c.contradicted]
     found = [(c, f) for c, f in usable if c.p_value < SIGNIFICANCE_P and c.explained_fraction >= MIN_EXPLAINED_FRACTION]
     if not found:
-        return None
+        return []
     first, fitted = found[0]
     if first.significant:  # claimed alone: its fit may have taken up a partner's residual (a DSNU the PRNU's pattern),
         # a partner whose own fit found something alone too (a partner found only once the lead is bent to make room for
@@ -936,15 +955,16 @@ def _pair(comp: Comparison, ranked: list[Candidate], model: Sequence[Effect] = (
         if a.significant and b.significant and _share_left(rows0, b.rows) <= MAX_PAIR_ERROR:
             pairs.append((joint.chi2, (first, a), (other, b)))
     if not pairs:
-        return None
+        return []
     pairs.sort(key=lambda p: p[0])
     best, partner = pairs[0][0], pairs[0][2][0]
     if partner.significant:  # claimed beside the lead: against the two as the forward selection fitted them
         r = comp.residuals([e for e in model if e.name in (first.effect, partner.effect)])
         if best >= float(r @ r):
-            return None
+            return []
     limit = best + EQUIVALENT_CHI2 * max(1.0, best / max(on_first.n_obs - len(first.params), 1))
-    return pairs[0][1], pairs[0][2], [p[2][1] for p in pairs[1:] if p[0] <= limit]
+    alike = [p for p in pairs if p[0] <= limit]
+    return [(p[1], p[2], [q[2][1] for q in alike if q is not p]) for p in alike]
 
 
 def _moved(first: Candidate, a: Assessment) -> float:

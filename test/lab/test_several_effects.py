@@ -203,6 +203,19 @@ def test_groups_judged_before_a_later_pass_claims_are_judged_again_beyond_it(tmp
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.15)
 
 
+def test_partners_that_fit_as_well_beside_the_lead_are_each_completed_and_weighed(tmp_path: Path) -> None:
+    """Seed 1033, each effect's pattern drawn from it: beside the PRNU, hot pixels stretched to the limit of their
+    fraction (0.2 of the pixels at 0.8 x the dark current) fit as well as the DSNU they stand for, and were the pair's
+    partner, leaving the real hot pixels unexplained. Each partner's claims completed by the forward selection and
+    weighed by the BIC, the DSNU's win: all four at their values (before 2026-11-30 the DSNU was missed and the hot
+    pixels read as a DSNU)."""
+    claimed = _claimed(analyze(_bag(tmp_path, 1033, own_patterns=True), profile="ev76c661", estimator=None))
+    assert set(claimed) == FOUR
+    assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.1)
+    assert claimed["hot_pixels"]["fraction"] == pytest.approx(0.001, rel=0.3)
+    assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
+
+
 def _mixed_rows(model_fixed: float) -> list[dict]:
     """20 cells as :func:`_rows` (fixed 1 DN^2 measured to 0.01) and three measured to 4 DN^2 whose fixed variance
     reads 5 DN^2 above or below the true 1 (imprecise cells at a high gain)."""
