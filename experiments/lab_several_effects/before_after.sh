@@ -1,22 +1,24 @@
 #!/bin/bash
 # The lab's claims on fresh campaigns, by the code of another source tree (BEFORE) and by this one, side by side,
 # then the totals: claims of the hidden effects and of effects not hidden, before and after.
-#   bash experiments/lab_several_effects/before_after.sh BEFORE_TREE OUT_DIR SEED... -- EFFECT...
+#   [IMAGES=DIR] bash experiments/lab_several_effects/before_after.sh BEFORE_TREE OUT_DIR SEED... -- EFFECT...
 # e.g. git worktree add /tmp/before <commit>; bash .../before_after.sh /tmp/before /tmp/runs 650 651 -- prnu=1 dsnu=0.3
 # "{seed}" in an EFFECT is replaced by the bag's seed: "prnu:sigma_pct=1,seed={seed}" gives every bag its own sensor
-# pattern (without it every bag shares the effect's pattern seed 0, one sensor).
+# pattern (without it every bag shares the effect's pattern seed 0, one sensor). IMAGES builds the campaigns from the
+# images in DIR (`simulate-bag --images`) instead of the scenario's own photographs.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
 before=$1; out=$2; shift 2
 seeds=(); while [ "$1" != "--" ]; do seeds+=("$1"); shift; done; shift
 specs=("$@")
+imgs=(); [ -n "${IMAGES:-}" ] && imgs=(--images "$IMAGES")
 py=$here/.venv/bin/python
 mkdir -p "$out"
 for s in "${seeds[@]}"; do
   eff=(); for e in "${specs[@]}"; do eff+=(--effect "${e//\{seed\}/$s}"); done
   bag=$out/seed$s.mcap
   [ -f "$bag" ] || $py -m noise_monitor.cli simulate-bag "$bag" --profile ev76c661 --scenario campaign_heldout \
-      --frames 120 --seed "$s" "${eff[@]}" > /dev/null
+      --frames 120 --seed "$s" "${imgs[@]}" "${eff[@]}" > /dev/null
   (cd "$before" && PYTHONPATH=$before $py -m noise_monitor.cli analyze "$bag" --profile ev76c661 --no-estimator \
       --quiet --json "$out/seed$s.before.json" > /dev/null) &
   (cd "$here" && $py -m noise_monitor.cli analyze "$bag" --profile ev76c661 --no-estimator --quiet \
