@@ -733,14 +733,16 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
     if options:  # the pair replaces what the forward selection claimed, which is then tested beyond it
         absorbed = options[0][0][0].significant  # claimed alone before: its fit had taken up part of the partner's residual
         forward = _Claims.of(model, claimed, ranked)
-        best: tuple[_Claims, Candidate] | None = None
+        best: tuple[float, _Claims, Candidate] | None = None
         for option in options:  # partners that fit as well: the claims completed with each, the best by the BIC
             _claim_pair(comp, ranked, model, claimed, absorbed, *option)
-            if best is None or _bic(comp, model, claimed) < best[0].bic(comp):
-                best = _Claims.of(model, claimed, ranked), option[1][0]
+            bic = _bic(comp, model, claimed)
+            if best is None or bic < best[0]:
+                best = bic, _Claims.of(model, claimed, ranked), option[1][0]
         assert best is not None
-        best[0].restore(model, claimed, ranked)
-        if not forward.holds(best[1]) and forward.model and forward.bic(comp) <= _bic(comp, model, claimed):
+        bic, pair, partner = best
+        pair.restore(model, claimed, ranked)
+        if not forward.holds(partner) and forward.model and forward.bic(comp) <= bic:
             forward.restore(model, claimed, ranked)  # the forward selection's claims fit better, each complete
     return ranked
 
@@ -881,8 +883,9 @@ def _part(group: list[Candidate], claimed: Candidate, beyond: dict[str, Any], re
     others = [c for c in group if c is not claimed]
     for c in group:
         c.equivalent_to, c.indistinguishable = [], ""
-    tried = [c.effect for c in others if any(c is r for r in refitted)]
-    untried = [c.effect for c in others if not any(c is r for r in refitted)]
+    was_refitted = {id(r) for r in refitted}
+    tried = [c.effect for c in others if id(c) in was_refitted]
+    untried = [c.effect for c in others if id(c) not in was_refitted]
     reading = f"; alone indistinguishable from {', '.join(c.effect for c in others)}, "
     if not untried:
         reading += f"which {_is(tried)} not significant beyond"
