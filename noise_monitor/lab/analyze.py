@@ -24,6 +24,7 @@ from .compare import (
 )
 from .diagnose import EffectSpec, candidate_names, component_errors, diagnose, diagnosis_line, fit, fitted_reading
 from .estimate import estimator_views
+from .left import left_by_claims
 from .measure import Measurements, SegmentTolerance, measure_frames
 from .noise_events import events, set_apart, without_segments
 from .signature import plugin_skeleton, unexplained
@@ -110,7 +111,9 @@ def analyze(
     ``significant`` (claimed), ``significant_alone``, ``explained_by`` and ``beyond`` (the claims' forward
     selection: :func:`.diagnose.claim`), ``explained_fraction``, ``params``, ...), ``diagnosis`` (one line:
     :func:`.diagnose.diagnosis_line`), ``unexplained`` (the residual's signature, :func:`.signature.unexplained`; ``significant`` when
-    no candidate explains a significant residual), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
+    no candidate explains a significant residual), ``left_by_claims`` (what the claimed effects at their claimed values
+    leave: chi-square, its p-value, rms errors, the candidates refused beyond them: :func:`.left.left_by_claims`; None
+    when nothing is claimed), ``measurement``; with ``add_effects`` also ``added_effects``, ``rms_error_before_dn``,
     ``rms_error_after_dn`` (both net, as ``rms_error_dn``), ``rms_error_before_raw_dn``, ``rms_error_after_raw_dn``,
     ``rms_error_by_component_after_dn`` and ``by_condition_after`` (the extended model, evaluated exactly).
     ``rms_error_by_component_dn``: per measured component, the error its variance mismatch makes in the
@@ -158,6 +161,7 @@ def analyze(
         "candidates": [c.as_dict() for c in cands],
         "diagnosis": diagnosis_line([c.as_dict() for c in cands]),
         "unexplained": unexplained(comp, rows, cands),
+        "left_by_claims": left_by_claims(comp, cands),
         "cells": _strip(rows),
     }
     if write_plugin_skeleton:

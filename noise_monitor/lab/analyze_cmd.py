@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from .analyze import analyze, component_change_text, write_json
+from .left import left_text
 from .measure import field_conditions_text, scene_in_single_views_text, scene_in_views_text
 from .noise_events import events_text
 from .shape import fixed_shape_text
@@ -94,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
     for c in top:
         if c["contradicted"]:
             print(f"x {c['effect']}: not claimed, {c['contradicted']}")
+    if summary["left_by_claims"]:
+        for line in left_text(summary["left_by_claims"], summary["rms_error_dn"]):
+            print(line)
     un = summary["unexplained"]
     if un["significant"]:
         print(f"unexplained: {un['reading']}")

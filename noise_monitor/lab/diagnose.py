@@ -1007,7 +1007,7 @@ def _together(other: Candidate, a: Assessment, absorbed: bool, alternatives: Seq
 def _refit(a: Assessment, given: list[str], reading: str) -> dict[str, Any]:
     """A refit beyond the ``given`` explanations as :attr:`Candidate.beyond` records it, with its plain ``reading``."""
     name = a.effect.name
-    return {"given": given, "significant": a.significant, "chi2_given": round(a.chi2_given, 3),
+    return {"effect": name, "given": given, "significant": a.significant, "chi2_given": round(a.chi2_given, 3),
             "chi2": round(a.fit.chi2, 3), "p_value": a.p_value, "explained_fraction": round(a.explained_fraction, 6),
             "params": a.fit.values[name], "param_errors": a.fit.errors[name],
             "degenerate": (a.fit.degenerate or {}).get(name, []),

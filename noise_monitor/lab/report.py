@@ -19,6 +19,7 @@ from ..physics import NoiseModel  # noqa: E402
 from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve, signed_sigma  # noqa: E402
 from .diagnose import Candidate, diagnosis_line  # noqa: E402
+from .left import left_text  # noqa: E402
 from .measure import BLOCK, field_conditions_text, scene_in_single_views_text, scene_in_views_text  # noqa: E402
 from .noise_events import events_text  # noqa: E402
 from .shape import fixed_shape_text  # noqa: E402
@@ -347,6 +348,11 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
                      "them (claimed only if significant beyond them):<ul>" + "".join(
                          f"<li>rank {rank}, {html.escape(', '.join(c.effect for c in candidates if c.rank == rank))}: "
                          f"{html.escape(reading)}</li>" for rank, reading in beyond) + "</ul></p>")
+    if left := summary.get("left_by_claims"):
+        first, *refused = left_text(left, summary["rms_error_dn"])
+        parts.append(f"<p{' class=sig' if left['significant'] else ''}>{html.escape(first[:1].upper() + first[1:])}"
+                     + ("<ul>" + "".join(f"<li>{html.escape(r.strip())}</li>" for r in refused) + "</ul>" if refused
+                        else "") + "</p>")
     contradicted = [c for c in candidates if c.contradicted]
     if contradicted:
         parts.append("<p>Fits a direct observation contradicts (never claimed):<ul>" + "".join(

@@ -41,6 +41,11 @@ def test_four_effects_missing_at_once_are_claimed_in_one_pass(tmp_path: Path) ->
     s = analyze(_bag(tmp_path, 630), profile="ev76c661", estimator=None)
     claimed = {c["effect"]: (c["beyond"] or {}).get("params") or c["params"] for c in s["candidates"] if c["significant"]}
     assert set(claimed) == FOUR
+    # what the four leave: the last claim's refit chi-square, within the measurement's scatter
+    left, last = s["left_by_claims"], max((c for c in s["candidates"] if c["significant"]), key=lambda c: c["rank"])
+    assert set(left["claimed"]) == FOUR and not left["significant"] and left["chi2"] < left["dof"]
+    assert left["chi2"] == pytest.approx(min(last["beyond"]["chi2"], last["beyond"]["chi2_given"]), rel=1e-3)
+    assert left["rms_error_dn"] < 0.05 * s["rms_error_dn"] and left["refused_beyond"] == []
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
     assert claimed["column_offsets"]["sigma_dn"] == pytest.approx(0.45, rel=0.1)
@@ -76,6 +81,7 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
                               f"(alone: fraction={cands['dsnu']['params']['fraction']:.4g})")
     html = (report / "report.html").read_text()
     assert "<th>claimed_params</th>" in html and f"fraction={claimed['dsnu']['fraction']:.4g}" in html
+    assert "<p>Left by the claims (" in html and "within the measurement&#x27;s scatter" in html  # all four found
 
 
 def _rows(model_fixed: float) -> list[dict]:
@@ -339,3 +345,27 @@ def test_a_prnu_whose_cut_only_imprecise_cells_would_judge_is_claimed(tmp_path: 
     assert set(claimed) == FOUR
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
+
+
+def test_what_the_claims_leave_is_reported_with_the_candidates_refused_beyond_them(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Seed 1102, each effect's pattern drawn from it (an open miss, experiments/lab_several_effects section 24): the
+    DSNU is claimed alone, and the hot pixels' refit beyond it passes the F-test but explains 8 % of what it leaves.
+    The DSNU at its claimed value leaves a chi-square far beyond its degrees of freedom, and the outliers' error the
+    hot pixels make: the report says the diagnosis is not complete and names the hot pixels as the one to try."""
+    bag = _bag(tmp_path, 1102, own_patterns=True)
+    js = tmp_path / "out.json"
+    assert main(["analyze", str(bag), "--profile", "ev76c661", "--no-estimator", "--quiet", "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    s = json.loads(js.read_text())
+    left = s["left_by_claims"]
+    assert set(_claimed(s)) == {"dsnu"} and left["claimed"] == ["dsnu"]
+    hot = next(c for c in s["candidates"] if c["effect"] == "hot_pixels")
+    assert left["chi2"] == pytest.approx(hot["beyond"]["chi2_given"], rel=1e-3) and left["chi2"] > 3 * left["dof"]
+    assert left["significant"] and left["p_value"] < 1e-6
+    assert left["rms_error_by_component_dn"]["outlier"] > 0.5 * left["rms_error_dn"]  # the hot pixels' part
+    assert [c["effect"] for c in left["refused_beyond"]] == ["hot_pixels"]
+    assert left["refused_beyond"][0]["failed"] == ["explained fraction"]
+    assert left["refused_beyond"][0]["explained_fraction"] < MIN_EXPLAINED_FRACTION
+    assert "left by the claims (dsnu)" in out and "the claims do not explain all of it" in out
+    assert "try --add-effect hot_pixels=fit" in out

@@ -1,0 +1,69 @@
+"""What the claimed explanations leave: the camera's model with every claimed effect at its claimed value against the
+measurements (chi-square on the degrees of freedom net of every claimed parameter, its p-value, the net rms error in
+total and per component), and the candidates refitted beyond exactly those claims whose drop passed the F-test but
+which another test refused. Where the claims leave more than the measurement's scatter, the diagnosis is not complete:
+those candidates are the ones to try next (``analyze --add-effect``)."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from scipy.stats import chi2 as chi2_dist
+
+from ..physics import Effect
+from .compare import Comparison, rms_error, rms_error_raw
+from .diagnose import SIGNIFICANCE_P, Candidate, component_errors
+
+
+def claimed_effects(ranked: Sequence[Candidate]) -> list[Effect]:
+    """The claimed model's effects at their claimed values, one per claimed group (ranked best first): the member
+    whose refit the claim records (``beyond["effect"]``), else the group's first (claimed on its fit alone)."""
+    out = []
+    for rank in dict.fromkeys(c.rank for c in ranked if c.significant):
+        group = [c for c in ranked if c.rank == rank and c.significant]
+        refit = group[0].beyond
+        member = next((c for c in group if refit and c.effect == refit["effect"]), group[0])
+        if member.fitted is None:
+            raise ValueError(f"claimed candidate {member.effect!r} has no fit")
+        params = refit["params"] if refit else member.params
+        out.append(type(member.fitted)(**{**member.fitted.values, **params}))
+    return out
+
+
+def left_by_claims(comp: Comparison, ranked: Sequence[Candidate]) -> dict[str, Any] | None:
+    """What the claims leave (module docstring); None when nothing is claimed (then :func:`.signature.unexplained`
+    reads the whole residual)."""
+    effects = claimed_effects(ranked)
+    if not effects:
+        return None
+    names = sorted(e.name for e in effects)
+    r = comp.residuals(effects)
+    chi2 = float(r @ r)
+    dof = max(r.size - sum(len(c.params) for c in ranked if c.significant and c.effect in names), 1)
+    p = float(chi2_dist.sf(chi2, dof))
+    rows = comp.cell_table(extra=effects)
+    refused = [{"effect": c.effect, "p_value": b["p_value"], "explained_fraction": b["explained_fraction"],
+                "failed": b["failed"]}
+               for c in ranked if not c.significant and (b := c.beyond) is not None
+               and sorted(b["given"]) == names and b["p_value"] < SIGNIFICANCE_P]
+    return {"claimed": [e.name for e in effects], "chi2": round(chi2, 3), "dof": dof, "p_value": p,
+            "significant": p < SIGNIFICANCE_P, "rms_error_dn": rms_error(rows), "rms_error_raw_dn": rms_error_raw(rows),
+            "rms_error_by_component_dn": {k: round(v, 5) for k, v in component_errors(rows).items()},
+            "refused_beyond": refused}
+
+
+def left_text(left: dict[str, Any], rms_before_dn: float) -> list[str]:
+    """:func:`left_by_claims` for people: one line, and where the claims leave more than the scatter, the candidates
+    refused beyond them."""
+    comps = ", ".join(f"{k} {v:.3f}" for k, v in left["rms_error_by_component_dn"].items() if v >= 0.0005)
+    p = f"p = {left['p_value']:.2g}" if left["p_value"] > 0.0 else "p < 1e-300"
+    verdict = ("more than the measurement's scatter: the claims do not explain all of it" if left["significant"] else
+               "within the measurement's scatter")
+    lines = [f"left by the claims ({', '.join(left['claimed'])}): chi-square {left['chi2']:.1f} on {left['dof']} "
+             f"degrees of freedom ({p}), {verdict}; rms error {rms_before_dn:.4f} -> "
+             f"{left['rms_error_dn']:.4f} DN" + (f" ({comps})" if comps else "")]
+    if left["significant"]:
+        lines += [f"  beyond them, significant by the F-test but refused: {c['effect']} (p = {c['p_value']:.2g}, "
+                  f"{c['explained_fraction']:.1%} of what they leave; failed: {', '.join(c['failed'])}): try "
+                  f"--add-effect {c['effect']}=fit" for c in left["refused_beyond"]]
+    return lines

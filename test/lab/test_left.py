@@ -1,0 +1,46 @@
+"""The claimed model that `left_by_claims` evaluates: one effect per claimed group, at the values the claim records
+(bags: test_several_effects.py, `left_by_claims` within the scatter on seed 630 and beyond it on seed 1102)."""
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from noise_monitor.lab.diagnose import Candidate
+from noise_monitor.lab.left import claimed_effects, left_text
+from noise_monitor.physics.effects import effect_class
+
+
+def _candidate(effect: str, params: dict[str, float], rank: int, significant: bool,
+               beyond: dict[str, Any] | None = None) -> Candidate:
+    return Candidate(effect=effect, params=params, param_errors={}, chi2=0.0, explained_fraction=0.5, delta_bic=-10.0,
+                     p_value=1e-9, significant=significant, reading="", rms_error_after_dn=0.0, rank=rank,
+                     beyond=beyond, fitted=effect_class(effect)(**params))
+
+
+def test_one_effect_per_claimed_group_at_the_values_its_claim_records() -> None:
+    """A group claimed alone (its members alike, all significant): its first member at its fit alone. A group claimed
+    whole beyond it: the member whose refit the claim records (its values; the other member shares the record but is
+    not in the model). Unclaimed candidates are not in the model."""
+    refit = {"effect": "temperature_error", "given": ["dsnu"], "params": {"offset_c": 2.5}}
+    ranked = [_candidate("dsnu", {"fraction": 0.31}, 1, True), _candidate("hot_pixels", {"fraction": 0.2}, 1, True),
+              _candidate("exposure_error", {"factor": 1.2}, 2, True, refit),
+              _candidate("temperature_error", {"offset_c": 1.9}, 2, True, refit),
+              _candidate("prnu", {"sigma_pct": 1.2}, 3, False)]
+    effects = claimed_effects(ranked)
+    assert [e.name for e in effects] == ["dsnu", "temperature_error"]
+    assert effects[0].values["fraction"] == pytest.approx(0.31) and effects[1].values["offset_c"] == pytest.approx(2.5)
+    assert claimed_effects(ranked[4:]) == []
+
+
+def test_the_reading_names_what_to_try_only_where_the_claims_leave_more_than_the_scatter() -> None:
+    left = {"claimed": ["dsnu"], "chi2": 3469.1, "dof": 609, "p_value": 0.0, "significant": True, "rms_error_dn": 2.4,
+            "rms_error_by_component_dn": {"fixed": 0.209, "row": 0.0001, "outlier": 2.27},
+            "refused_beyond": [{"effect": "hot_pixels", "p_value": 1.1e-11, "explained_fraction": 0.08,
+                                "failed": ["explained fraction"]}]}
+    first, second = left_text(left, 2.99)
+    assert first.startswith("left by the claims (dsnu): chi-square 3469.1 on 609 degrees of freedom (p < 1e-300)")
+    assert "rms error 2.9900 -> 2.4000 DN (fixed 0.209, outlier 2.270)" in first
+    assert "8.0% of what they leave" in second and second.endswith("try --add-effect hot_pixels=fit")
+    within = {**left, "chi2": 590.0, "p_value": 0.7, "significant": False}
+    assert len(left_text(within, 2.99)) == 1 and "within the measurement's scatter" in left_text(within, 2.99)[0]
