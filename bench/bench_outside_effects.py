@@ -10,7 +10,8 @@ test's magnitudes) and ``campaign_heldout`` (``--scenario campaign_heldout`` wit
 magnitudes; measure it once, never tune on it), written as MCAP bags and analysed end to end;
 ``campaign_short``: the ``campaign`` scenario cut to 64 frames of 160x128 (about 6 holds).
 ``--seed`` replaces the campaign sets' seed (scene, plan and noise; several: one run per seed). Prints a
-line per run (with the candidates significant alone but not beyond the claimed explanations), whether it
+line per run (with the candidates significant alone but not beyond the claimed explanations, and whether what the claims
+leave is within the measurement's scatter: ``left_by_claims``), whether it
 meets issue 14's requirement (no built-in claimed without the plug-in; with it the plug-in ranks first and
 is the only claim; net error cut >= 70 %), and counts per set and effect (also of the part with the plug-in);
 ``--json PATH`` writes them.
@@ -111,8 +112,23 @@ def run(effect: str, cfg: dict, plugin: Path, tmp: Path) -> dict:
         "rms_error_after_raw_dn": with_plugin["rms_error_after_raw_dn"],
         "error_cut_raw": 1.0 - with_plugin["rms_error_after_raw_dn"] / with_plugin["rms_error_before_raw_dn"],
         "contradicted_without_plugin": {c["effect"]: c["contradicted"] for c in bare["candidates"] if c["contradicted"]},
+        "left_without_plugin": _left(bare), "left_with_plugin": _left(with_plugin),
         "analysis_time_s": round(t_bare, 1),
     }
+
+
+def _left(summary: dict) -> dict | None:
+    """What the claims leave (None: nothing claimed): whether more than the scatter, and the chi-square on its dof."""
+    left = summary["left_by_claims"]
+    return left and {"significant": left["significant"], "chi2": left["chi2"], "dof": left["dof"],
+                     "refused_beyond": [c["effect"] for c in left["refused_beyond"]]}
+
+
+def _left_text(left: dict | None) -> str:
+    if left is None:
+        return "nothing claimed"
+    verdict = "more than the scatter" if left["significant"] else "within the scatter"
+    return f"{verdict} (chi-square {left['chi2']:.0f} on {left['dof']})"
 
 
 def _explained_by(summary: dict) -> dict[str, list[str]]:
@@ -163,7 +179,8 @@ def print_row(r: dict) -> None:
     print(f"{r['set']:16s} seed {r['seed']:<3d} {r['effect']:13s} meets {r['meets_requirement']}; built-ins claimed: {r['builtins_claimed_without_plugin'] or 'none'}; "
           f"unexplained: {r['unexplained_significant']} ({r['kind']}: {'; '.join(r['traits'])}); law {r['law'] and {k: r['law'][k] for k in ('intensity_power', 'exposure_power', 'gain_power', 'dark_current_law')}}; "
           f"plug-in rank {r['plugin_rank']} significant {r['plugin_significant']}, claimed "
-          f"{r['claimed_with_plugin']}; significant alone, explained by the claimed: without the plug-in "
+          f"{r['claimed_with_plugin']}; the claims leave: without the plug-in {_left_text(r['left_without_plugin'])}, "
+          f"with it {_left_text(r['left_with_plugin'])}; significant alone, explained by the claimed: without the plug-in "
           f"{r['explained_by_without_plugin'] or 'none'}, with it {r['explained_by_with_plugin'] or 'none'}; fitted {r['fitted']} +- {r['fitted_errors']} (truth {r['truth']}); rms "
           f"{r['rms_error_before_dn']:.3f} -> {r['rms_error_after_dn']:.3f} DN "
           f"(cut {r['error_cut']:.0%}; raw {r['rms_error_before_raw_dn']:.3f} -> {r['rms_error_after_raw_dn']:.3f} DN, "
