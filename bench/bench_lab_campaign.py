@@ -88,7 +88,9 @@ def run_bag(tmp: Path, scenario: str, effect: str | None, args: argparse.Namespa
            "rms_error_dn": round(s["rms_error_dn"], 4), "rms_error_raw_dn": round(s["rms_error_raw_dn"], 4),
            "measurement_scatter_dn": round(s["measurement_scatter_dn"], 4), "best": names[0], "claimed": claimed,
            "explained_by": {c["effect"]: c["explained_by"] for c in s["candidates"] if c.get("explained_by")},
-           "cells": s["measurement"]["cells"], "not_measured": s["measurement"]["not_measured"]}
+           "cells": s["measurement"]["cells"], "not_measured": s["measurement"]["not_measured"],
+           # what the claims leave: more than the measurement's scatter (None: nothing claimed)
+           "left_significant": s["left_by_claims"] and s["left_by_claims"]["significant"]}
     row["net_mse_dn2"], row["net_mse_se_dn2"] = (round(x, 5) for x in net_mse(s["cells"]))
     groups: dict[int, list[str]] = {}
     for c in s["candidates"]:
@@ -162,7 +164,9 @@ def main() -> None:
                       f"{f' (undefined for {none}: no net error before)' if none else ''} (raw: median "
                       f"{_pct(statistics.median(raw))}, min {_pct(min(raw))}; in the effect's own component: median "
                       f"{_pct(statistics.median([r['own_cut'] for r in hidden]))}, min "
-                      f"{_pct(min(r['own_cut'] for r in hidden))})", flush=True)
+                      f"{_pct(min(r['own_cut'] for r in hidden))}); the claims leave more than the scatter on "
+                      f"{sum(bool(r['left_significant']) for r in rows)} of "
+                      f"{sum(r['left_significant'] is not None for r in rows)} bags with claims", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
 
