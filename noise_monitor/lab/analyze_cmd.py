@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
     for c in top:
         mark = "*" if c["significant"] else "~" if c["significant_alone"] else " "
         params = ", ".join(_param_text(k, v, c["param_ranges"].get(k)) for k, v in c["params"].items())
-        if c["significant"] and c["beyond"]:  # claimed as refitted beyond (or with) the others: those values
+        if c["significant"] and c["beyond"] and c["beyond"]["effect"] == c["effect"]:  # refitted beyond (or with) the
+            # others: those values (a member of a group claimed whole shares its lead's refit: its fit alone)
             ranges = c["beyond"]["param_ranges"]
             params = (", ".join(_param_text(k, v, ranges.get(k)) for k, v in c["claimed_params"].items())
                       + f"  (alone: {params})")

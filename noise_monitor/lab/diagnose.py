@@ -212,10 +212,11 @@ class Candidate:
 
     @property
     def claimed_params(self) -> dict[str, float] | None:
-        """The values claimed (its refit beyond or with the other claims, else its fit alone); None: not claimed."""
+        """The values claimed (its refit beyond or with the other claims, else its fit alone: also for a member of a
+        group claimed whole, whose ``beyond`` records the refit of the group's lead); None: not claimed."""
         if not self.significant:
             return None
-        return self.beyond["params"] if self.beyond else self.params
+        return self.beyond["params"] if self.beyond and self.beyond["effect"] == self.effect else self.params
 
     def as_dict(self) -> dict[str, Any]:
         return {

@@ -44,3 +44,13 @@ def test_the_reading_names_what_to_try_only_where_the_claims_leave_more_than_the
     assert "8.0% of what they leave" in second and second.endswith("try --add-effect hot_pixels=fit")
     within = {**left, "chi2": 590.0, "p_value": 0.7, "significant": False}
     assert len(left_text(within, 2.99)) == 1 and "within the measurement's scatter" in left_text(within, 2.99)[0]
+
+
+def test_a_group_members_claimed_values_are_its_own_not_its_leads_refit() -> None:
+    """A group claimed whole records its lead's refit on every member (``beyond``); a member's claimed values are its
+    own fit alone (before 2026-12-01 they were the lead's: hot pixels claimed beside a DSNU read "fraction 0.297")."""
+    refit = {"effect": "temperature_error", "given": ["dsnu"], "params": {"offset_c": 2.5}}
+    member = _candidate("exposure_error", {"factor": 1.2}, 2, True, refit)
+    lead = _candidate("temperature_error", {"offset_c": 1.9}, 2, True, refit)
+    assert member.claimed_params == {"factor": 1.2} and lead.claimed_params == {"offset_c": 2.5}
+    assert _candidate("prnu", {"sigma_pct": 1.2}, 3, False, refit).claimed_params is None
