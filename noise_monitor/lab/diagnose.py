@@ -268,13 +268,18 @@ def fitted_reading(res: FitResult, effect: Effect) -> str:
     if ranges:
         spans = "; ".join(f"{name} anywhere from {lo:.3g} to {hi:.3g}" for name, (lo, hi) in ranges.items())
         notes.append(f"not identified by these data: {spans} fits as well")
-    free = res.values.get(effect.name, {})
-    for p in type(effect).params:
-        lo, hi = p.bounds
-        if p.name in free and p.name not in ranges and free[p.name] >= hi - AT_LIMIT * (hi - lo):
-            notes.append(f"{p.name} at the upper limit of its allowed range, {hi:g}: the data would take more; "
-                         "the effect may stand for another")
+    for name, hi in at_upper_limit(type(effect), res.values.get(effect.name, {}), ranges):
+        notes.append(f"{name} at the upper limit of its allowed range, {hi:g}: the data would take more; "
+                     "the effect may stand for another")
     return effect.reading() + "".join(f" ({n})" for n in notes)
+
+
+def at_upper_limit(cls: type[Effect], fitted: Mapping[str, float], ranges: Mapping[str, Any]
+                   ) -> list[tuple[str, float]]:
+    """The ``fitted`` parameters of an effect of ``cls`` a fit pushed to the upper limit of their allowed range (name,
+    limit), but those the data do not identify (``ranges``: any value in a range fits as well)."""
+    return [(p.name, p.bounds[1]) for p in cls.params if p.name in fitted and p.name not in ranges
+            and fitted[p.name] >= p.bounds[1] - AT_LIMIT * (p.bounds[1] - p.bounds[0])]
 
 
 def _scan_values(p: Param) -> np.ndarray:

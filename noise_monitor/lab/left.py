@@ -1,7 +1,8 @@
 """What the claimed explanations leave: the camera's model with every claimed effect at its claimed value against the
 measurements (chi-square on the degrees of freedom net of every claimed parameter, its p-value, the net rms error in
-total and per component), and the candidates refitted beyond exactly those claims whose drop passed the F-test but
-which another test refused. Where the claims leave more than the measurement's scatter, the diagnosis is not complete:
+total and per component), the candidates refitted beyond exactly those claims whose drop passed the F-test but
+which another test refused, and the claimed values a fit pushed to the upper limit of their range (an effect
+stretched to stand for another). Where the claims leave more than the measurement's scatter, the diagnosis is not complete:
 those candidates are the ones to try next (``analyze --add-effect``)."""
 from __future__ import annotations
 
@@ -12,21 +13,27 @@ from scipy.stats import chi2 as chi2_dist
 
 from ..physics import Effect
 from .compare import Comparison, rms_error, rms_error_raw
-from .diagnose import SIGNIFICANCE_P, Candidate, component_errors
+from .diagnose import SIGNIFICANCE_P, Candidate, at_upper_limit, component_errors
 
 
-def claimed_effects(ranked: Sequence[Candidate]) -> list[Effect]:
-    """The claimed model's effects at their claimed values, one per claimed group (ranked best first): the member
-    whose refit the claim records (``beyond["effect"]``), else the group's first (claimed on its fit alone)."""
+def model_members(ranked: Sequence[Candidate]) -> list[Candidate]:
+    """The claimed candidates in the claimed model, one per claimed group (ranked best first): the member whose refit
+    the claim records (``beyond["effect"]``), else the group's first (claimed on its fit alone)."""
     out = []
     for rank in dict.fromkeys(c.rank for c in ranked if c.significant):
         group = [c for c in ranked if c.rank == rank and c.significant]
         refit = group[0].beyond
-        member = next((c for c in group if refit and c.effect == refit["effect"]), group[0])
-        if member.fitted is None:
-            raise ValueError(f"claimed candidate {member.effect!r} has no fit")
-        params = refit["params"] if refit else member.params
-        out.append(type(member.fitted)(**{**member.fitted.values, **params}))
+        out.append(next((c for c in group if refit and c.effect == refit["effect"]), group[0]))
+    return out
+
+
+def claimed_effects(ranked: Sequence[Candidate]) -> list[Effect]:
+    """The claimed model's effects at their claimed values (:func:`model_members`)."""
+    out = []
+    for m in model_members(ranked):
+        if m.fitted is None or m.claimed_params is None:
+            raise ValueError(f"claimed candidate {m.effect!r} has no fit")
+        out.append(type(m.fitted)(**{**m.fitted.values, **m.claimed_params}))
     return out
 
 
@@ -49,7 +56,21 @@ def left_by_claims(comp: Comparison, ranked: Sequence[Candidate]) -> dict[str, A
     return {"claimed": [e.name for e in effects], "chi2": round(chi2, 3), "dof": dof, "p_value": p,
             "significant": p < SIGNIFICANCE_P, "rms_error_dn": rms_error(rows), "rms_error_raw_dn": rms_error_raw(rows),
             "rms_error_by_component_dn": {k: round(v, 5) for k, v in component_errors(rows).items()},
-            "refused_beyond": refused}
+            "refused_beyond": refused, "at_limit": claims_at_limit(ranked)}
+
+
+def claims_at_limit(ranked: Sequence[Candidate]) -> list[dict[str, Any]]:
+    """The claimed model's values at the upper limit of their allowed range (an effect stretched, perhaps standing for
+    another: hot pixels at 20 % of the pixels for a DSNU), but the parameters the claim's fit does not identify."""
+    out = []
+    for m in model_members(ranked):
+        if m.fitted is None:
+            continue
+        params = m.claimed_params or {}
+        ranges = m.beyond["param_ranges"] if m.beyond else (m.param_ranges or {})
+        out += [{"effect": m.effect, "param": name, "value": params[name], "limit": hi}
+                for name, hi in at_upper_limit(type(m.fitted), params, ranges)]
+    return out
 
 
 def left_text(left: dict[str, Any], rms_before_dn: float) -> list[str]:
@@ -62,6 +83,9 @@ def left_text(left: dict[str, Any], rms_before_dn: float) -> list[str]:
     lines = [f"left by the claims ({', '.join(left['claimed'])}): chi-square {left['chi2']:.1f} on {left['dof']} "
              f"degrees of freedom ({p}), {verdict}; rms error {rms_before_dn:.4f} -> "
              f"{left['rms_error_dn']:.4f} DN" + (f" ({comps})" if comps else "")]
+    lines += [f"  claimed at the upper limit of its allowed range: {a['effect']} {a['param']} = {a['value']:.4g} (limit "
+              f"{a['limit']:g}): the data would take more, the effect may stand for another one; the claims are not a "
+              f"measurement of it" for a in left["at_limit"]]
     if left["significant"]:
         lines += [f"  beyond them, significant by the F-test but refused: {c['effect']} (p = {c['p_value']:.2g}, "
                   f"{c['explained_fraction']:.1%} of what they leave; failed: {', '.join(c['failed'])}): try "

@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 from noise_monitor.lab.diagnose import Candidate
-from noise_monitor.lab.left import claimed_effects, left_text
+from noise_monitor.lab.left import claimed_effects, claims_at_limit, left_text
 from noise_monitor.physics.effects import effect_class
 
 
@@ -37,7 +37,7 @@ def test_the_reading_names_what_to_try_only_where_the_claims_leave_more_than_the
     left = {"claimed": ["dsnu"], "chi2": 3469.1, "dof": 609, "p_value": 0.0, "significant": True, "rms_error_dn": 2.4,
             "rms_error_by_component_dn": {"fixed": 0.209, "row": 0.0001, "outlier": 2.27},
             "refused_beyond": [{"effect": "hot_pixels", "p_value": 1.1e-11, "explained_fraction": 0.08,
-                                "failed": ["explained fraction"]}]}
+                                "failed": ["explained fraction"]}], "at_limit": []}
     first, second = left_text(left, 2.99)
     assert first.startswith("left by the claims (dsnu): chi-square 3469.1 on 609 degrees of freedom (p < 1e-300)")
     assert "rms error 2.9900 -> 2.4000 DN (fixed 0.209, outlier 2.270)" in first
@@ -54,3 +54,23 @@ def test_a_group_members_claimed_values_are_its_own_not_its_leads_refit() -> Non
     lead = _candidate("temperature_error", {"offset_c": 1.9}, 2, True, refit)
     assert member.claimed_params == {"factor": 1.2} and lead.claimed_params == {"offset_c": 2.5}
     assert _candidate("prnu", {"sigma_pct": 1.2}, 3, False, refit).claimed_params is None
+
+
+def test_a_claim_stretched_to_the_limit_of_its_range_is_named() -> None:
+    """Seed 1057's claims: hot pixels at 20 % of the pixels (the limit of their fraction) standing for a DSNU, whose
+    chi-square the measurement's scatter covers: the fraction is named as stretched; a dark multiplier at its limit
+    that the data do not identify (any value in a range fits as well) is not, nor is a group member not in the model."""
+    stretched = {"effect": "hot_pixels", "given": ["prnu"], "params": {"fraction": 0.2, "dark_multiplier": 1e7},
+                 "param_ranges": {"dark_multiplier": [348.0, 1e7]}}
+    ranked = [_candidate("prnu", {"sigma_pct": 1.04}, 1, True),
+              _candidate("hot_pixels", {"fraction": 0.2, "dark_multiplier": 0.78}, 2, True, stretched),
+              _candidate("dsnu", {"fraction": 10.0}, 2, True, stretched)]  # its group's alternative, at its own limit
+    assert claims_at_limit(ranked) == [{"effect": "hot_pixels", "param": "fraction", "value": 0.2, "limit": 0.2}]
+    left = {"claimed": ["prnu", "hot_pixels"], "chi2": 560.5, "dof": 474, "p_value": 0.0037, "significant": False,
+            "rms_error_dn": 3.66, "rms_error_by_component_dn": {"outlier": 3.665}, "refused_beyond": [],
+            "at_limit": claims_at_limit(ranked)}
+    first, second = left_text(left, 3.98)
+    assert "within the measurement's scatter" in first
+    assert second == ("  claimed at the upper limit of its allowed range: hot_pixels fraction = 0.2 (limit 0.2): the "
+                      "data would take more, the effect may stand for another one; the claims are not a measurement of it")
+
