@@ -145,7 +145,8 @@ def analyze(
         rows = comp.cell_table()
     names = list(candidates) if candidates is not None else candidate_names(plugin_names)
     with tqdm(total=len(names), desc="diagnose", unit="effect", disable=not progress) as bar:
-        cands = diagnose(comp, names, progress=bar)
+        diag = diagnose(comp, names, progress=bar)
+    cands = diag.candidates
     out: dict[str, Any] = {
         "source": source,
         "profile": prof.name if prof else None,
@@ -161,7 +162,7 @@ def analyze(
         "candidates": [c.as_dict() for c in cands],
         "diagnosis": diagnosis_line([c.as_dict() for c in cands]),
         "unexplained": unexplained(comp, rows, cands),
-        "left_by_claims": left_by_claims(comp, cands),
+        "left_by_claims": left_by_claims(comp, diag),
         "cells": _strip(rows),
     }
     if write_plugin_skeleton:

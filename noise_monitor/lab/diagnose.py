@@ -681,7 +681,17 @@ def assess(comp: Comparison, given: Given, spec: EffectSpec) -> Assessment:
                       [name for name, ok in tests if not ok], scatter)
 
 
-def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any = None) -> list[Candidate]:
+@dataclass
+class Diagnosis:
+    """:func:`diagnose`'s answer: the candidates ranked best first with their verdicts, and the claimed model (the
+    claimed effects at their claimed values, one per claimed group; ``claimed``: the candidate whose fit each is)."""
+
+    candidates: list[Candidate]
+    model: list[Effect]
+    claimed: list[Candidate]
+
+
+def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any = None) -> Diagnosis:
     """Fit every candidate alone, rank by BIC gain (best first), test significance, group the candidates
     the data cannot tell apart, and claim by forward selection (:func:`claim`)."""
     base = Given.of(comp)
@@ -717,7 +727,7 @@ def diagnose(comp: Comparison, names: Iterable[str] | None = None, progress: Any
     return claim(comp, group_equivalent(comp, out))
 
 
-def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
+def claim(comp: Comparison, ranked: list[Candidate]) -> Diagnosis:
     """Claim explanations by forward selection over the groups (ranked best first, significance per
     group from each candidate's own fit): the first group significant alone is claimed; each later one
     (significant alone or not) is refitted (its best member, then the others in turn: :func:`_refit_group`) with the
@@ -750,7 +760,7 @@ def claim(comp: Comparison, ranked: list[Candidate]) -> list[Candidate]:
         pair.restore(model, claimed, ranked)
         if not forward.holds(partner) and forward.model and forward.bic(comp) <= bic:
             forward.restore(model, claimed, ranked)  # the forward selection's claims fit better, each complete
-    return ranked
+    return Diagnosis(ranked, model, claimed)
 
 
 def _claim_pair(comp: Comparison, ranked: list[Candidate], model: list[Effect], claimed: list[Candidate], absorbed: bool,

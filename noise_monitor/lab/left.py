@@ -6,70 +6,44 @@ stretched to stand for another). Where the claims leave more than the measuremen
 those candidates are the ones to try next (``analyze --add-effect``)."""
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 from scipy.stats import chi2 as chi2_dist
 
-from ..physics import Effect
 from .compare import Comparison, rms_error, rms_error_raw
-from .diagnose import SIGNIFICANCE_P, Candidate, at_upper_limit, component_errors
+from .diagnose import SIGNIFICANCE_P, Diagnosis, at_upper_limit, component_errors
 
 
-def model_members(ranked: Sequence[Candidate]) -> list[Candidate]:
-    """The claimed candidates in the claimed model, one per claimed group (ranked best first): the member whose refit
-    the claim records (``beyond["effect"]``), else the group's first (claimed on its fit alone)."""
-    out = []
-    for rank in dict.fromkeys(c.rank for c in ranked if c.significant):
-        group = [c for c in ranked if c.rank == rank and c.significant]
-        refit = group[0].beyond
-        out.append(next((c for c in group if refit and c.effect == refit["effect"]), group[0]))
-    return out
-
-
-def claimed_effects(ranked: Sequence[Candidate]) -> list[Effect]:
-    """The claimed model's effects at their claimed values (:func:`model_members`)."""
-    out = []
-    for m in model_members(ranked):
-        if m.fitted is None or m.claimed_params is None:
-            raise ValueError(f"claimed candidate {m.effect!r} has no fit")
-        out.append(type(m.fitted)(**{**m.fitted.values, **m.claimed_params}))
-    return out
-
-
-def left_by_claims(comp: Comparison, ranked: Sequence[Candidate]) -> dict[str, Any] | None:
+def left_by_claims(comp: Comparison, diag: Diagnosis) -> dict[str, Any] | None:
     """What the claims leave (module docstring); None when nothing is claimed (then :func:`.signature.unexplained`
     reads the whole residual)."""
-    effects = claimed_effects(ranked)
-    if not effects:
+    if not diag.model:
         return None
-    names = sorted(e.name for e in effects)
-    r = comp.residuals(effects)
+    names = sorted(e.name for e in diag.model)
+    r = comp.residuals(diag.model)
     chi2 = float(r @ r)
-    dof = max(r.size - sum(len(c.params) for c in ranked if c.significant and c.effect in names), 1)
+    dof = max(r.size - sum(len(c.params) for c in diag.claimed), 1)
     p = float(chi2_dist.sf(chi2, dof))
-    rows = comp.cell_table(extra=effects)
+    rows = comp.cell_table(extra=diag.model)
     refused = [{"effect": c.effect, "p_value": b["p_value"], "explained_fraction": b["explained_fraction"],
                 "failed": b["failed"]}
-               for c in ranked if not c.significant and (b := c.beyond) is not None
+               for c in diag.candidates if not c.significant and (b := c.beyond) is not None
                and sorted(b["given"]) == names and b["p_value"] < SIGNIFICANCE_P]
-    return {"claimed": [e.name for e in effects], "chi2": round(chi2, 3), "dof": dof, "p_value": p,
+    return {"claimed": [e.name for e in diag.model], "chi2": round(chi2, 3), "dof": dof, "p_value": p,
             "significant": p < SIGNIFICANCE_P, "rms_error_dn": rms_error(rows), "rms_error_raw_dn": rms_error_raw(rows),
             "rms_error_by_component_dn": {k: round(v, 5) for k, v in component_errors(rows).items()},
-            "refused_beyond": refused, "at_limit": claims_at_limit(ranked)}
+            "refused_beyond": refused, "at_limit": claims_at_limit(diag)}
 
 
-def claims_at_limit(ranked: Sequence[Candidate]) -> list[dict[str, Any]]:
+def claims_at_limit(diag: Diagnosis) -> list[dict[str, Any]]:
     """The claimed model's values at the upper limit of their allowed range (an effect stretched, perhaps standing for
     another: hot pixels at 20 % of the pixels for a DSNU), but the parameters the claim's fit does not identify."""
     out = []
-    for m in model_members(ranked):
-        if m.fitted is None:
-            continue
-        params = m.claimed_params or {}
+    for m, effect in zip(diag.claimed, diag.model, strict=True):
         ranges = m.beyond["param_ranges"] if m.beyond else (m.param_ranges or {})
+        params = {k: effect.values[k] for k in m.params}
         out += [{"effect": m.effect, "param": name, "value": params[name], "limit": hi}
-                for name, hi in at_upper_limit(type(m.fitted), params, ranges)]
+                for name, hi in at_upper_limit(type(effect), params, ranges)]
     return out
 
 

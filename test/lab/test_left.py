@@ -1,13 +1,11 @@
-"""The claimed model that `left_by_claims` evaluates: one effect per claimed group, at the values the claim records
-(bags: test_several_effects.py, `left_by_claims` within the scatter on seed 630 and beyond it on seed 1102)."""
+"""What the claims leave, for people, and the claimed values it names (bags: test_several_effects.py, `left_by_claims`
+within the scatter on seed 630 and beyond it on seed 1102)."""
 from __future__ import annotations
 
 from typing import Any
 
-import pytest
-
-from noise_monitor.lab.diagnose import Candidate
-from noise_monitor.lab.left import claimed_effects, claims_at_limit, left_text
+from noise_monitor.lab.diagnose import Candidate, Diagnosis
+from noise_monitor.lab.left import claims_at_limit, left_text
 from noise_monitor.physics.effects import effect_class
 
 
@@ -16,21 +14,6 @@ def _candidate(effect: str, params: dict[str, float], rank: int, significant: bo
     return Candidate(effect=effect, params=params, param_errors={}, chi2=0.0, explained_fraction=0.5, delta_bic=-10.0,
                      p_value=1e-9, significant=significant, reading="", rms_error_after_dn=0.0, rank=rank,
                      beyond=beyond, fitted=effect_class(effect)(**params))
-
-
-def test_one_effect_per_claimed_group_at_the_values_its_claim_records() -> None:
-    """A group claimed alone (its members alike, all significant): its first member at its fit alone. A group claimed
-    whole beyond it: the member whose refit the claim records (its values; the other member shares the record but is
-    not in the model). Unclaimed candidates are not in the model."""
-    refit = {"effect": "temperature_error", "given": ["dsnu"], "params": {"offset_c": 2.5}}
-    ranked = [_candidate("dsnu", {"fraction": 0.31}, 1, True), _candidate("hot_pixels", {"fraction": 0.2}, 1, True),
-              _candidate("exposure_error", {"factor": 1.2}, 2, True, refit),
-              _candidate("temperature_error", {"offset_c": 1.9}, 2, True, refit),
-              _candidate("prnu", {"sigma_pct": 1.2}, 3, False)]
-    effects = claimed_effects(ranked)
-    assert [e.name for e in effects] == ["dsnu", "temperature_error"]
-    assert effects[0].values["fraction"] == pytest.approx(0.31) and effects[1].values["offset_c"] == pytest.approx(2.5)
-    assert claimed_effects(ranked[4:]) == []
 
 
 def test_the_reading_names_what_to_try_only_where_the_claims_leave_more_than_the_scatter() -> None:
@@ -65,10 +48,12 @@ def test_a_claim_stretched_to_the_limit_of_its_range_is_named() -> None:
     ranked = [_candidate("prnu", {"sigma_pct": 1.04}, 1, True),
               _candidate("hot_pixels", {"fraction": 0.2, "dark_multiplier": 0.78}, 2, True, stretched),
               _candidate("dsnu", {"fraction": 10.0}, 2, True, stretched)]  # its group's alternative, at its own limit
-    assert claims_at_limit(ranked) == [{"effect": "hot_pixels", "param": "fraction", "value": 0.2, "limit": 0.2}]
+    model = [effect_class("prnu")(sigma_pct=1.04), effect_class("hot_pixels")(**stretched["params"])]
+    diag = Diagnosis(ranked, model, ranked[:2])
+    assert claims_at_limit(diag) == [{"effect": "hot_pixels", "param": "fraction", "value": 0.2, "limit": 0.2}]
     left = {"claimed": ["prnu", "hot_pixels"], "chi2": 560.5, "dof": 474, "p_value": 0.0037, "significant": False,
             "rms_error_dn": 3.66, "rms_error_by_component_dn": {"outlier": 3.665}, "refused_beyond": [],
-            "at_limit": claims_at_limit(ranked)}
+            "at_limit": claims_at_limit(diag)}
     first, second = left_text(left, 3.98)
     assert "within the measurement's scatter" in first
     assert second == ("  claimed at the upper limit of its allowed range: hot_pixels fraction = 0.2 (limit 0.2): the "
