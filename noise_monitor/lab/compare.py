@@ -138,9 +138,12 @@ class Partner(NamedTuple):
     """A partner view of a segment's blocks (see :func:`.measure._cross_views`)."""
 
     meta: CameraMetadata
-    v: np.ndarray  # the blocks' intensities there
+    v: np.ndarray  # the blocks' intensities there (of the blocks each stands for, by their weights)
     sigma: np.ndarray  # their robust sigma there
     weight: np.ndarray  # their weight in the cross energies (0: not flat there)
+    #: the mean weight of the blocks each stands for (:class:`_SegmentBase`): the model's cross energies (one block's
+    #: weight is 0 or up to 1 as the partner is flat and quiet there, and the partners' patterns differ 300-fold)
+    cross_weight: np.ndarray
     confirms: np.ndarray  # whether the block there can confirm an outlier pixel
 
 
@@ -219,15 +222,17 @@ class Views:
         self.partner_weight = np.zeros((n_slots, self.own.size))
         self.partner_valid = np.zeros((n_slots, self.own.size), dtype=bool)
         self.partner_confirms = np.zeros((n_slots, self.own.size), dtype=bool)
+        flat = np.zeros((n_slots, self.own.size), dtype=bool)
         for s, (ks, (*_, parts)) in enumerate(zip(partner, segments)):
             sl = slice(self.bounds[s], self.bounds[s + 1])
             for j, (k, part) in enumerate(zip(ks, parts)):
                 self.partner_index[j, sl] = index(k)
-                self.partner_weight[j, sl] = part.weight
+                self.partner_weight[j, sl] = part.cross_weight
                 self.partner_valid[j, sl] = True
                 self.partner_confirms[j, sl] = part.confirms & (part.weight > 0)
+                flat[j, sl] = part.weight > 0
         # outlier pixels need CONFIRM_VIEWS confirming partner views (all of them when fewer are flat there)
-        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(self.partner_weight > 0, axis=0)), 1)
+        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(flat, axis=0)), 1)
         self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
@@ -483,16 +488,20 @@ def model_curve(effects: Sequence[Effect], meta: CameraMetadata, v: np.ndarray) 
 class _SegmentBase:
     """A segment's cells and the representative blocks the model is evaluated at: up to
     ``MAX_MODEL_BLOCKS`` per cell, evenly spread over the cell's block intensities (weights: blocks
-    represented)."""
+    represented; ``members``: per representative block, the cell's blocks it stands for, nearest in intensity)."""
 
     def __init__(self, seg: SegmentMeasurement, cells: list[Cell]) -> None:
         self.seg, self.cells = seg, cells
         picks, weights = [], []
+        self.members: list[np.ndarray] = []
         self.average = np.zeros((len(cells), sum(min(c.block_index.size, MAX_MODEL_BLOCKS) for c in cells)))
         start = 0
         for i, c in enumerate(cells):
             idx = c.block_index[np.argsort(seg.intensity_dn[c.block_index], kind="stable")]
-            pick = idx[np.unique(np.rint(np.linspace(0, idx.size - 1, min(idx.size, MAX_MODEL_BLOCKS))).astype(int))]
+            at = np.unique(np.rint(np.linspace(0, idx.size - 1, min(idx.size, MAX_MODEL_BLOCKS))).astype(int))
+            pick = idx[at]
+            edges = np.r_[0, (at[1:] + at[:-1] + 1) // 2, idx.size]
+            self.members += [idx[a:b] for a, b in zip(edges[:-1], edges[1:])]
             picks.append(pick)
             weights.append(np.full(pick.size, idx.size / pick.size))
             self.average[i, start:start + pick.size] = 1.0 / pick.size
@@ -554,8 +563,15 @@ class _SegmentBase:
             assert seg.partner_intensity_dn is not None and seg.partner_sigma_dn is not None
             assert seg.partner_confirms is not None
             rep = self.rep
-            self.partners = [Partner(metas[p], seg.partner_intensity_dn[rep, j], seg.partner_sigma_dn[rep, j],
-                                     seg.partner_weight[rep, j], seg.partner_confirms[rep, j])
+            # the blocks each stands for: their mean weights, and their intensities there by weight (a block not flat
+            # there, its weight 0, may be clipped or on an edge there)
+            w = [seg.partner_weight[m] for m in self.members]
+            cross = np.stack([x.mean(axis=0) for x in w])
+            total = np.stack([x.sum(axis=0) for x in w])
+            there = np.stack([np.sum(x * seg.partner_intensity_dn[m], axis=0) for x, m in zip(w, self.members)])
+            v = np.where(total > 0.0, there / np.maximum(total, 1e-300), seg.partner_intensity_dn[rep])
+            self.partners = [Partner(metas[p], v[:, j], seg.partner_sigma_dn[rep, j], seg.partner_weight[rep, j],
+                                     cross[:, j], seg.partner_confirms[rep, j])
                              for j, p in enumerate(seg.partners)]
 
 
@@ -749,7 +765,7 @@ class Comparison:
             for e in analytic:
                 here = np.asarray(pred[e.name], dtype=float)
                 if sb.partners and not e.temporal:  # cross-view: product of the sigmas in both views
-                    var = sum(p.weight * here * np.asarray(pp[e.name], dtype=float)
+                    var = sum(p.cross_weight * here * np.asarray(pp[e.name], dtype=float)
                               for p, pp in zip(sb.partners, preds_p))
                 else:
                     var = here**2
