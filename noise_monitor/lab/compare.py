@@ -155,8 +155,12 @@ OUTLIER_OFFSET2 = "outlier_offset2"
 OUTLIER_KEYS = (OUTLIER_PIXELS, OUTLIER_OFFSET, OUTLIER_OFFSET2)
 #: key of the model's own uncertainty of the temporal variance (quantization phase) in component dicts
 QUANT_SPREAD = "quantization_spread"
+#: key of the fixed component at each representative block as that block's own measurement weighs its partner views,
+#: minus the cells' model (which weighs them as the blocks it stands for: :class:`Partner`), in component dicts: a
+#: block compared with itself (regional contrasts, position patterns) takes its own weights
+AT_BLOCK = "fixed_at_block"
 #: per-block values in component dicts besides the measured components' variances
-EXTRA = (QUANT_SPREAD, *OUTLIER_KEYS)
+EXTRA = (QUANT_SPREAD, *OUTLIER_KEYS, AT_BLOCK)
 
 
 class EffectCache:
@@ -222,7 +226,7 @@ class Views:
         self.partner_weight = np.zeros((n_slots, self.own.size))
         self.partner_valid = np.zeros((n_slots, self.own.size), dtype=bool)
         self.partner_confirms = np.zeros((n_slots, self.own.size), dtype=bool)
-        flat = np.zeros((n_slots, self.own.size), dtype=bool)
+        self.partner_weight_own = np.zeros((n_slots, self.own.size))
         for s, (ks, (*_, parts)) in enumerate(zip(partner, segments)):
             sl = slice(self.bounds[s], self.bounds[s + 1])
             for j, (k, part) in enumerate(zip(ks, parts)):
@@ -230,9 +234,9 @@ class Views:
                 self.partner_weight[j, sl] = part.cross_weight
                 self.partner_valid[j, sl] = True
                 self.partner_confirms[j, sl] = part.confirms & (part.weight > 0)
-                flat[j, sl] = part.weight > 0
+                self.partner_weight_own[j, sl] = part.weight
         # outlier pixels need CONFIRM_VIEWS confirming partner views (all of them when fewer are flat there)
-        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(flat, axis=0)), 1)
+        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(self.partner_weight_own > 0, axis=0)), 1)
         self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
@@ -273,7 +277,7 @@ class Views:
         slope = None if slope_all is None else slope_all[self.own]
         n = self.own.size
         out = {c: np.zeros(n) for c in MEASURED + OUTLIER_KEYS}
-        cross = {c: np.zeros(n) for c in MEASURED}  # cross-view parts, slopes already applied
+        cross = {c: np.zeros(n) for c in (*MEASURED, AT_BLOCK)}  # cross-view parts, slopes already applied
         for e in effects:
             if component_of(e) is None or e.distribution == "quantization":
                 continue
@@ -293,7 +297,7 @@ class Views:
         counts = {c: out[c] for c in OUTLIER_KEYS}
         if slope is not None:
             out = {c: a * slope**2 for c, a in out.items()}
-        out = {c: out[c] + cross[c] for c in MEASURED} | counts
+        out = {c: out[c] + cross[c] for c in MEASURED} | counts | {AT_BLOCK: cross[AT_BLOCK]}
         own_conds = [conds[g] for g in self.group_of_segment]
         added, fixed, spread = self._quantization(effects, own_conds, out["temporal"], span)
         out["temporal"] = out["temporal"] + added
@@ -401,10 +405,12 @@ class Views:
         if slope_all is not None:
             there_all = there_all * slope_all
         here = there_all[self.own]
-        acc = np.zeros(here.shape)
-        for idx, w, valid in zip(self.partner_index, self.partner_weight, self.partner_valid):
-            acc = acc + np.where(valid, w * here * there_all[idx], 0.0)
-        return out, {comp_f: acc}
+        acc, own = np.zeros(here.shape), np.zeros(here.shape)
+        for idx, w, w_own, valid in zip(self.partner_index, self.partner_weight, self.partner_weight_own,
+                                        self.partner_valid):
+            prod = np.where(valid, here * there_all[idx], 0.0)
+            acc, own = acc + w * prod, own + w_own * prod
+        return out, {comp_f: acc} | ({AT_BLOCK: own - acc} if comp_f == "fixed" else {})
 
     def _quantization(self, effects: Sequence[Effect], conds: Sequence[Conditions], temporal_var: np.ndarray,
                       span: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -543,7 +549,7 @@ class _SegmentBase:
         the segment's mean); fixed once, so a fit cannot widen its own errors."""
         n_all = self.rep.size
         for k in self.regional:
-            x = self.seg.values[k][self.rep] - comps[k]
+            x = self.seg.values[k][self.rep] - at_block(comps, k)
             floor = max(float(np.median(np.abs(comps[k]))) * 0.01, MIN_VAR_ERR)
             errs = []
             for idx in self.regions:
@@ -588,6 +594,12 @@ def as_measured(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> np
     if comp in ("column", "row"):
         return comps[comp] + comps[f"temporal_{comp}"]
     return comps[comp]
+
+
+def at_block(comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
+    """A component's model at each representative block as that block's own measurement weighs its partner views
+    (:data:`AT_BLOCK`): what a block is compared with on its own."""
+    return comps[comp] + comps[AT_BLOCK] if comp == "fixed" else comps[comp]
 
 
 def _cell_values(sb: _SegmentBase, comps: dict[str, np.ndarray], comp: str) -> np.ndarray:
@@ -709,7 +721,7 @@ class Observables:
         like = np.sqrt(2.0 * np.log(err / self.errors))
         pooled = np.stack([self.pooling @ measured[k] for k in self.comps])[self.pooled_comp, self.pooled_seg]
         pooled_res = (self.pooled_values - pooled) / self.pooled_errors
-        contrasts = np.stack([self.contrast @ (m - comps[k]) for k, m in zip(REGIONAL, self.region_measured)])
+        contrasts = np.stack([self.contrast @ (m - at_block(comps, k)) for k, m in zip(REGIONAL, self.region_measured)])
         region_res = contrasts[self.region_comp, self.region_row] / self.region_err
         count, amp, spread = self.outliers(comps)
         count_res = (self.outlier_pixels - count) / np.sqrt(np.maximum(np.maximum(count, self.outlier_pixels), 1.0))
@@ -764,12 +776,14 @@ class Comparison:
             preds_p = [clip_model.predict(p.v, p.meta) for p in sb.partners]
             for e in analytic:
                 here = np.asarray(pred[e.name], dtype=float)
+                name = component_of(e)
                 if sb.partners and not e.temporal:  # cross-view: product of the sigmas in both views
-                    var = sum(p.cross_weight * here * np.asarray(pp[e.name], dtype=float)
-                              for p, pp in zip(sb.partners, preds_p))
+                    prods = [here * np.asarray(pp[e.name], dtype=float) for pp in preds_p]
+                    var = sum(p.cross_weight * x for p, x in zip(sb.partners, prods))
+                    if name == "fixed":
+                        comps[AT_BLOCK] = comps[AT_BLOCK] + sum(p.weight * x for p, x in zip(sb.partners, prods)) - var
                 else:
                     var = here**2
-                name = component_of(e)
                 assert name is not None  # analytic effects are poisson or gaussian: a measured component
                 comps[name] = comps[name] + var
             for name, var in drifted.items():
@@ -905,7 +919,7 @@ def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[st
     for sb, comps in comp.predict_with(extra):
         seg = sb.seg
         measured = np.sum([seg.values[c][sb.rep] for c in seg.values], axis=0)
-        model = np.sum([comps[c] for c in MEASURED], axis=0)
+        model = np.sum([comps[c] for c in MEASURED], axis=0) + comps[AT_BLOCK]
         for region, m, p in zip(seg.region[sb.rep], measured, model):
             meas_var.setdefault(int(region), []).append(float(m))
             model_var.setdefault(int(region), []).append(float(p))

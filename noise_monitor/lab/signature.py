@@ -30,7 +30,7 @@ from scipy.stats import f as f_dist
 
 from ..physics import Effect
 from ..physics.sensor import dark_electrons
-from .compare import Comparison, as_measured, gaussian_fixed
+from .compare import Comparison, as_measured, at_block, gaussian_fixed
 from .measure import CROSS_VIEW
 
 #: a component's weighted mean excess must be this many standard errors from zero to count
@@ -247,7 +247,8 @@ def position_pattern(comp: Comparison, name: str, extra: Sequence[Effect] = (),
         if (name not in sb.seg.values or (name == "fixed" and not sb.seg.partners)
                 or (name == "single" and sb.seg.scene_dn2 is not None)):
             continue
-        xs.append(sb.seg.values[name][sb.rep] - as_measured(sb, comps, name))
+        model = at_block(comps, name) if name == "fixed" else as_measured(sb, comps, name)
+        xs.append(sb.seg.values[name][sb.rep] - model)
         segs.append(np.full(sb.rep.size, j))
         pos.append(sb.pos)
         vs.append(sb.v / 128.0)
