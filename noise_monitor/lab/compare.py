@@ -41,7 +41,9 @@ AMPLITUDE_SYSTEMATIC = 0.05
 #: blocks per cell at which the model is evaluated (evenly spread over the cell's intensities); a cross-view block's
 #: model takes its partner views' intensities, which vary from block to block: at 16 a cell's model scattered 8-10 %
 #: around its every-block value, noise in the fit's regressor that pulled the fits low (PRNU 1.5 % read 1.489,
-#: seed-to-seed spread 0.0049; at 32 1.4955 and 0.0032, as with every block)
+#: seed-to-seed spread 0.0049; at 32 1.4955 and 0.0032, as with every block). Measured before each representative
+#: took the partner weights and intensities of the blocks it stands for (:class:`Partner`): a cell's model then
+#: scattered by up to 2x where the partners' patterns differ 300-fold (seed 1102's DSNU)
 MAX_MODEL_BLOCKS = 32
 #: half the temperature step (degC) of a fixed pattern's slope with the temperature (:meth:`Views.drift`)
 DRIFT_STEP_C = 0.5
