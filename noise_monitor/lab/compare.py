@@ -159,7 +159,8 @@ OUTLIER_KEYS = (OUTLIER_PIXELS, OUTLIER_OFFSET, OUTLIER_OFFSET2)
 QUANT_SPREAD = "quantization_spread"
 #: key of the fixed component at each representative block as that block's own measurement weighs its partner views,
 #: minus the cells' model (which weighs them as the blocks it stands for: :class:`Partner`), in component dicts: a
-#: block compared with itself (regional contrasts, position patterns) takes its own weights
+#: block compared with itself (regional contrasts, position patterns) takes its own weights (at the partner intensities
+#: of the blocks it stands for: seed 1142's regional chi-square 165.3 with its own, 166.1 so, 314.1 with the cells')
 AT_BLOCK = "fixed_at_block"
 #: per-block values in component dicts besides the measured components' variances
 EXTRA = (QUANT_SPREAD, *OUTLIER_KEYS, AT_BLOCK)

@@ -108,14 +108,15 @@ def test_one_cell_far_noisier_than_the_rest_does_not_hide_a_component_error() ->
 
 
 def test_a_partner_claimed_beside_a_lead_that_took_up_its_residual_is_refitted_with_it(tmp_path: Path) -> None:
-    """Seed 672: the DSNU alone is claimed at 0.333 (it took up the PRNU's pattern); beyond it the PRNU explains 75 %
+    """Seed 672: the DSNU alone is claimed at 0.33 (it took up the PRNU's pattern); beyond it the PRNU explains 75 %
     of the chi-square (its own-component cut needs the cells' chi-square: one very noisy cell), and held at 0.333
     the DSNU leaves an excess that a dark-current law would make up. Refitted jointly (the DSNU moves by many of its
     standard errors), both at their values, the hot pixels beyond them, no dark-current law."""
     s = analyze(_bag(tmp_path, 672), profile="ev76c661", estimator=None)
     cands = {c["effect"]: c for c in s["candidates"]}
     claimed = _claimed(s)
-    assert cands["dsnu"]["params"]["fraction"] > 0.33  # alone: too high
+    assert cands["dsnu"]["params"]["fraction"] > 0.32  # alone: too high (0.333; 0.330 since the cells' model is
+    # their every-block value, 2026-12-01)
     assert {"prnu", "dsnu", "hot_pixels"} <= set(claimed) <= {"prnu", "dsnu", "hot_pixels", "column_offsets"}
     assert claimed["dsnu"]["fraction"] == pytest.approx(0.3, rel=0.05)
     assert claimed["prnu"]["sigma_pct"] == pytest.approx(1.0, rel=0.05)
