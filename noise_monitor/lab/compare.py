@@ -226,20 +226,20 @@ class Views:
         self.lone = np.repeat([not parts for *_, parts in segments], sizes)  # blocks without partner views
         n_slots = max((len(p) for p in partner), default=0)
         self.partner_index = np.zeros((n_slots, self.own.size), dtype=int)
-        self.partner_weight = np.zeros((n_slots, self.own.size))
+        self.partner_cross_weight = np.zeros((n_slots, self.own.size))
         self.partner_valid = np.zeros((n_slots, self.own.size), dtype=bool)
         self.partner_confirms = np.zeros((n_slots, self.own.size), dtype=bool)
-        self.partner_weight_own = np.zeros((n_slots, self.own.size))
+        self.partner_weight = np.zeros((n_slots, self.own.size))
         for s, (ks, (*_, parts)) in enumerate(zip(partner, segments)):
             sl = slice(self.bounds[s], self.bounds[s + 1])
             for j, (k, part) in enumerate(zip(ks, parts)):
                 self.partner_index[j, sl] = index(k)
-                self.partner_weight[j, sl] = part.cross_weight
+                self.partner_cross_weight[j, sl] = part.cross_weight
                 self.partner_valid[j, sl] = True
                 self.partner_confirms[j, sl] = part.confirms & (part.weight > 0)
-                self.partner_weight_own[j, sl] = part.weight
+                self.partner_weight[j, sl] = part.weight
         # outlier pixels need CONFIRM_VIEWS confirming partner views (all of them when fewer are flat there)
-        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(self.partner_weight_own > 0, axis=0)), 1)
+        self.confirm_need = np.maximum(np.minimum(CONFIRM_VIEWS, np.sum(self.partner_weight > 0, axis=0)), 1)
         self.base_conds = [Conditions.from_meta(m).replace(where=Pixels(p[:, 0], p[:, 1])) for m, p in zip(self.metas, pos)]
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
@@ -409,7 +409,7 @@ class Views:
             there_all = there_all * slope_all
         here = there_all[self.own]
         acc, own = np.zeros(here.shape), np.zeros(here.shape)
-        for idx, w, w_own, valid in zip(self.partner_index, self.partner_weight, self.partner_weight_own,
+        for idx, w, w_own, valid in zip(self.partner_index, self.partner_cross_weight, self.partner_weight,
                                         self.partner_valid):
             prod = np.where(valid, here * there_all[idx], 0.0)
             acc, own = acc + w * prod, own + w_own * prod
