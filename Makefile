@@ -19,7 +19,7 @@ $(STAMP): requirements.txt setup.py setup.cfg $(wildcard */__init__.py)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(PY) -m pytest -q -p no:cacheprovider test
+	$(PY) -m pytest -q -p no:cacheprovider -n auto --dist loadfile test
 
 demo: $(STAMP)
 	$(VENV)/bin/noise-monitor replay bags/ev76c661_field.mcap --profile ev76c661 --out out/demo --json out/demo/summary.json

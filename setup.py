@@ -35,7 +35,7 @@ setup(
         "fleet": ["ray>=2.58", "pyarrow>=25"],
         # `--foxglove PORT` on `node` and `replay`: a live view over the Foxglove WebSocket protocol
         "live": ["foxglove-sdk>=0.30"],
-        "dev": ["pytest>=8", "hypothesis>=6", "mcap>=1.1", "ruff>=0.15", "mypy>=1.10", "types-PyYAML", "build>=1.0", "websockets>=13"],
+        "dev": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6", "mcap>=1.1", "ruff>=0.15", "mypy>=1.10", "types-PyYAML", "build>=1.0", "websockets>=13"],
     },
     zip_safe=True,
     maintainer="noise_monitor developers",
