@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# pytest-xdist workers (2: CI's cores; `make test TEST_WORKERS=auto` uses every core this machine shows)
+TEST_WORKERS ?= 2
 # Keep DDS discovery on this machine; tests set their own ROS_DOMAIN_ID per process.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
@@ -19,7 +21,7 @@ $(STAMP): requirements.txt setup.py setup.cfg $(wildcard */__init__.py)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(PY) -m pytest -q -p no:cacheprovider -n auto --dist loadfile test
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile test
 
 demo: $(STAMP)
 	$(VENV)/bin/noise-monitor replay bags/ev76c661_field.mcap --profile ev76c661 --out out/demo --json out/demo/summary.json
