@@ -21,7 +21,7 @@ $(STAMP): requirements.txt setup.py setup.cfg $(wildcard */__init__.py)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile test
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=10 test
 
 demo: $(STAMP)
 	$(VENV)/bin/noise-monitor replay bags/ev76c661_field.mcap --profile ev76c661 --out out/demo --json out/demo/summary.json
