@@ -5,10 +5,12 @@ hidden PRNU 2 %), then analysed with every built-in candidate (with and without 
 the frames) and once with --add-effect prnu (refit, exact re-evaluation, estimator view for both models).
 
 With ``--scenario campaign`` the bag is a field-like campaign (photographs, holds and pans, EV76C661,
-10 Hz) instead. Wall and process CPU time are printed (CPU time is what a shared machine does not inflate).
+10 Hz) instead; ``--effect`` (repeated) hides other effects than the PRNU (several at once: the forward selection's
+refits are most of the time), ``--seed`` picks the bag. Wall and process CPU time are printed (CPU time is what a
+shared machine does not inflate).
 
 Usage: .venv/bin/python bench/bench_lab.py [--frames 120] [--width 640] [--height 512] [--scenario lab]
-       [--json out.json]
+       [--effect prnu=2 ...] [--seed 1] [--json out.json]
 Prints figures; asserts nothing.
 """
 from __future__ import annotations
@@ -29,14 +31,17 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=512)
     ap.add_argument("--scenario", default="lab", choices=("lab", "campaign", "campaign_heldout"))
+    ap.add_argument("--effect", action="append", help="an effect hidden in the bag (repeat; default prnu=2)")
+    ap.add_argument("--seed", type=int, default=1, help="the bag's seed")
     ap.add_argument("--json", help="write the results here")
     args = ap.parse_args()
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         profile = "icx285" if args.scenario == "lab" else "ev76c661"
-        bag = simulate_bag(Path(tmp) / "lab.mcap", profile, args.scenario, effects=["prnu=2"], frames=args.frames,
-                           width=args.width, height=args.height, seed=1, fps=5.0 if args.scenario == "lab" else 10.0)
+        bag = simulate_bag(Path(tmp) / "lab.mcap", profile, args.scenario, effects=args.effect or ["prnu=2"],
+                           frames=args.frames, width=args.width, height=args.height, seed=args.seed,
+                           fps=5.0 if args.scenario == "lab" else 10.0)
         results["simulate_s"] = round(time.perf_counter() - t, 2)
         print(f"simulated {args.frames} frames {args.width}x{args.height} in {results['simulate_s']:.1f} s")
         for label, add, view in (("diagnose", [], True), ("diagnose, no estimator view", [], False),

@@ -10,8 +10,9 @@ change of variance a set of effects makes (cheap, no new tables) to this clip-aw
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
-from typing import Any, NamedTuple
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, Generic, NamedTuple, TypeVar
 
 import numpy as np
 from scipy import sparse
@@ -166,15 +167,59 @@ AT_BLOCK = "fixed_at_block"
 EXTRA = (QUANT_SPREAD, *OUTLIER_KEYS, AT_BLOCK)
 
 
-class EffectCache:
-    """Per-effect contributions of a fixed set of effects (a comparison's baseline) to the components of
-    every segment, computed once: a fit re-evaluates only the effect it varies. Used only while no modifier
-    or response effect is in the set (they would change every effect's conditions or signal)."""
+#: memory the per-effect contributions of :meth:`Views.components` may keep for reuse (bytes, least recently used
+#: dropped first): a fit re-evaluates the effects it holds at their values with every change of the one it varies, and
+#: later fits the same effects at the same values (scan points, claims)
+PARTS_CACHE_BYTES = 64 * 2**20
 
-    def __init__(self, effects: Sequence[Effect]) -> None:
-        self.effects = list(effects)  # keeps the objects alive, so their ids stay theirs
-        self.ids = {id(e) for e in effects}
-        self.parts: dict[int, tuple[dict[str, np.ndarray], dict[str, np.ndarray]]] = {}
+#: sets of modifier and response effects whose colder and warmer conditions (:meth:`Views._warmer`) are kept
+WARMER_KEPT = 16
+
+_Parts = tuple[dict[str, np.ndarray], dict[str, np.ndarray]]
+_Warmer = list[tuple[list[Conditions | None], list[np.ndarray]]]
+T = TypeVar("T")
+
+
+def _effect_key(e: Effect) -> tuple:
+    """What an effect's model contributions depend on: its class and parameter values."""
+    return type(e), tuple(e.values.items())
+
+
+def _bending(effects: Sequence[Effect]) -> tuple:
+    """The keys of the modifier and response effects among ``effects``, in order: what the conditions and linear
+    signals the others are evaluated at depend on."""
+    return tuple(_effect_key(e) for e in effects if e.distribution in ("modifier", "response"))
+
+
+class _Recent(Generic[T]):
+    """Values by key, the least recently used dropped while their sizes (``size``) sum beyond ``budget``."""
+
+    def __init__(self, budget: float, size: Callable[[T], float]) -> None:
+        self.budget = budget
+        self._size = size
+        self._store: OrderedDict[tuple, tuple[T, float]] = OrderedDict()
+        self.used = 0.0
+
+    def get(self, key: tuple) -> T | None:
+        hit = self._store.get(key)
+        if hit is None:
+            return None
+        self._store.move_to_end(key)
+        return hit[0]
+
+    def put(self, key: tuple, value: T) -> None:
+        size = self._size(value)
+        self._store[key] = (value, size)
+        self.used += size
+        while self.used > self.budget and len(self._store) > 1:
+            self.used -= self._store.popitem(last=False)[1][1]
+
+    def __len__(self) -> int:
+        return len(self._store)
+
+
+def _nbytes(parts: _Parts) -> float:
+    return float(sum(np.asarray(a).nbytes for d in parts for a in d.values()))
 
 
 class Views:
@@ -244,14 +289,14 @@ class Views:
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
         self.hold_frames = np.repeat([max(d[1], 1) for d in drift], sizes) if drift else np.ones(self.own.size)
-        self._warmer_cache: list[tuple[list[Conditions | None], list[np.ndarray]]] | None = None
+        self._warmer_kept: _Recent[_Warmer] = _Recent(WARMER_KEPT, lambda _: 1.0)
+        self._parts: _Recent[_Parts] = _Recent(PARTS_CACHE_BYTES, _nbytes)
 
     def split(self, arrays: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
         """Per segment: its part of the component arrays."""
         return [{c: a[lo:hi] for c, a in arrays.items()} for lo, hi in zip(self.bounds[:-1], self.bounds[1:])]
 
-    def components(self, effects: Sequence[Effect], span: np.ndarray | None = None,
-                   cache: EffectCache | None = None) -> dict[str, np.ndarray]:
+    def components(self, effects: Sequence[Effect], span: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Unclipped variance (DN^2) per measured component at every segment's blocks (concatenated).
 
         Each effect's variance is split by its ``temporal_share`` into a temporal and a fixed-pattern part and
@@ -266,14 +311,14 @@ class Views:
         are the weighted products of each effect's fixed sigma (slope included) here and in the partner
         views, which see the same sensor blocks (same positions) at other intensities; the quantization's
         fixed part, a pattern of the scene's levels, moves with the scene and cancels.
-        ``cache``: contributions of the cache's effects (see :class:`EffectCache`).
+        An effect's contributions are computed once for its values and the modifier and response effects beside it
+        (kept within :data:`PARTS_CACHE_BYTES`).
         """
-        bends = any(e.distribution in ("modifier", "response") for e in effects)
-        if bends:
+        bending = _bending(effects)
+        if bending:
             conds = [_conditions(effects, m, p) for m, p in zip(self.metas, self._pos)]
             lins = [_linear(effects, c, v) for c, v in zip(conds, self.v)]
             slopes = [_slope(effects, c, v) for c, v in zip(conds, self.v)]
-            cache = None
         else:
             conds, lins, slopes = self.base_conds, self.v, [None] * len(self.v)
         slope_all = None if not slopes or slopes[0] is None else np.concatenate([x for x in slopes if x is not None])
@@ -284,15 +329,14 @@ class Views:
         for e in effects:
             if component_of(e) is None or e.distribution == "quantization":
                 continue
-            store = cache.parts if cache is not None and id(e) in cache.ids else None
-            if store is not None and id(e) in store:
-                part, part_cross = store[id(e)]
-            else:
-                part, part_cross = self._effect_parts(e, conds, lins, slope_all)
-                for c, a in self._effect_drift(e, effects, bends).items():
-                    part[c] = part.get(c, 0.0) + a
-                if store is not None:
-                    store[id(e)] = (part, part_cross)
+            key = (_effect_key(e), bending)
+            parts = self._parts.get(key)
+            if parts is None:
+                parts = self._effect_parts(e, conds, lins, slope_all)
+                for c, a in self._effect_drift(e, effects, bending).items():
+                    parts[0][c] = parts[0].get(c, 0.0) + a
+                self._parts.put(key, parts)
+            part, part_cross = parts
             for c, a in part.items():
                 out[c] = out[c] + a
             for c, a in part_cross.items():
@@ -313,9 +357,9 @@ class Views:
         sensor temperature (a DSNU) add to the temporal noise of holds whose temperature moved from frame to frame and
         take from a single view's fixed component (:meth:`_effect_drift`), response slopes included."""
         out: dict[str, np.ndarray] = {}
-        bends = any(e.distribution in ("modifier", "response") for e in effects)
+        bending = _bending(effects)
         for e in effects:
-            for c, a in self._effect_drift(e, effects, bends).items():
+            for c, a in self._effect_drift(e, effects, bending).items():
                 out[c] = out.get(c, 0.0) + a
         if out and any(e.distribution == "response" for e in effects):
             conds = [_conditions(effects, m, p) for m, p in zip(self.metas, self._pos)]
@@ -324,7 +368,7 @@ class Views:
             out = {c: a * slope[self.own] ** 2 for c, a in out.items()}
         return out
 
-    def _effect_drift(self, e: Effect, effects: Sequence[Effect], bends: bool) -> dict[str, np.ndarray]:
+    def _effect_drift(self, e: Effect, effects: Sequence[Effect], bending: tuple) -> dict[str, np.ndarray]:
         """One effect's part of :meth:`drift` (before the response slope): a fixed pattern whose size ``a`` follows the
         temperature changes between a hold's frames by its slope ``da/dT`` (central difference over +-DRIFT_STEP_C in
         the conditions ``effects`` make) times the frames' temperature deviations: ``(da/dT)^2`` times their variance
@@ -337,7 +381,7 @@ class Views:
                 or not np.any(self.temperature_var > 0.0)):
             return {}
         size = []
-        for conds, lins in self._warmer(effects, bends):
+        for conds, lins in self._warmer(effects, bending):
             size.append(np.concatenate([
                 np.sqrt(np.maximum((1.0 - _temporal_share(e, lin, c, lin.shape)) * e.variance_dn2(lin, c), 0.0))
                 if c is not None else np.zeros(lin.shape) for c, lin in zip(conds, lins)])[self.own])
@@ -345,20 +389,20 @@ class Views:
         return {str(component_of(e, True)): var,
                 str(component_of(e, False)): -np.where(self.lone, var / self.hold_frames, 0.0)}
 
-    def _warmer(self, effects: Sequence[Effect], bends: bool
-                ) -> list[tuple[list[Conditions | None], list[np.ndarray]]]:
+    def _warmer(self, effects: Sequence[Effect], bending: tuple) -> _Warmer:
         """The conditions (None for a group with no segment's own view) and linear signals of every metadata group
-        DRIFT_STEP_C colder and warmer; without modifiers or responses computed once."""
-        if not bends and self._warmer_cache is not None:
-            return self._warmer_cache
+        DRIFT_STEP_C colder and warmer, computed once for each of the last WARMER_KEPT sets of modifier and response
+        effects (``bending``, :func:`_bending`: all they depend on)."""
+        kept = self._warmer_kept.get(bending)
+        if kept is not None:
+            return kept
         own = set(self.group_of_segment)
-        out = []
+        out: _Warmer = []
         for step in (-DRIFT_STEP_C, DRIFT_STEP_C):
             conds = [_conditions(effects, m.replace(sensor_temperature_c=m.sensor_temperature_c + step), p)
                      if g in own else None for g, (m, p) in enumerate(zip(self.metas, self._pos))]
             out.append((conds, [_linear(effects, c, v) if c is not None else v for c, v in zip(conds, self.v)]))
-        if not bends:
-            self._warmer_cache = out
+        self._warmer_kept.put(bending, out)
         return out
 
     def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],
@@ -803,9 +847,7 @@ class Comparison:
         self.clip_aware = {c: np.concatenate([sb.clip_aware[c] for sb in self.segments]) if self.segments
                            else np.zeros(0) for c in (*MEASURED, *EXTRA)}
         self.observables = Observables(self.segments)
-        #: the baseline effects' contributions, evaluated once (a fit varies one effect)
-        self.cache = EffectCache(self.effects)
-        self.unclipped = self.views.components(self.effects, self.span, cache=self.cache)
+        self.unclipped = self.views.components(self.effects, self.span)
 
     # --- predictions -------------------------------------------------------------------------
     def replaced(self, extra: Sequence[Effect]) -> list[Effect]:
@@ -827,7 +869,7 @@ class Comparison:
         effects = self.replaced(extra)
         names = ", ".join(e.name for e in extra)
         try:
-            new = self.views.components(effects, self.span, cache=self.cache)
+            new = self.views.components(effects, self.span)
         except EffectError:
             raise
         except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
