@@ -71,7 +71,8 @@ class Param:
 
 
 class Effect:
-    """Base class of all noise effects (built-in and plug-in)."""
+    """Base class of all noise effects (built-in and plug-in). Its methods depend only on their arguments, the class
+    and the parameter values: the lab reuses an effect's model contributions by them."""
 
     name: ClassVar[str] = ""
     distribution: ClassVar[Distribution] = Distribution.GAUSSIAN
