@@ -369,6 +369,7 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
     out: dict[str, Any] = {"residual_significant": significant, "kind": kind, "components": stats,
                            "pixels": counts, "traits": []}
     if not significant:
+        out["scene_may_explain"] = False
         out["reading"] = "the residual is within the measurement's uncertainty"
         return out
     dominant = max(sig, key=lambda k: (stats[k].get("position_significant", False),
@@ -395,18 +396,40 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
             spatial = spatial_by[dominant]
             if spatial and spatial["significant"]:
                 traits.append(f"a region: {spatial['pattern']}")
+    scene = _scene_may_explain(comp, stats, sig) and not isolated_fixed and not isolated_temporal
     out.update({
         "sign": "excess" if sign > 0 else "deficit",
         "dominant_component": dominant,
         "traits": traits,
         "law": law,
         "spatial": spatial,
+        "scene_may_explain": scene,
     })
     out["suggested"] = _suggest(out)
     law_text = _law_text(law, observations[dominant].pooled) if law and dominant else ""
     out["reading"] = (f"{kind} noise the model lacks ({'; '.join(traits)}), strongest in the {dominant} "
                       f"component: {law_text}" if dominant else f"{kind} noise the model lacks: {'; '.join(traits)}")
+    if scene:
+        out["reading"] += ("; or the scene's texture: most of it is measured in views from one camera pose whose fixed "
+                           "pattern shows the scene, with as much variance (a moved camera or a flat chart tells them "
+                           "apart)")
     return out
+
+
+def _scene_may_explain(comp: Comparison, stats: dict[str, dict[str, Any]], significant: Sequence[str]) -> bool:
+    """Whether the significant components are fixed-pattern ones (fixed, column, row), most of the views they are
+    measured in come from one camera pose and show the scene (``SegmentMeasurement.scene_dn2``), and each excess is
+    no larger than the scene's variance in those views (its mean over their blocks: the scene's whole variance bounds
+    its line parts). One pose cannot tell the scene's texture finer than a block from a fixed pattern, so the excess
+    may be the scene's."""
+    if not significant or not set(significant) <= {"fixed", "column", "row"}:
+        return False
+    views = [s for s in comp.meas.segments if s.intensity_dn.size and any(k in s.values for k in significant)]
+    shown = [s for s in views if not s.partners and s.scene_dn2 is not None]
+    if len(shown) <= len(views) / 2:
+        return False
+    scene = float(np.mean([abs(float(np.mean(s.scene_dn2))) for s in shown if s.scene_dn2 is not None]))
+    return all(stats[k]["excess_dn2"] <= scene for k in significant)
 
 
 def _suggest(sig: dict[str, Any]) -> dict[str, Any]:

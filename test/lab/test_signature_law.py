@@ -32,7 +32,7 @@ def test_a_prnu_reads_as_growing_with_the_intensity_squared(tmp_path: Path) -> N
     crossed = [r for r in lab["cells"] if "cross_view" in r]
     assert crossed and all(r["cross_view"]["partners"] for r in crossed)
     law = lab["unexplained"]["law"]
-    assert lab["unexplained"]["dominant_component"] == "fixed"
+    assert lab["unexplained"]["dominant_component"] == "fixed" and not lab["unexplained"]["scene_may_explain"]
     assert (law["intensity_power"], law["exposure_power"], law["gain_power"]) == (2, 0, 0)
     assert law["amplitude_dn2"] == pytest.approx((0.02 * 128.0) ** 2, rel=0.2)
     assert "law = (v / 128) ** 2" in skeleton.read_text()
