@@ -208,6 +208,9 @@ class _Recent(Generic[T]):
         return hit[0]
 
     def put(self, key: tuple, value: T) -> None:
+        old = self._store.pop(key, None)
+        if old is not None:
+            self.used -= old[1]
         size = self._size(value)
         self._store[key] = (value, size)
         self.used += size
