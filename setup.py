@@ -25,6 +25,7 @@ setup(
     install_requires=[
         "numpy>=1.26", "scipy>=1.11", "PyYAML>=6.0", "opencv-python-headless>=4.8", "torch>=2.2", "onnx>=1.15",
         "onnxruntime>=1.17", "rosbags>=0.10", "tqdm>=4.60", "matplotlib>=3.7",
+        "cachetools>=5.0",
     ],
     extras_require={
         # the live node and `play` without a system ROS: ROS 2 Jazzy from PyPI wheels

@@ -10,11 +10,11 @@ change of variance a set of effects makes (cheap, no new tables) to this clip-aw
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
-from collections.abc import Callable, Iterable, Sequence
-from typing import Any, Generic, NamedTuple, TypeVar
+from collections.abc import Iterable, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
+from cachetools import LRUCache
 from scipy import sparse
 from scipy.special import ndtr
 
@@ -177,7 +177,6 @@ WARMER_KEPT = 16
 
 _Parts = tuple[dict[str, np.ndarray], dict[str, np.ndarray]]
 _Warmer = list[tuple[list[Conditions | None], list[np.ndarray]]]
-T = TypeVar("T")
 
 
 def _effect_key(e: Effect) -> tuple:
@@ -191,38 +190,16 @@ def _bending(effects: Sequence[Effect]) -> tuple:
     return tuple(_effect_key(e) for e in effects if e.distribution in ("modifier", "response"))
 
 
-class _Recent(Generic[T]):
-    """Values by key, the least recently used dropped while their sizes (``size``) sum beyond ``budget``."""
-
-    def __init__(self, budget: float, size: Callable[[T], float]) -> None:
-        self.budget = budget
-        self._size = size
-        self._store: OrderedDict[tuple, tuple[T, float]] = OrderedDict()
-        self.used = 0.0
-
-    def get(self, key: tuple) -> T | None:
-        hit = self._store.get(key)
-        if hit is None:
-            return None
-        self._store.move_to_end(key)
-        return hit[0]
-
-    def put(self, key: tuple, value: T) -> None:
-        old = self._store.pop(key, None)
-        if old is not None:
-            self.used -= old[1]
-        size = self._size(value)
-        self._store[key] = (value, size)
-        self.used += size
-        while self.used > self.budget and len(self._store) > 1:
-            self.used -= self._store.popitem(last=False)[1][1]
-
-    def __len__(self) -> int:
-        return len(self._store)
-
-
 def _nbytes(parts: _Parts) -> float:
     return float(sum(np.asarray(a).nbytes for d in parts for a in d.values()))
+
+
+def _keep(kept: LRUCache, key: tuple, value: Any) -> None:
+    """``kept[key] = value``, unless the value alone is larger than the cache may hold (then it is not kept)."""
+    try:
+        kept[key] = value
+    except ValueError:
+        pass
 
 
 class Views:
@@ -292,8 +269,8 @@ class Views:
         self._pos = pos
         self.temperature_var = np.repeat([d[0] for d in drift], sizes) if drift else np.zeros(self.own.size)
         self.hold_frames = np.repeat([max(d[1], 1) for d in drift], sizes) if drift else np.ones(self.own.size)
-        self._warmer_kept: _Recent[_Warmer] = _Recent(WARMER_KEPT, lambda _: 1.0)
-        self._parts: _Recent[_Parts] = _Recent(PARTS_CACHE_BYTES, _nbytes)
+        self._warmer_kept: LRUCache[tuple, _Warmer] = LRUCache(WARMER_KEPT)
+        self._parts: LRUCache[tuple, _Parts] = LRUCache(PARTS_CACHE_BYTES, getsizeof=_nbytes)
 
     def split(self, arrays: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
         """Per segment: its part of the component arrays."""
@@ -338,7 +315,7 @@ class Views:
                 parts = self._effect_parts(e, conds, lins, slope_all)
                 for c, a in self._effect_drift(e, effects, bending).items():
                     parts[0][c] = parts[0].get(c, 0.0) + a
-                self._parts.put(key, parts)
+                _keep(self._parts, key, parts)
             part, part_cross = parts
             for c, a in part.items():
                 out[c] = out[c] + a
@@ -405,7 +382,7 @@ class Views:
             conds = [_conditions(effects, m.replace(sensor_temperature_c=m.sensor_temperature_c + step), p)
                      if g in own else None for g, (m, p) in enumerate(zip(self.metas, self._pos))]
             out.append((conds, [_linear(effects, c, v) if c is not None else v for c, v in zip(conds, self.v)]))
-        self._warmer_kept.put(bending, out)
+        self._warmer_kept[bending] = out
         return out
 
     def _effect_parts(self, e: Effect, conds: Sequence[Conditions], lins: Sequence[np.ndarray],

@@ -15,11 +15,11 @@ A metadata set whose surrounding nodes would leave the valid metadata ranges get
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from cachetools import LRUCache
 
 from .metadata import STATIC_FIELDS, CameraMetadata, MetadataError
 
@@ -88,8 +88,8 @@ class TableGrid:
         self.exact = exact
         self.surrogate = surrogate
         self.spec = spec or GridSpec()
-        self._nodes: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray]] = OrderedDict()
-        self._cells: OrderedDict[tuple, tuple[tuple[str, ...], np.ndarray] | None] = OrderedDict()
+        self._nodes: LRUCache[tuple, tuple[tuple[str, ...], np.ndarray]] = LRUCache(self.spec.max_nodes)
+        self._cells: LRUCache[tuple, tuple[tuple[str, ...], np.ndarray] | None] = LRUCache(16)
         self.nodes_computed = 0
 
     def _surrogate(self, meta: CameraMetadata, mode: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +110,6 @@ class TableGrid:
         ck = (key, mode, node)
         hit = self._nodes.get(ck)
         if hit is not None:
-            self._nodes.move_to_end(ck)
             return hit
         node_meta = self.spec.node_metadata(meta, node)
         tables = self.exact(node_meta, mode)
@@ -125,8 +124,6 @@ class TableGrid:
         entry = (names, np.stack([m1 - a1, log_ratio, var, ok.astype(float)], axis=1))
         self._nodes[ck] = entry
         self.nodes_computed += 1
-        while len(self._nodes) > self.spec.max_nodes:
-            self._nodes.popitem(last=False)
         return entry
 
     def _cell(self, meta: CameraMetadata, mode: str, base: tuple[int, int, int]
@@ -136,7 +133,6 @@ class TableGrid:
         key = static_key(meta)
         ck = (key, mode, base)
         if ck in self._cells:
-            self._cells.move_to_end(ck)
             return self._cells[ck]
         i, j, k = base
         try:  # the extreme corners within the valid ranges (then all corners are)
@@ -148,8 +144,6 @@ class TableGrid:
             corners = [self._node(key, meta, mode, (i + a, j + b, k + c)) for a, b, c in _CORNERS]
             cell = (corners[0][0], np.stack([c[1] for c in corners]))
         self._cells[ck] = cell
-        while len(self._cells) > 16:
-            self._cells.popitem(last=False)
         return cell
 
     def tables(self, meta: CameraMetadata, mode: str) -> Tables:

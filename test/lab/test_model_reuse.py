@@ -82,13 +82,14 @@ def test_reuse_gives_what_a_fresh_evaluation_gives(meas: Measurements, monkeypat
 
 def test_the_kept_contributions_stay_within_their_memory(meas: Measurements, monkeypatch: pytest.MonkeyPatch) -> None:
     assert compare.PARTS_CACHE_BYTES <= 128 * 2**20
+    first = _comparison(meas).views._parts
+    one = first.currsize / len(first)  # the baseline effects' contributions, about one entry each
+    monkeypatch.setattr(compare, "PARTS_CACHE_BYTES", 3.5 * one)
     comp = _comparison(meas)
     kept = comp.views._parts
-    one = kept.used / len(kept)  # the baseline effects' contributions, about one entry each
-    kept.budget = 3.5 * one
     calls = _counting(monkeypatch)
     values = [make_effect("prnu", sigma_pct=x) for x in (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)]
     readings = [comp.residuals([e]) for e in values]
-    assert kept.used <= kept.budget
+    assert kept.currsize <= kept.maxsize
     assert np.array_equal(comp.residuals([values[0]]), readings[0])  # dropped, computed again, the same
     assert calls[("prnu", tuple(values[0].values.items()))] == 2
