@@ -425,11 +425,8 @@ def _scene_may_explain(comp: Comparison, stats: dict[str, dict[str, Any]], signi
     if not significant or not set(significant) <= {"fixed", "column", "row"}:
         return False
     views = [s for s in comp.meas.segments if s.intensity_dn.size and any(k in s.values for k in significant)]
-    shown = [s for s in views if not s.partners and s.scene_dn2 is not None]
-    if len(shown) <= len(views) / 2:
-        return False
-    scene = float(np.mean([abs(float(np.mean(s.scene_dn2))) for s in shown if s.scene_dn2 is not None]))
-    return all(stats[k]["excess_dn2"] <= scene for k in significant)
+    scenes = [abs(float(np.mean(s.scene_dn2))) for s in views if not s.partners and s.scene_dn2 is not None]
+    return len(scenes) > len(views) / 2 and all(stats[k]["excess_dn2"] <= np.mean(scenes) for k in significant)
 
 
 def _suggest(sig: dict[str, Any]) -> dict[str, Any]:
