@@ -24,6 +24,8 @@ WORLD_SCALE = (1.6, 1.8)  # (rows, columns)
 VARIANTS = ("tuned", "heldout")
 #: Smallest side (pixels, after downsampling) of a user's image read for a campaign's photo panels.
 MIN_PHOTO_SIDE = 32
+#: Share of a world's panels filled with photographs by default (the others: procedural textures).
+PHOTO_SHARE = 0.75
 
 
 @dataclass(frozen=True)
@@ -84,12 +86,14 @@ def _procedural(rng: np.random.Generator, h: int, w: int, variant: str) -> np.nd
 
 
 def make_world(rng: np.random.Generator, height: int, width: int, variant: str = "tuned",
-               photos: Sequence[np.ndarray] | None = None) -> np.ndarray:
+               photos: Sequence[np.ndarray] | None = None, photo_share: float = PHOTO_SHARE) -> np.ndarray:
     """A float32 world in DN larger than the view: panels of photographs (random crops, contrast and
-    gamma) and procedural textures, with a few small flat chart patches (8..247 DN) on top. ``photos``:
-    grayscale DN images (e.g. a user's own scenes) instead of the variant's photographs."""
+    gamma; each panel with probability ``photo_share``) and procedural textures, with a few small flat chart
+    patches (8..247 DN) on top. ``photos``: grayscale DN images (e.g. a user's own scenes) instead of the
+    variant's photographs; ``photo_share`` 1: every panel is one of them."""
     if variant not in LAWS:
         raise ValueError(f"campaign variant must be one of {', '.join(LAWS)}, got {variant!r}")
+    check_photo_share(photo_share)
     if height < 32 or width < 32:
         raise ValueError(f"image size must be at least 32x32 pixels for a campaign, got {width}x{height}")
     law = LAWS[variant]
@@ -103,7 +107,7 @@ def make_world(rng: np.random.Generator, height: int, width: int, variant: str =
     for r in range(pr):
         for c in range(pc):
             ph, pw = ys[r + 1] - ys[r], xs[c + 1] - xs[c]
-            if rng.random() < 0.75:
+            if rng.random() < photo_share:
                 img = photos[int(rng.integers(len(photos)))]
                 f = min(img.shape[0] / ph, img.shape[1] / pw) * rng.uniform(0.5, 1.0)
                 ch, cw = max(8, int(ph * f)), max(8, int(pw * f))
@@ -124,6 +128,12 @@ def make_world(rng: np.random.Generator, height: int, width: int, variant: str =
         x0 = int(rng.integers(0, ww - side))
         world[y0:y0 + side, x0:x0 + side] = level
     return np.clip(world, 0.0, 255.0)
+
+
+def check_photo_share(share: float) -> None:
+    """ValueError unless ``share`` is a share of panels (0-1)."""
+    if not 0.0 <= share <= 1.0:  # NaN fails too
+        raise ValueError(f"photo share must be in [0, 1] (the share of a world's panels that are photographs), got {share}")
 
 
 def _auto_exposure(rng: np.random.Generator, law: Law, luminance: float) -> tuple[float, float]:

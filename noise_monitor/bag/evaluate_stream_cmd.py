@@ -8,9 +8,9 @@ from pathlib import Path
 
 from noise_monitor.estimator.user_images import load_image_set
 
-from .campaign import MIN_PHOTO_SIDE
+from .campaign import MIN_PHOTO_SIDE, PHOTO_SHARE
 from .scenarios import SCENARIOS
-from .simulate_cmd import add_field_arguments, field_keywords
+from .simulate_cmd import add_field_arguments, add_photo_share_argument, field_keywords
 from .stream_eval import GAIN_OFFSET_DB, TARGET_CLEAN_XI_DN, TARGET_DETECTION, WITHIN, evaluate_stream
 
 CAMPAIGNS = sorted(name for name, s in SCENARIOS.items() if s.campaign)
@@ -21,6 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="your own clean scenes for the campaigns' photo panels (files or directories of PNG / JPEG / "
                         "TIFF / BMP / PGM / NPY images; default: the scenario's bundled photographs)")
     p.add_argument("--image-downsample", type=int, default=2, help="area-downsample --images first (1-4; default 2)")
+    add_photo_share_argument(p)
     p.add_argument("--profile", default="ev76c661", help="camera profile (name or YAML; default ev76c661)")
     p.add_argument("--scenario", default="campaign_heldout", choices=CAMPAIGNS)
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2], help="one campaign per seed (default 1 2)")
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     images = load_image_set(args.images, args.image_downsample, MIN_PHOTO_SIDE) if args.images else None
     result = evaluate_stream(args.profile, args.seeds, images, args.scenario, args.frames, args.width, args.height,
                              args.fps, args.gain_offset_db, args.params, args.threads, args.keep_bags,
-                             field_keywords(args))
+                             field_keywords(args), args.photo_share)
     for r in result["bags"]:
         print(f"seed {r['seed']}: {r['processed_clean']} / {r['frames']} frames processed clean, {r['processed_offset']} "
               f"with the gain stated {args.gain_offset_db:+g} dB; {r['views']} views; false-alarm episodes "
@@ -49,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     s = result["summary"]
     det = "no frame was due an alarm" if not s["need"] else f"{100 * s['detection']:.1f} % ({s['hits']} / {s['need']})"
     scenes = ", ".join(images.names) if images else f"the {args.scenario} scenario's photographs"
+    if args.photo_share != PHOTO_SHARE:
+        scenes += f" ({100 * args.photo_share:g} % of the panels)"
     print(f"over {s['bags']} campaign(s) of {scenes}:\n"
           f"  clean: xi error RMS {s['clean_xi_rms']:.3f} DN (target <= {TARGET_CLEAN_XI_DN}), mean "
           f"{s['clean_xi_mean']:+.3f} DN; xi_filtered {s['clean_xi_filtered_rms']:.3f} DN; false-alarm episodes "

@@ -123,6 +123,7 @@ def simulate_bag(
     start_ns: int = START_NS,
     frame_hook: FrameHook | None = None,
     images: ImageSet | None = None,
+    photo_share: float = campaign.PHOTO_SHARE,
     moving_objects: int = 0,
     vibration_px: float = 0.0,
     vibration_hz: float = 0.0,
@@ -148,7 +149,9 @@ def simulate_bag(
     effect outside the noise model (:class:`FrameHook`), e.g. a response non-linearity or amplifier glow;
     it draws from its own random generator, so the model's noise is that of the bag without it. ``images``:
     a campaign's photo panels from these images (a user's own scenes, ``user_images.load_image_set``) instead of
-    its variant's photographs; named in the truth sidecar. ``moving_objects``: that many objects crossing a
+    its variant's photographs; named in the truth sidecar. ``photo_share``: the share of a campaign world's panels that
+    are photographs (the others procedural textures; 1: the scenes alone, besides the small flat chart patches).
+    ``moving_objects``: that many objects crossing a
     campaign's view (:func:`.campaign.moving_objects`: people or vehicles passing while the camera holds still),
     painted into the clean view before the noise, from their own random generator (the campaign is that of the
     seed without them). ``vibration_px``: a campaign camera that vibrates, its view displaced every frame by an
@@ -188,10 +191,12 @@ def simulate_bag(
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
     for asked, what in ((moving_objects, "moving objects cross a campaign scenario's view"),
                         (vibration_px, "vibration shakes a campaign scenario's camera"),
-                        (images is not None, "own images make the photo panels of a campaign scenario")):
+                        (images is not None, "own images make the photo panels of a campaign scenario"),
+                        (photo_share != campaign.PHOTO_SHARE, "the photo share is of a campaign scenario's panels")):
         if asked and not scen.campaign:
             raise ValueError(f"{what}; {scen.name!r} is none "
                              f"(use {', '.join(n for n, sc in SCENARIOS.items() if sc.campaign)})")
+    campaign.check_photo_share(photo_share)
     if not 0 <= moving_objects <= 100:
         raise ValueError(f"moving_objects must be 0-100, got {moving_objects}")
     if not 0 <= vibration_px <= MAX_VIBRATION_PX:
@@ -238,7 +243,8 @@ def simulate_bag(
     hunt = auto_exposure_wander(np.random.default_rng([seed, 5]), frames, auto_exposure_pct)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
     if scen.campaign:
-        world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images)
+        world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images,
+                                    photo_share)
         plans = campaign.plan(rng, frames, scen.campaign)
         vignette = campaign.vignetting(height, width, campaign.LAWS[scen.campaign].vignetting)
         # their own generator: the campaign's world, plan and noise stay those of the seed without objects
@@ -334,6 +340,7 @@ def simulate_bag(
         "bag": out.name, "profile": prof.name, "scenario": scen.name, "description": scen.description,
         "effects": effect_specs, **({"frame_hook": frame_hook.truth} if frame_hook is not None else {}),
         **({"images": list(images.names), "images_key": images.key} if images is not None else {}),
+        **({"photo_share": photo_share} if photo_share != campaign.PHOTO_SHARE else {}),
         **({"moving_objects": moving_objects} if moving_objects else {}),
         **({"vibration_px": vibration_px} if vibration_px else {}),
         **({"vibration_hz": vibration_hz} if vibration_hz else {}),

@@ -9,7 +9,7 @@ from pathlib import Path
 from noise_monitor.estimator.user_images import load_image_set
 from noise_monitor.physics import load_plugin_file
 
-from .campaign import MIN_PHOTO_SIDE
+from .campaign import MIN_PHOTO_SIDE, PHOTO_SHARE
 from .scenarios import SCENARIOS
 from .simulate import LINE_TIME_S, MAINS_HZ, PWM_DUTY, START_NS, FieldConditions, load_truth, simulate_bag, truth_path
 
@@ -45,10 +45,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "PNG / JPEG / TIFF / BMP / PGM / NPY images) instead of the bundled photographs")
     parser.add_argument("--image-downsample", type=int, default=2,
                         help="area-downsample --images by this factor first (1-4; default 2)")
+    add_photo_share_argument(parser)
     parser.add_argument("--moving-objects", type=int, default=0, metavar="N",
                         help="campaign scenarios: N objects with a smooth texture crossing the view at 2-8 px per "
                              "frame (people, vehicles passing a parked camera; default 0)")
     add_field_arguments(parser)
+
+
+def add_photo_share_argument(parser: argparse.ArgumentParser) -> None:
+    """``--photo-share``: the share of a campaign world's panels that are photographs (``simulate_bag``'s ``photo_share``)."""
+    parser.add_argument("--photo-share", type=float, default=PHOTO_SHARE, metavar="F",
+                        help=f"campaign scenarios: the share of the world's panels that are photographs (--images or "
+                             f"the bundled ones), the others procedural textures (0-1; default {PHOTO_SHARE:g}; 1: "
+                             f"the scenes alone, besides a few small flat chart patches)")
 
 
 def add_field_arguments(parser: argparse.ArgumentParser) -> None:
@@ -129,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
     bag = simulate_bag(args.out, args.profile, args.scenario, effects=args.effect, frames=args.frames,
                        width=args.width, height=args.height, seed=args.seed, storage=args.storage, fps=args.fps,
                        namespace=args.namespace, hold_s=args.hold, progress=True, hardware_id=args.hardware_id,
-                       start_ns=_start_ns(args.start), images=images, moving_objects=args.moving_objects,
+                       start_ns=_start_ns(args.start), images=images, photo_share=args.photo_share,
+                       moving_objects=args.moving_objects,
                        **field_keywords(args))
     truth = load_truth(bag)
     summary = {"bag": str(bag), "truth": str(truth_path(bag)), "frames": len(truth["frames"]),

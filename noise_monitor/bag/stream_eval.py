@@ -31,6 +31,7 @@ import numpy as np
 from noise_monitor.estimator.user_images import ImageSet
 from noise_monitor.physics import CameraProfile
 
+from .campaign import PHOTO_SHARE
 from .reader import BagReader
 from .replay import replay
 from .results import FrameTable, alarm_episodes
@@ -146,8 +147,9 @@ def evaluate_stream(profile: str | Path | CameraProfile, seeds: Sequence[int], i
                     scenario: str = "campaign_heldout", frames: int = 100, width: int = 320, height: int = 256,
                     fps: float = 10.0, gain_offset_db: float = GAIN_OFFSET_DB, params: str | Path | None = None,
                     threads: int = 1, workdir: Path | None = None,
-                    field: FieldConditions | None = None) -> dict[str, Any]:
-    """One campaign bag per seed (its photo panels from ``images`` when given; recorded under the ``field``
+                    field: FieldConditions | None = None, photo_share: float = PHOTO_SHARE) -> dict[str, Any]:
+    """One campaign bag per seed (its photo panels from ``images`` when given, ``photo_share`` of its world's panels
+    photographs; recorded under the ``field``
     conditions, ``simulate_bag`` keywords such as ``vibration_px``, ``flicker_pct``, ``banding_pct``), each
     replayed as recorded and with the gain stated ``gain_offset_db`` off:
     {"bags": per-bag figures with their seed, "summary": together}. The bags are written to ``workdir`` (kept)
@@ -165,7 +167,8 @@ def evaluate_stream(profile: str | Path | CameraProfile, seeds: Sequence[int], i
         folder.mkdir(parents=True, exist_ok=True)
         for seed in seeds:
             bag = simulate_bag(folder / f"{scenario}_{seed}.mcap", profile, scenario, frames=frames, width=width,
-                               height=height, fps=fps, seed=seed, images=images, **(field or {}))
+                               height=height, fps=fps, seed=seed, images=images,
+                               photo_share=photo_share, **(field or {}))
             offset = stated_gain_copy(bag, folder / f"{scenario}_{seed}_gain{gain_offset_db:+g}dB.mcap", gain_offset_db)
             rows.append({"seed": seed, **measure_bag(bag, offset, profile, params, threads)})
     return {"bags": rows, "summary": summarize(rows)}

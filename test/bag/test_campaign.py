@@ -87,6 +87,38 @@ def test_world_of_own_images() -> None:
         campaign.make_world(np.random.default_rng(0), 128, 160, "heldout", photos=[])
 
 
+def test_photo_share_sets_how_much_of_the_world_is_the_scenes(tmp_path, capsys) -> None:
+    """``photo_share``: the share of a world's panels that are the photographs (a uniform scene: its panels are flat,
+    the procedural ones textured): 1 gives the scenes alone besides the chart patches, 0 none of them; the default
+    is 0.75 (the worlds before the option); a share outside [0, 1] is a clear error, also from the CLI, and a
+    non-campaign scenario refuses it."""
+    flat_photo = [np.full((90, 120), 100.0)]
+
+    def flat_share(share: float) -> float:
+        world = campaign.make_world(np.random.default_rng(0), 128, 160, "heldout", photos=flat_photo, photo_share=share)
+        gy, gx = np.gradient(world)
+        return float(((np.abs(gx) < 1e-3) & (np.abs(gy) < 1e-3)).mean())
+
+    assert flat_share(1.0) > 0.9 and flat_share(0.0) < 0.15 and flat_share(0.0) < flat_share(0.75) < flat_share(1.0)
+    default = campaign.make_world(np.random.default_rng(0), 128, 160, "heldout", photos=flat_photo)
+    assert np.array_equal(default, campaign.make_world(np.random.default_rng(0), 128, 160, "heldout", photos=flat_photo,
+                                                       photo_share=0.75))
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="photo share must be in"):
+            campaign.make_world(np.random.default_rng(0), 128, 160, "heldout", photo_share=bad)
+    def simulate(share: str) -> int:
+        return cli_main(["simulate-bag", str(tmp_path / f"{share}.mcap"), "--profile", "ev76c661", "--scenario",
+                         "campaign_heldout", "--frames", "2", "--width", "64", "--height", "64", "--photo-share", share])
+
+    assert simulate("1") == 0 and load_truth(tmp_path / "1.mcap")["photo_share"] == 1.0
+    assert simulate("0.75") == 0 and "photo_share" not in load_truth(tmp_path / "0.75.mcap")  # the default: as before
+    capsys.readouterr()
+    assert simulate("2") == 2 and "photo share must be in [0, 1]" in capsys.readouterr().err
+    other = ["simulate-bag", str(tmp_path / "x.mcap"), "--profile", "ev76c661", "--scenario", "image_noise", "--frames",
+             "2", "--photo-share", "1"]
+    assert cli_main(other) == 2 and "campaign scenario" in capsys.readouterr().err
+
+
 def test_campaign_of_own_images_end_to_end(tmp_path, capsys) -> None:
     """`simulate-bag --images`: a field-like campaign over the user's own scene (named in the truth and the
     summary); replayed through the monitor, every frame is accounted for and the clean campaign's per-frame xi is
