@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from noise_monitor.estimator.user_images import load_image_set
@@ -49,6 +50,9 @@ def run(args: argparse.Namespace) -> int:
               f"{r['false_alarm_episodes']}; detected {r['hits']} / {r['need']}")
     s = result["summary"]
     det = "no frame was due an alarm" if not s["need"] else f"{100 * s['detection']:.1f} % ({s['hits']} / {s['need']})"
+    offset_err = (f"{s['offset_xi_error_rms']:.3f} DN" if math.isfinite(s["offset_xi_error_rms"]) else
+                  f"none: no frame processed with the gain stated {args.gain_offset_db:+g} dB (the monitor skips a stated "
+                  f"gain outside the profile's range as invalid metadata)")
     scenes = ", ".join(images.names) if images else f"the {args.scenario} scenario's photographs"
     if args.photo_share != PHOTO_SHARE:
         scenes += f" ({100 * args.photo_share:g} % of the panels)"
@@ -57,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
           f"{s['clean_xi_mean']:+.3f} DN; xi_filtered {s['clean_xi_filtered_rms']:.3f} DN; false-alarm episodes "
           f"{s['false_alarm_episodes']} (target 0)\n"
           f"  gain stated {args.gain_offset_db:+g} dB: frames with true |xi| >= 1 DN detected within {WITHIN} frames "
-          f"{det} (target >= {100 * TARGET_DETECTION:.0f} %); xi error RMS {s['offset_xi_error_rms']:.3f} DN\n"
+          f"{det} (target >= {100 * TARGET_DETECTION:.0f} %); xi error RMS {offset_err}\n"
           f"  {'meets' if s['meets_targets'] else 'does NOT meet'} issue 15's per-frame targets")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -92,17 +92,25 @@ def test_leds_dimmed_by_pwm_raise_no_false_alarm() -> None:
 
 def test_evaluate_stream_on_the_user_scene_alone(tmp_path, capsys) -> None:
     """``--photo-share 1``: the campaigns' world is the user's scene alone (no procedural panel; the summary says so
-    and the truth records it), and the targets are judged on it: a smooth scene, every frame due an alarm detected."""
+    and the truth records it), and the targets are judged on it: a smooth scene, every frame due an alarm detected; a
+    campaign whose stated-gain copy has no valid frame says so."""
     scenes = tmp_path / "scenes"
     scenes.mkdir()
     y, x = np.mgrid[0:480, 0:640]
     cv2.imwrite(str(scenes / "wall.png"), (128 + 50 * np.sin(x / 60.0) * np.cos(y / 80.0)).astype(np.uint8))
-    args = ["evaluate-stream", "--images", str(scenes), "--seeds", "6", "--frames", "30", "--width", "160",
-            "--height", "128", "--photo-share", "1", "--json", str(tmp_path / "r.json"), "--keep-bags", str(tmp_path)]
-    assert cli_main(args) == 0
+
+    def args(seed: int, share: str = "1") -> list[str]:
+        return ["evaluate-stream", "--images", str(scenes), "--seeds", str(seed), "--frames", "30", "--width", "160",
+                "--height", "128", "--photo-share", share]
+
+    assert cli_main(args(6) + ["--json", str(tmp_path / "r.json"), "--keep-bags", str(tmp_path)]) == 0
     assert json.loads(next(tmp_path.glob("*.truth.json")).read_text())["photo_share"] == 1.0
     s = json.loads((tmp_path / "r.json").read_text())["summary"]
     assert s["need"] >= 5 and s["detection"] >= 0.97 and s["false_alarm_episodes"] == 0 and s["meets_targets"]
     assert "campaign(s) of wall.png (100 % of the panels)" in capsys.readouterr().out
-    assert cli_main(args[:-6] + ["--photo-share", "1.5"]) == 2
+    assert cli_main(args(6, "1.5")) == 2
     assert "photo share must be in [0, 1]" in capsys.readouterr().err
+    # seed 3's views all sit below 6 dB: the stated-gain replay processes no frame, said so (before: "nan DN")
+    assert cli_main(args(3)) == 0
+    out = capsys.readouterr().out
+    assert "no frame processed with the gain stated -6 dB" in out and "nan" not in out and "does NOT meet" in out
