@@ -5,6 +5,7 @@
 | ``diagnostics`` (default) | diagnostic_msgs/DiagnosticArray with CameraMetadata key names | metadata_topic |
 | ``keymap`` | diagnostic_msgs/DiagnosticArray read through ``metadata_keymap`` | metadata_topic |
 | ``flir`` / ``basler`` / ``realsense`` | the driver's metadata message (:mod:`msg_adapters.vendor`) | metadata_topic |
+| ``camera_ros`` | diagnostic_msgs/DiagnosticArray with libcamera's metadata (:mod:`msg_adapters.libcamera`) | metadata_topic (``/diagnostics``) |
 | ``parameters`` | rcl_interfaces/ParameterEvent of ``metadata_driver_node`` (v4l2_camera, usb_cam) | /parameter_events |
 
 Driver message packages are imported only for their source; a missing one is a ValueError naming the ROS
@@ -17,11 +18,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from .keymap import keymap_entries, metadata_from_keymap, parse_keymap
+from .libcamera import libcamera_status, metadata_from_camera_ros
 from .metadata import metadata_from_diagnostics
 from .parameter_events import metadata_from_parameters, parameter_values, preset_keymap
 from .vendor import SOURCE_TYPES, message_class, metadata_from_vendor
 
-METADATA_SOURCES = ("diagnostics", "keymap", *SOURCE_TYPES, "parameters")
+METADATA_SOURCES = ("diagnostics", "keymap", *SOURCE_TYPES, "camera_ros", "parameters")
 PARAMETER_EVENTS_TOPIC = "/parameter_events"
 
 
@@ -44,19 +46,23 @@ class MetadataSource:
     driver_node: str = ""
     parameter_names: tuple[str, ...] = ()
     from_values: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    #: the camera's own status of a DiagnosticArray shared with other nodes (camera_ros on /diagnostics)
+    own_status: Callable[[Any], Any] | None = None
 
     def hardware_id(self, msg: Any) -> str | None:
         """The driver's device id (its serial) when the message carries one: a DiagnosticArray status's
-        ``hardware_id`` (the first non-empty one)."""
-        for status in getattr(msg, "status", None) or ():
+        ``hardware_id`` (the first non-empty one; the camera's own status's on a shared topic)."""
+        statuses = [self.own_status(msg)] if self.own_status is not None else getattr(msg, "status", None) or ()
+        for status in statuses:
             if str(getattr(status, "hardware_id", "")).strip():
                 return str(status.hardware_id).strip()
         return None
 
 
 def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str = "", driver: str = "v4l2_camera",
-                   profile: Any = None) -> MetadataSource | None:
-    """The source for the node's parameters (None without a metadata topic); ValueError naming what is wrong."""
+                   profile: Any = None, hardware_id: str = "") -> MetadataSource | None:
+    """The source for the node's parameters (None without a metadata topic); ValueError naming what is wrong.
+    ``hardware_id``: with ``camera_ros``, read only this camera's statuses (several cameras on /diagnostics)."""
     if source not in METADATA_SOURCES:
         raise ValueError(f"parameter metadata_source must be one of {', '.join(METADATA_SOURCES)}, got {source!r}")
     entries = parse_keymap(keymap_entries(keymap)) if keymap else None
@@ -94,6 +100,9 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
                               held=source == "basler")
     from diagnostic_msgs.msg import DiagnosticArray
 
+    if source == "camera_ros":
+        return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_camera_ros(m, hardware_id),
+                              own_status=lambda m: libcamera_status(m, hardware_id))
     if source == "keymap":
         mapped = entries or []
         return MetadataSource(source, DiagnosticArray, topic, lambda m: metadata_from_keymap(m, mapped, profile))

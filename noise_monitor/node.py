@@ -160,7 +160,8 @@ class NoiseMonitorNode(Node):
         # a camera namespace names the camera: /cam1 and /cam2 report apart on /diagnostics
         p["camera_name"] = p["camera_name"] or self.get_namespace().strip("/").replace("/", "_")
         source_args = {"source": p["metadata_source"], "topic": p["metadata_topic"], "keymap": p["metadata_keymap"],
-                       "driver_node": p["metadata_driver_node"], "driver": p["metadata_driver"]}
+                       "driver_node": p["metadata_driver_node"], "driver": p["metadata_driver"],
+                       "hardware_id": p["hardware_id"]}
         resolve_source(**source_args)  # a bad source, key map or missing driver package: fail before loading
         self.runtime = MonitorRuntime(p, estimator=estimator)
         self.params = p = self.runtime.params

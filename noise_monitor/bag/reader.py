@@ -3,8 +3,8 @@
 Topics are found by message type unless given: the image topic (sensor_msgs/msg/Image; a
 sensor_msgs/msg/CompressedImage topic when the bag has no raw one: lossless PNG/zstd frames are decoded,
 lossy ones skipped with the reason), the metadata
-topic (a DiagnosticArray, a known vendor metadata type, or any type with fields named like
-CameraMetadata fields), CameraInfo and Temperature. Message definitions stored in the bag are
+topic (a DiagnosticArray, a known vendor metadata type, any type with fields named like
+CameraMetadata fields, or camera_ros's libcamera metadata on /diagnostics), CameraInfo and Temperature. Message definitions stored in the bag are
 registered (rosbags typesys), so vendor types deserialise without their packages installed.
 """
 from __future__ import annotations
@@ -20,6 +20,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from msg_adapters import AdapterError, camera_geometry, prepare_frame
 from msg_adapters.keymap import KeyMapEntry, metadata_from_keymap, parse_keymap
+from msg_adapters.libcamera import is_libcamera, metadata_from_camera_ros
 from msg_adapters.metadata import (
     ALIASES,
     KNOWN_FIELDS,
@@ -45,6 +46,8 @@ CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 _METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
+#: messages of a DiagnosticArray topic read to tell whether it carries camera_ros's libcamera metadata, and whose
+PEEK_MESSAGES = 200
 bounded.install()  # MCAP chunks are decompressed within limits (decompression bombs are refused)
 
 
@@ -110,11 +113,15 @@ class BagReader:
             self.close()
             raise BagError(f"bag {self.path} is empty (no messages)")
         self.image_topic = self.metadata_topic = self.camera_info_topic = self.temperature_topic = None
+        #: the libcamera camera ids in the metadata topic when it is camera_ros's /diagnostics (else empty)
+        self.libcamera_ids: tuple[str, ...] = ()
         if not detect_topics:  # raw access only (playback of every topic)
             return
         try:
             self.image_topic = self._pick("image", image_topic, self._image_candidates(), required=True)
             self.metadata_topic = self._pick("metadata", metadata_topic, self._metadata_candidates())
+            if self.metadata_topic is not None and self.topics[self.metadata_topic] == DIAGNOSTIC_TYPE:
+                self.libcamera_ids = self._libcamera_ids(self.metadata_topic)
             self.camera_info_topic = self._pick("camera_info", camera_info_topic, self._typed(CAMERA_INFO_TYPE))
             self.temperature_topic = self._pick("temperature", temperature_topic, self._typed(TEMPERATURE_TYPE))
         except BagError:
@@ -142,8 +149,23 @@ class BagReader:
                          and m in fielddefs and _METADATA_NAMES & {f[0] for f in fielddefs[m][1]})
         if generic:
             return generic
-        return [t for t in self._typed(DIAGNOSTIC_TYPE)  # not the monitor's own outputs (a recorded node)
+        diag = [t for t in self._typed(DIAGNOSTIC_TYPE)  # not the monitor's own outputs (a recorded node)
                 if t != DIAGNOSTICS_TOPIC and not t.endswith(f"/{FRAME}")]
+        if not diag and DIAGNOSTICS_TOPIC in self.topics and self._libcamera_ids(DIAGNOSTICS_TOPIC):
+            return [DIAGNOSTICS_TOPIC]  # camera_ros: libcamera's metadata among every node's diagnostics
+        return diag
+
+    def _libcamera_ids(self, topic: str) -> tuple[str, ...]:
+        """The camera ids of the libcamera metadata statuses (camera_ros) among the first PEEK_MESSAGES messages of a
+        DiagnosticArray topic, in order of appearance (none: it is not camera_ros's)."""
+        ids: dict[str, None] = {}
+        for i, (_, _, msg) in enumerate(self.messages([topic])):
+            if i == PEEK_MESSAGES:
+                break
+            for status in getattr(msg, "status", None) or ():
+                if is_libcamera(status):
+                    ids.setdefault(str(status.hardware_id).strip(), None)
+        return tuple(ids)
 
     def _pick(self, role: str, override: str | None, candidates: list[str], required: bool = False) -> str | None:
         if override:
@@ -187,9 +209,11 @@ class BagReader:
 
     def hardware_id(self) -> str | None:
         """The driver's device id: the ``hardware_id`` of the first metadata message's first status (a
-        DiagnosticArray), or None."""
+        DiagnosticArray; camera_ros: its one camera's libcamera id), or None."""
         if self.metadata_topic is None:
             return None
+        if self.libcamera_ids:
+            return self.libcamera_ids[0] or None if len(self.libcamera_ids) == 1 else None
         for _, _, msg in self.messages([self.metadata_topic]):
             status = getattr(msg, "status", None)
             return (str(status[0].hardware_id).strip() or None) if status else None
@@ -247,8 +271,10 @@ class BagReader:
         return int(self._reader.message_count)
 
     def _metadata_of(self, msg: Any, profile: CameraProfile | None = None,
-                     keymap: Sequence[KeyMapEntry] | None = None) -> dict[str, Any]:
+                     keymap: Sequence[KeyMapEntry] | None = None, camera: str = "") -> dict[str, Any] | None:
         mtype = getattr(msg, "__msgtype__", "")
+        if mtype == DIAGNOSTIC_TYPE and self.libcamera_ids:
+            return metadata_from_camera_ros(msg, camera)  # None: another node's diagnostics or another camera's
         if mtype == DIAGNOSTIC_TYPE:
             return metadata_from_keymap(msg, keymap, profile) if keymap else metadata_from_diagnostics(msg)
         if mtype in VENDOR_TYPES:
@@ -256,7 +282,8 @@ class BagReader:
         return metadata_from_mapping({k: getattr(msg, k) for k in _METADATA_NAMES if hasattr(msg, k)})
 
     def _timeline(self, topic: str | None, convert) -> tuple[list[int], list[Any]]:
-        """(sorted header stamps, converted values) of a small side topic, errors kept as AdapterError."""
+        """(sorted header stamps, converted values) of a small side topic, errors kept as AdapterError; messages that
+        convert to None (not this camera's) left out."""
         if topic is None:
             return [], []
         items = []
@@ -267,14 +294,16 @@ class BagReader:
                 value: Any = convert(msg)
             except (AdapterError, ValueError) as exc:
                 value = AdapterError(f"{topic}: {exc}")
-            items.append((_stamp_ns(msg, log_time), value))
+            if value is not None:
+                items.append((_stamp_ns(msg, log_time), value))
         items.sort(key=lambda x: x[0])
         return [s for s, _ in items], [v for _, v in items]
 
     # --- frames ----------------------------------------------------------------------------------
     def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None,
                sync_tolerance_s: float = 0.01, color: str = "luma",
-               metadata_keymap: Sequence[str] | None = None, black_level_dn: float | None = None) -> Iterator[Frame]:
+               metadata_keymap: Sequence[str] | None = None, black_level_dn: float | None = None,
+               hardware_id: str = "") -> Iterator[Frame]:
         """Yield every image as a :class:`Frame` in log-time order, prepared as the node prepares it
         (``msg_adapters.prepare_frame``).
 
@@ -286,12 +315,19 @@ class BagReader:
         metadata messages (:mod:`msg_adapters.vendor`) are converted with the profile (relative gains);
         ``metadata_keymap`` (``STATUS|KEY|FIELD|UNIT[|SCALE]`` entries) reads a DiagnosticArray of a
         driver's own key names (:mod:`msg_adapters.keymap`; a bad entry is a ValueError). ``black_level_dn``: the
-        black level taken off every image (default: the profile's).
+        black level taken off every image (default: the profile's). camera_ros's libcamera metadata on /diagnostics
+        (:mod:`msg_adapters.libcamera`) is read from its camera's statuses, ``hardware_id``'s when several cameras
+        publish there (a BagError naming them without it).
         """
+        if len(self.libcamera_ids) > 1 and hardware_id not in self.libcamera_ids:
+            raise BagError(f"bag {self.path}: {self.metadata_topic} carries the libcamera metadata of several cameras "
+                           f"({clip(', '.join(self.libcamera_ids))}): name one with the node parameter hardware_id"
+                           + (f" (not {clip(repr(hardware_id), 80)})" if hardware_id else ""))
         prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
         options = FrameOptions(prof, bit_depth or (prof.bit_depth if prof else None), color, black_level_dn)
         keymap = parse_keymap(metadata_keymap) if metadata_keymap else None
-        meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap))
+        camera = hardware_id if self.libcamera_ids and hardware_id in self.libcamera_ids else ""
+        meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap, camera))
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
         info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
         tol = int(sync_tolerance_s * 1e9)

@@ -256,7 +256,7 @@ def run_replay(
         opts = rt.frame_options
         frames = reader.frames(prof, bit_depth=opts.bit_depth, sync_tolerance_s=rt.params["sync_tolerance_s"],
                                color=opts.color, metadata_keymap=keymap_entries(rt.params["metadata_keymap"]) or None,
-                               black_level_dn=opts.black_level_dn)
+                               black_level_dn=opts.black_level_dn, hardware_id=rt.params["hardware_id"])
         periods: PeriodSummary | None = None  # /diagnostics summaries every diag_period_ns of bag time
         next_report = last_stamp = 0
         last_log = 0

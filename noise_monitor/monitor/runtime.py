@@ -40,7 +40,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "metadata_topic": ("metadata", "per-frame metadata (type per metadata_source); '' = none"),
     "metadata_source": ("diagnostics", "diagnostics (DiagnosticArray with CameraMetadata key names), keymap "
                                        "(DiagnosticArray through metadata_keymap), flir, basler, realsense (the driver's "
-                                       "metadata message; its ROS package must be importable) or parameters (the "
+                                       "metadata message; its ROS package must be importable), camera_ros (libcamera's "
+                                       "metadata on /diagnostics: set metadata_topic /diagnostics) or parameters (the "
                                        "driver node's /parameter_events)"),
     "metadata_keymap": ("", "key map 'STATUS|KEY|FIELD|UNIT[|SCALE]; ...' (FIELD: exposure_time_s, gain_db, "
                             "sensor_temperature_c; UNIT: s ms us 100us ns, dB factor relative, degC K)"),
@@ -53,7 +54,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "camera_name": ("", "camera name in the diagnostic status name 'noise_monitor: <camera_name>'; '' = the node's "
                         "namespace (cam1 for /cam1, two cameras stay apart), else 'camera'"),
     "hardware_id": ("", "diagnostic hardware_id; '' = the driver's (its metadata status's hardware_id, e.g. the "
-                        "serial), else '<profile name>/<camera_name>'"),
+                        "serial), else '<profile name>/<camera_name>'; with metadata_source camera_ros and several "
+                        "cameras on /diagnostics, set it: only that camera's metadata is read"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
     "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
     "black_level_dn": (-1.0, "the camera's black level (pedestal, 8-bit DN scale; settable at run time) taken off "

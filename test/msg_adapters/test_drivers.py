@@ -13,8 +13,10 @@ import pytest
 
 from msg_adapters import AdapterError
 from msg_adapters.keymap import metadata_from_keymap, parse_keymap
+from msg_adapters.libcamera import metadata_from_camera_ros
 from msg_adapters.parameter_events import metadata_from_parameters, parameter_values, preset_keymap
 from msg_adapters.vendor import BASLER, FLIR, REALSENSE, metadata_from_vendor
+from noise_monitor.bag.errors import BagError
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.writer import BagWriter, typestore
@@ -77,6 +79,19 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
                 js = json.dumps({"frame_number": 1, "actual_exposure": int(round(exp_us)),
                                  "gain_level": gain_db / 24.0 * 232 + 16, "auto_exposure": 1})
                 w.write("/camera/color/metadata", t[REALSENSE](header=msg.header, json_data=js), log_time)
+            elif kind.startswith("camera_ros"):  # libcamera's metadata among other nodes' diagnostics
+                kv, st = t["diagnostic_msgs/msg/KeyValue"], t["diagnostic_msgs/msg/DiagnosticStatus"]
+                arr = t["diagnostic_msgs/msg/DiagnosticArray"]
+                w.write("/diagnostics", arr(header=msg.header, status=[st(level=0, name="battery", message="",
+                        hardware_id="bms", values=[kv(key="voltage", value="12.1")])]), log_time)
+                libcamera = [kv(key="AnalogueGain", value=f"{10 ** (gain_db / 20) / 2:.6f}"),
+                             kv(key="DigitalGain", value="2.000000"), kv(key="ExposureTime", value=str(round(exp_us))),
+                             kv(key="SensorTemperature", value=f"{temp:.6f}")]
+                cams = [st(level=0, name="", message="", hardware_id="/base/imx708@1a", values=libcamera)]
+                if kind == "camera_ros2":  # a second camera's status first, its own conditions
+                    cams.insert(0, st(level=0, name="", message="", hardware_id="/base/imx477@1a", values=[
+                        kv(key="AnalogueGain", value="1.0"), kv(key="ExposureTime", value="500")]))
+                w.write("/diagnostics", arr(header=msg.header, status=cams), log_time)
             else:  # a driver's own DiagnosticArray key names and units
                 kv = t["diagnostic_msgs/msg/KeyValue"]
                 status = t["diagnostic_msgs/msg/DiagnosticStatus"](
@@ -88,9 +103,17 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
     return dst, truth
 
 
-@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "keymap"])
+@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "keymap", "camera_ros", "camera_ros2"])
 def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
+    """Each driver's metadata in a bag gives the stated metadata; camera_ros's on /diagnostics (found there, other
+    nodes' arrays left aside), the camera named by hardware_id where two publish there (a clear error without)."""
     bag, truth = _driver_bag(tmp_path, kind)
+    camera = {}
+    if kind == "camera_ros2":
+        with open_bag(bag) as reader, pytest.raises(BagError, match=r"/diagnostics carries the libcamera metadata of "
+                                                                    r"several cameras \(/base/imx477@1a, /base/imx708@1a"):
+            next(reader.frames(PROFILE))
+        camera = {"hardware_id": "/base/imx708@1a"}
     profile = PROFILE
     if kind == "realsense":
         profile = profile_from_mapping({**load_profile("ev76c661").values, "gain_range_db": [0.0, 24.0],
@@ -98,7 +121,10 @@ def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
     keymap = ["acme_cam|ExposureMs|exposure_time_s|ms", "*|GainX|gain_db|factor",
               "acme_cam|SensorTempK|sensor_temperature_c|K"] if kind == "keymap" else None
     with open_bag(bag) as reader:
-        frames = list(reader.frames(profile, metadata_keymap=keymap))
+        frames = list(reader.frames(profile, metadata_keymap=keymap, **camera))
+        if kind.startswith("camera_ros"):
+            assert reader.metadata_topic == "/diagnostics"
+            assert reader.hardware_id() == (None if camera else "/base/imx708@1a")
     assert len(frames) == 4
     for f, r in zip(frames, truth):
         assert f.skip_reason is None, f.skip_reason
@@ -130,6 +156,32 @@ def test_driver_messages_with_bad_fields_name_them():
     with pytest.raises(AdapterError, match="neither actual_exposure nor gain_level"):
         metadata_from_vendor(ns(__msgtype__=REALSENSE, json_data='{"frame_number": 3}'), PROFILE)
     assert flir
+
+
+def test_camera_ros_metadata_conversion():
+    """camera_ros's libcamera status: ExposureTime (us), AnalogueGain x DigitalGain (dB), SensorTemperature; an
+    array without one (another node's), or with only another camera's when an id is asked for, is None; a bad value
+    is named."""
+    ns, kv = SimpleNamespace, lambda k, v: SimpleNamespace(key=k, value=v)  # noqa: E731
+    cam = ns(name="", hardware_id="imx708", values=[kv("AnalogueGain", "4.000000"), kv("DigitalGain", "1.000000"),
+                                                    kv("ExposureTime", "20000"), kv("SensorTemperature", "47.5")])
+    other = ns(name="", hardware_id="ov5647", values=[kv("AnalogueGain", "1.0"), kv("ExposureTime", "100")])
+    battery = ns(name="battery", hardware_id="bms", values=[kv("voltage", "12.1")])
+    msg = ns(status=[battery, cam])
+    assert metadata_from_camera_ros(msg) == {"exposure_time_s": pytest.approx(0.02), "gain_db": pytest.approx(12.0412),
+                                             "sensor_temperature_c": 47.5}
+    assert metadata_from_camera_ros(ns(status=[battery])) is None and metadata_from_camera_ros(ns(status=[])) is None
+    assert metadata_from_camera_ros(ns(status=[other, cam]))["exposure_time_s"] == pytest.approx(1e-4)  # the first
+    assert metadata_from_camera_ros(ns(status=[other, cam]), "imx708")["exposure_time_s"] == pytest.approx(0.02)
+    assert metadata_from_camera_ros(ns(status=[other]), "imx708") is None
+    no_temp = ns(name="", hardware_id="", values=[kv("ExposureTime", "100")])
+    assert metadata_from_camera_ros(ns(status=[no_temp])) == {"exposure_time_s": pytest.approx(1e-4)}
+    for key, value, what in (("AnalogueGain", "0.0", "a positive number"), ("DigitalGain", "nan", "a positive number"),
+                             ("SensorTemperature", "hot", None)):
+        bad = ns(name="", hardware_id="", values=[kv(k.key, value if k.key == key else k.value) for k in cam.values])
+        match = f"camera_ros metadata {key} = '{value}' is not " + (what or "a number")
+        with pytest.raises(AdapterError, match=match):
+            metadata_from_camera_ros(ns(status=[bad]))
 
 
 def test_keymap_validation_and_conversion():

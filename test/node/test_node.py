@@ -573,6 +573,45 @@ def test_keymap_metadata_source_reads_a_drivers_own_keys(rig_factory, tmp_path):
     assert bad.level == WARN and "metadata invalid: metadata GainX = " in bad.message and "is not a number" in bad.message
 
 
+def test_camera_ros_libcamera_metadata_on_diagnostics(rig_factory):
+    """metadata_source camera_ros: camera_ros publishes each frame's libcamera metadata on /diagnostics, where the
+    monitor's own summaries and other nodes' diagnostics go too. The camera's status gives the numbers of this
+    project's key names (ExposureTime in us, AnalogueGain x DigitalGain, SensorTemperature); another node's array
+    with the image's stamp is not taken for the metadata; the camera's libcamera id names it; with hardware_id set,
+    another camera's status in the same array is left aside."""
+    ref, _ = rig_factory("lref").step(0)
+    gain = 10 ** (DYNAMIC["gain_db"] / 20)
+    libcamera = {"AeLocked": "true", "AnalogueGain": gain / 2, "DigitalGain": 2.0, "ExposureTime": 10000,
+                 "FrameDuration": 33333, "SensorTemperature": DYNAMIC["sensor_temperature_c"]}
+    assert DYNAMIC["exposure_time_s"] == 0.01
+
+    def array(i: int, *statuses: tuple[str, str, dict]) -> DiagnosticArray:
+        msg = DiagnosticArray(status=[DiagnosticStatus(name=name, hardware_id=hw, values=[
+            KeyValue(key=k, value=str(v)) for k, v in values.items()]) for name, hw, values in statuses])
+        stamp_ns = 1_000 * 10**9 + i * 33_333_333  # Rig.publish's stamp of image i
+        msg.header.stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+        return msg
+
+    imx = "/base/axi/pcie@120000/rp1/i2c@88000/imx708@1a"
+    rig = rig_factory("lcam", metadata_source="camera_ros", metadata_topic="/diagnostics")
+    rig.pub_meta.publish(array(0, ("battery", "bms", {"voltage": "12.1"})))  # another node's, the image's stamp
+    rig.pub_meta.publish(array(0, ("", imx, libcamera)))
+    report, _ = rig.step(0, metadata={})
+    assert report.level == OK, report.message
+    assert report.hardware_id == imx
+    for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
+        assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+    two = rig_factory("lcam2", metadata_source="camera_ros", metadata_topic="/diagnostics", hardware_id=imx)
+    other = {**libcamera, "AnalogueGain": 1.0, "DigitalGain": 1.0, "ExposureTime": 500}
+    two.pub_meta.publish(array(0, ("", "/base/imx477@1a", other), ("", imx, libcamera)))
+    report, _ = two.step(0, metadata={})
+    assert report.level == OK, report.message
+    assert float(report.values["sigma_model"]) == pytest.approx(float(ref.values["sigma_model"]), rel=1e-5)
+    two.pub_meta.publish(array(1, ("", imx, {**libcamera, "ExposureTime": "-1"})))
+    bad, _ = two.step(1, metadata={})
+    assert bad.level == WARN and "camera_ros metadata ExposureTime = '-1' is not a positive number" in bad.message
+
+
 def test_parameter_events_of_a_v4l2_driver_node_give_the_metadata(rig_factory, tmp_path):
     """metadata_source parameters: the driver node's exposure/gain parameters (v4l2_camera names and
     units) followed on /parameter_events; the temperature from a sensor_msgs/Temperature topic."""

@@ -1,0 +1,68 @@
+"""camera_ros (christianrauch/camera_ros >= 0.7, the libcamera ROS 2 node: Raspberry Pi and other libcamera cameras)
+-> CameraMetadata fields.
+
+camera_ros publishes every frame's libcamera metadata on ``/diagnostics``: a DiagnosticArray with the image's header
+(the same stamp) and one status whose ``hardware_id`` is the camera's libcamera id and whose key/values are libcamera's
+control names and values as libcamera prints them. Read here: ``ExposureTime`` (us), ``AnalogueGain`` and
+``DigitalGain`` (factors: the gain of the published image is their product, the digital gain being applied in the ISP
+that produces it) and ``SensorTemperature`` (degC, where the sensor reports one). ``/diagnostics`` carries every node's
+diagnostics, the monitor's own among them: an array without a libcamera status (or only other cameras', when a
+``hardware_id`` is asked for) is not this camera's (None).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from noise_monitor.text import clip
+
+from .errors import AdapterError
+
+EXPOSURE, ANALOGUE_GAIN, DIGITAL_GAIN, TEMPERATURE = "ExposureTime", "AnalogueGain", "DigitalGain", "SensorTemperature"
+#: keys only a libcamera metadata status has (camera_ros prints every control of the request's metadata)
+LIBCAMERA_KEYS = frozenset((EXPOSURE, ANALOGUE_GAIN))
+
+
+def is_libcamera(status: Any) -> bool:
+    """A DiagnosticStatus (rclpy or rosbags) that carries libcamera metadata."""
+    return any(str(kv.key) in LIBCAMERA_KEYS for kv in getattr(status, "values", None) or ())
+
+
+def libcamera_status(msg: Any, hardware_id: str = "") -> Any | None:
+    """The first status of a DiagnosticArray that carries libcamera metadata, of the camera ``hardware_id`` when
+    given; None when there is none."""
+    for status in getattr(msg, "status", None) or ():
+        if is_libcamera(status) and (not hardware_id or str(status.hardware_id).strip() == hardware_id):
+            return status
+    return None
+
+
+def _number(key: str, value: Any, positive: bool = True) -> float:
+    try:
+        x = float(str(value).strip())
+    except ValueError:
+        raise AdapterError(f"camera_ros metadata {key} = {clip(repr(value), 80)} is not a number") from None
+    if not math.isfinite(x) or (positive and x <= 0):
+        raise AdapterError(f"camera_ros metadata {key} = {clip(repr(value), 80)} is not "
+                           f"{'a positive number' if positive else 'finite'}")
+    return x
+
+
+def metadata_from_camera_ros(msg: Any, hardware_id: str = "") -> dict[str, float] | None:
+    """CameraMetadata fields from camera_ros's DiagnosticArray, None when it is not this camera's (module docstring);
+    a value that is not a number (a positive one for the exposure and the gains) is an AdapterError naming it."""
+    status = libcamera_status(msg, hardware_id)
+    if status is None:
+        return None
+    values = {str(kv.key): kv.value for kv in status.values}
+    out: dict[str, float] = {}
+    if EXPOSURE in values:
+        out["exposure_time_s"] = _number(EXPOSURE, values[EXPOSURE]) * 1e-6
+    if ANALOGUE_GAIN in values:
+        gain = _number(ANALOGUE_GAIN, values[ANALOGUE_GAIN])
+        if DIGITAL_GAIN in values:
+            gain *= _number(DIGITAL_GAIN, values[DIGITAL_GAIN])
+        out["gain_db"] = 20.0 * math.log10(gain)
+    if TEMPERATURE in values:
+        out["sensor_temperature_c"] = _number(TEMPERATURE, values[TEMPERATURE], positive=False)
+    return out
