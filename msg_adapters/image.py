@@ -10,6 +10,9 @@ Reductions to one channel (the noise estimator works on gray images):
   per-channel sigma, so estimates refer to the luma image. ``color="green"`` keeps the green channel.
 - ``bayer_*8``/``bayer_*16``: one green site per 2x2 cell, giving a (H/2, W/2) image. No averaging of the
   two green sites (that would halve the noise variance and bias every estimate).
+- ``yuv422_yuy2``/``yuyv`` (Y U Y V) and ``yuv422``/``uyvy`` (U Y V Y), 4:2:2 as USB and libcamera cameras send
+  it: the Y (luma) of every pixel, at full resolution; ``color="green"`` is refused (no green channel without the
+  subsampled chroma).
 
 ``step`` row padding and ``is_bigendian`` (16-bit data) are honoured. A sensor_msgs/CompressedImage in a
 lossless format (PNG, TIFF, 16-bit compressedDepth PNG, zstd) is decoded first; lossy formats are refused
@@ -46,6 +49,11 @@ _BAYER_GREEN = {"rggb": (0, 1), "bggr": (0, 1), "gbrg": (0, 0), "grbg": (0, 0)}
 for _pat in _BAYER_GREEN:
     _ENCODINGS[f"bayer_{_pat}8"] = (1, 1, f"bayer_{_pat}")
     _ENCODINGS[f"bayer_{_pat}16"] = (2, 1, f"bayer_{_pat}")
+
+#: 4:2:2 YUV: one luma and one (alternating) chroma byte per pixel; the luma byte's position in the pair
+_YUV_LUMA = {"yuyv": 0, "uyvy": 1}
+_ENCODINGS.update({"yuv422_yuy2": (1, 2, "yuyv"), "yuyv": (1, 2, "yuyv"), "yuv422": (1, 2, "uyvy"),
+                   "uyvy": (1, 2, "uyvy")})
 
 SUPPORTED_ENCODINGS: tuple[str, ...] = tuple(
     e if not e[0].isdigit() else e.upper() for e in _ENCODINGS
@@ -130,6 +138,11 @@ def _to_gray(values: np.ndarray, layout: str, color: str) -> np.ndarray:
         if values.shape[0] < 2 or values.shape[1] < 2:
             raise AdapterError("a Bayer image needs at least 2x2 pixels")
         return values[r::2, c::2, 0].astype(np.float32)
+    if layout in _YUV_LUMA:
+        if color == "green":
+            raise AdapterError("a YUV image has no green channel (its chroma is subsampled): read its luma with "
+                               "color luma")
+        return values[:, :, _YUV_LUMA[layout]].astype(np.float32)
     rgb = values[:, :, :3].astype(np.float32)
     if layout == "bgr":
         rgb = rgb[:, :, ::-1]

@@ -96,8 +96,24 @@ def test_bayer_keeps_one_green_site_per_cell(rng, pattern, site):
     np.testing.assert_array_equal(out, pixels[r::2, c::2].astype(np.float32))
 
 
+@pytest.mark.parametrize("encoding,code", [
+    ("yuv422_yuy2", cv2.COLOR_YUV2GRAY_YUY2), ("yuyv", cv2.COLOR_YUV2GRAY_YUY2),
+    ("yuv422", cv2.COLOR_YUV2GRAY_UYVY), ("uyvy", cv2.COLOR_YUV2GRAY_UYVY),
+])
+def test_yuv422_gives_its_luma_at_full_resolution(rng, encoding, code):
+    """4:2:2 YUV (USB cameras, camera_ros's YUYV / UYVY): every pixel's Y, as OpenCV reads it; no green channel."""
+    pairs = rng.integers(0, 256, (6, 8, 2), dtype=np.uint8)  # (luma, chroma) or (chroma, luma) byte per pixel
+    for msg in (rclpy_image(pairs, encoding, pad=2),
+                rosbags_roundtrip(rclpy_image(pairs, encoding), "sensor_msgs/msg/Image")):
+        out = image_to_gray_dn(msg)
+        assert out.shape == (6, 8)
+        np.testing.assert_array_equal(out, cv2.cvtColor(pairs, code).astype(np.float32))
+    with pytest.raises(AdapterError, match="a YUV image has no green channel"):
+        image_to_gray_dn(rclpy_image(pairs, encoding), color="green")
+
+
 @pytest.mark.parametrize("change,match", [
-    ({"encoding": "yuv422"}, "unsupported image encoding"),
+    ({"encoding": "nv21"}, "unsupported image encoding"),
     ({"step": 3}, "step 3 is smaller"),
     ({"height": 9}, "image data has"),
     ({"width": 0}, "empty image"),
