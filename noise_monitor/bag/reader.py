@@ -4,8 +4,9 @@ Topics are found by message type unless given: the image topic (sensor_msgs/msg/
 sensor_msgs/msg/CompressedImage topic when the bag has no raw one: lossless PNG/zstd frames are decoded,
 lossy ones skipped with the reason), the metadata
 topic (a DiagnosticArray, a known vendor metadata type, any type with fields named like
-CameraMetadata fields, or camera_ros's libcamera metadata on /diagnostics), CameraInfo and Temperature. Message definitions stored in the bag are
-registered (rosbags typesys), so vendor types deserialise without their packages installed.
+CameraMetadata fields, or camera_ros's libcamera metadata on /diagnostics), CameraInfo and Temperature.
+Message definitions stored in the bag are registered (rosbags typesys), so vendor types deserialise without
+their packages installed.
 """
 from __future__ import annotations
 
@@ -46,7 +47,8 @@ CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 DIAGNOSTIC_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 _METADATA_NAMES = frozenset(KNOWN_FIELDS) | frozenset(ALIASES)
-#: messages of a DiagnosticArray topic read to tell whether it carries camera_ros's libcamera metadata, and whose
+#: messages of a DiagnosticArray topic read to tell whether it carries camera_ros's libcamera metadata, and of which
+#: cameras
 PEEK_MESSAGES = 200
 bounded.install()  # MCAP chunks are decompressed within limits (decompression bombs are refused)
 
@@ -212,8 +214,8 @@ class BagReader:
         DiagnosticArray; camera_ros: its one camera's libcamera id), or None."""
         if self.metadata_topic is None:
             return None
-        if self.libcamera_ids:
-            return self.libcamera_ids[0] or None if len(self.libcamera_ids) == 1 else None
+        if self.libcamera_ids:  # several cameras: none of them is the bag's
+            return (self.libcamera_ids[0] or None) if len(self.libcamera_ids) == 1 else None
         for _, _, msg in self.messages([self.metadata_topic]):
             status = getattr(msg, "status", None)
             return (str(status[0].hardware_id).strip() or None) if status else None
