@@ -15,6 +15,7 @@ from .camera_info import CameraGeometry
 from .compressed import decompress, is_compressed
 from .errors import AdapterError
 from .image import image_to_gray_dn
+from .libcamera import RAW_GAIN
 from .metadata import BLACK_LEVEL, black_level_value, resolve_metadata
 
 
@@ -28,8 +29,9 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
     ``metadata``: the per-frame key/values (merged over the profile of ``options`` and the latest
     ``temperature_c``), or the error (an exception or its text) of a metadata message that could not be
     read. ``geometry``: the latest CameraInfo, checked against the image size. ``image_error``: the image
-    message is known to be unusable (e.g. damaged bytes in a bag). Problems end up in the Frame's
-    ``image_error`` / ``metadata_error`` / ``missing``, never as exceptions.
+    message is known to be unusable (e.g. damaged bytes in a bag). A raw Bayer image takes the gain of the sensor's
+    output where the metadata tells it apart (``RAW_GAIN``: camera_ros's, without the ISP's digital gain).
+    Problems end up in the Frame's ``image_error`` / ``metadata_error`` / ``missing``, never as exceptions.
     """
     raw = metadata if isinstance(metadata, Mapping) else {}
     header = getattr(image_msg, "header", None)
@@ -51,6 +53,8 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
             frame.black_level_dn = black
         if geometry is not None:
             geometry.check_image(int(image_msg.height), int(image_msg.width))
+        if RAW_GAIN in raw and str(image_msg.encoding).strip().lower().startswith("bayer_"):
+            raw = {**raw, "gain_db": raw[RAW_GAIN]}
     except AdapterError as exc:
         frame.image_dn = None
         frame.image_error = str(exc)

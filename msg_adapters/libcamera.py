@@ -4,8 +4,10 @@
 camera_ros publishes every frame's libcamera metadata on ``/diagnostics``: a DiagnosticArray with the image's header
 (the same stamp) and one status whose ``hardware_id`` is the camera's libcamera id and whose key/values are libcamera's
 control names and values as libcamera prints them. Read here: ``ExposureTime`` (us), ``AnalogueGain`` and
-``DigitalGain`` (factors: the gain of the published image is their product, the digital gain being applied in the ISP
-that produces it) and ``SensorTemperature`` (degC, where the sensor reports one). ``/diagnostics`` carries every node's
+``DigitalGain`` (factors: the gain of a processed image is their product, the digital gain being applied in the ISP
+that produces it; a raw Bayer stream is the sensor's output, whose gain is the analogue gain alone, kept as
+:data:`RAW_GAIN` for :func:`msg_adapters.frames.prepare_frame`) and ``SensorTemperature`` (degC, where the sensor
+reports one). ``/diagnostics`` carries every node's
 diagnostics, the monitor's own among them: an array without a libcamera status (or only other cameras', when a
 ``hardware_id`` is asked for) is not this camera's (None).
 """
@@ -21,6 +23,8 @@ from .errors import AdapterError
 EXPOSURE, ANALOGUE_GAIN, DIGITAL_GAIN, TEMPERATURE = "ExposureTime", "AnalogueGain", "DigitalGain", "SensorTemperature"
 #: keys only a libcamera metadata status has (camera_ros prints every control of the request's metadata)
 LIBCAMERA_KEYS = frozenset((EXPOSURE, ANALOGUE_GAIN))
+#: the gain (dB) of the sensor's raw output, without the ISP's digital gain: a raw Bayer image's
+RAW_GAIN = "raw_gain_db"
 
 
 def is_libcamera(status: Any) -> bool:
@@ -59,10 +63,10 @@ def metadata_from_camera_ros(msg: Any, hardware_id: str = "") -> dict[str, float
     if EXPOSURE in values:
         out["exposure_time_s"] = _number(EXPOSURE, values[EXPOSURE]) * 1e-6
     if ANALOGUE_GAIN in values:
-        gain = _number(ANALOGUE_GAIN, values[ANALOGUE_GAIN])
-        if DIGITAL_GAIN in values:
-            gain *= _number(DIGITAL_GAIN, values[DIGITAL_GAIN])
-        out["gain_db"] = 20.0 * math.log10(gain)
+        analogue = _number(ANALOGUE_GAIN, values[ANALOGUE_GAIN])
+        digital = _number(DIGITAL_GAIN, values[DIGITAL_GAIN]) if DIGITAL_GAIN in values else 1.0
+        out["gain_db"] = 20.0 * math.log10(analogue * digital)
+        out[RAW_GAIN] = 20.0 * math.log10(analogue)
     if TEMPERATURE in values:
         out["sensor_temperature_c"] = _number(TEMPERATURE, values[TEMPERATURE], positive=False)
     return out

@@ -169,7 +169,7 @@ def test_camera_ros_metadata_conversion():
     battery = ns(name="battery", hardware_id="bms", values=[kv("voltage", "12.1")])
     msg = ns(status=[battery, cam])
     assert metadata_from_camera_ros(msg) == {"exposure_time_s": pytest.approx(0.02), "gain_db": pytest.approx(12.0412),
-                                             "sensor_temperature_c": 47.5}
+                                             "raw_gain_db": pytest.approx(12.0412), "sensor_temperature_c": 47.5}
     assert metadata_from_camera_ros(ns(status=[battery])) is None and metadata_from_camera_ros(ns(status=[])) is None
     assert metadata_from_camera_ros(ns(status=[other, cam]))["exposure_time_s"] == pytest.approx(1e-4)  # the first
     assert metadata_from_camera_ros(ns(status=[other, cam]), "imx708")["exposure_time_s"] == pytest.approx(0.02)
@@ -182,6 +182,30 @@ def test_camera_ros_metadata_conversion():
         match = f"camera_ros metadata {key} = '{value}' is not " + (what or "a number")
         with pytest.raises(AdapterError, match=match):
             metadata_from_camera_ros(ns(status=[bad]))
+
+
+def test_camera_ros_gain_of_a_raw_bayer_image_leaves_out_the_isps_digital_gain():
+    """AnalogueGain 4 x DigitalGain 2: a processed (mono8) image's gain is 18.06 dB, a raw Bayer image's (the sensor's
+    output, before the ISP) 12.04 dB; other drivers' gain is taken as it is for both."""
+    from msg_adapters import prepare_frame
+    from noise_monitor.monitor.runtime import FrameOptions
+
+    kv, ns = lambda k, v: SimpleNamespace(key=k, value=v), SimpleNamespace  # noqa: E731
+    values = [kv("AnalogueGain", "4.0"), kv("DigitalGain", "2.0"), kv("ExposureTime", "10000"),
+              kv("SensorTemperature", "40.0")]
+    meta = metadata_from_camera_ros(ns(status=[ns(name="", hardware_id="imx477", values=values)]))
+    options = FrameOptions(load_profile("ev76c661"), None, "luma", None)
+
+    def gain(encoding: str, metadata: dict) -> float:
+        img = ns(header=None, height=4, width=4, step=4, encoding=encoding, is_bigendian=0, data=bytes(range(16)))
+        frame = prepare_frame(img, 1, options, metadata=metadata)
+        assert frame.metadata is not None, (frame.image_error, frame.metadata_error, frame.missing)
+        return frame.metadata.gain_db
+
+    assert gain("mono8", meta) == pytest.approx(18.0618, abs=1e-4)
+    assert gain("bayer_rggb8", meta) == pytest.approx(12.0412, abs=1e-4)
+    plain = {k: v for k, v in meta.items() if k != "raw_gain_db"}
+    assert gain("bayer_rggb8", plain) == gain("mono8", plain) == pytest.approx(18.0618, abs=1e-4)
 
 
 def test_keymap_validation_and_conversion():
