@@ -227,7 +227,7 @@ def test_frames_lost_and_skip_reasons_reach_the_campaign(tmp_path: Path) -> None
                 if images - 1 in (3, 4, 9):
                     continue
                 if images - 1 == 12:
-                    msg = dataclasses.replace(msg, encoding="yuv422")
+                    msg = dataclasses.replace(msg, encoding="nv21")
             if topic == reader.metadata_topic:
                 metas += 1
                 if metas - 1 in (3, 4, 9):

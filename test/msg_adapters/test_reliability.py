@@ -69,7 +69,7 @@ PIXELS = np.arange(12 * 10, dtype=np.uint8).reshape(12, 10)
     ("header height larger than the data", {"height": 13}, "image data has 120 bytes, expected 130"),
     ("header width doubled, data unchanged", {"width": 5, "step": 5}, "image data has 120 bytes, expected 60"),
     ("step < width x bytes per pixel", {"step": 9}, "step 9 is smaller than width\\*channels\\*bytes = 10"),
-    ("unknown encoding", {"encoding": "yuv422"}, "unsupported image encoding 'yuv422'; supported: mono8"),
+    ("unknown encoding", {"encoding": "nv21"}, "unsupported image encoding 'nv21'; supported: mono8"),
     ("float encoding", {"encoding": "32FC1"}, "unsupported image encoding '32fc1'"),
     ("no encoding", {"encoding": ""}, "unsupported image encoding ''"),
     ("0x0 image", {"height": 0, "width": 0, "step": 0, "data": b""}, "empty image \\(0x0\\)"),

@@ -489,11 +489,11 @@ def test_sim_time_from_clock(rig_factory):
 
 def test_unusable_image_is_a_warning_with_the_reason(rig_factory):
     rig = rig_factory("yuv")
-    image = Image(height=4, width=4, encoding="yuv422", step=8, data=bytes(32))
+    image = Image(height=4, width=4, encoding="nv21", step=8, data=bytes(32))
     image.header.stamp = Time(sec=5, nanosec=0)
     rig.pub_img.publish(image)
     report = rig.status_for(5 * 10**9)
-    assert report.level == WARN and "image unusable: unsupported image encoding 'yuv422'" in report.message
+    assert report.level == WARN and "image unusable: unsupported image encoding 'nv21'" in report.message
 
 
 def test_temperature_topic_completes_the_metadata(rig_factory):

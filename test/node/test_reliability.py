@@ -168,8 +168,8 @@ def bad_images(patch_size: int) -> list[tuple[str, Image, str]]:
     good = np.full((SIZE, SIZE), 100, np.uint8).tobytes()
     big16 = np.full((SIZE, SIZE), 1000, ">u2").tobytes()
     return [
-        ("unknown encoding", Image(height=SIZE, width=SIZE, encoding="yuv422", step=SIZE, data=good),
-         "image unusable: unsupported image encoding 'yuv422'"),
+        ("unknown encoding", Image(height=SIZE, width=SIZE, encoding="nv21", step=SIZE, data=good),
+         "image unusable: unsupported image encoding 'nv21'"),
         ("data shorter", Image(height=SIZE, width=SIZE, encoding="mono8", step=SIZE, data=good[:-SIZE - 1]),
          f"image unusable: image data has {SIZE * SIZE - SIZE - 1} bytes"),
         ("data longer", Image(height=SIZE, width=SIZE, encoding="mono8", step=SIZE, data=good + good),
