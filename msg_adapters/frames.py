@@ -55,6 +55,7 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
             geometry.check_image(int(image_msg.height), int(image_msg.width))
         if RAW_GAIN in raw and str(image_msg.encoding).strip().lower().startswith("bayer_"):
             raw = {**raw, "gain_db": raw[RAW_GAIN]}
+            frame.raw_metadata = dict(raw)  # the gain of this image, as characterize and the lab read it
     except AdapterError as exc:
         frame.image_dn = None
         frame.image_error = str(exc)

@@ -200,6 +200,7 @@ def test_camera_ros_gain_of_a_raw_bayer_image_leaves_out_the_isps_digital_gain()
         img = ns(header=None, height=4, width=4, step=4, encoding=encoding, is_bigendian=0, data=bytes(range(16)))
         frame = prepare_frame(img, 1, options, metadata=metadata)
         assert frame.metadata is not None, (frame.image_error, frame.metadata_error, frame.missing)
+        assert frame.raw_metadata["gain_db"] == pytest.approx(frame.metadata.gain_db)  # what characterize reads
         return frame.metadata.gain_db
 
     assert gain("mono8", meta) == pytest.approx(18.0618, abs=1e-4)
