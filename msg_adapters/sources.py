@@ -4,7 +4,7 @@
 |---|---|---|
 | ``diagnostics`` (default) | diagnostic_msgs/DiagnosticArray with CameraMetadata key names | metadata_topic |
 | ``keymap`` | diagnostic_msgs/DiagnosticArray read through ``metadata_keymap`` | metadata_topic |
-| ``flir`` / ``basler`` / ``realsense`` | the driver's metadata message (:mod:`msg_adapters.vendor`) | metadata_topic |
+| ``flir`` / ``basler`` / ``realsense`` / ``aravis`` | the driver's metadata message (:mod:`msg_adapters.vendor`) | metadata_topic |
 | ``camera_ros`` | diagnostic_msgs/DiagnosticArray with libcamera's metadata (:mod:`msg_adapters.libcamera`) | metadata_topic (``/diagnostics``) |
 | ``parameters`` | rcl_interfaces/ParameterEvent of ``metadata_driver_node`` (v4l2_camera, usb_cam) | /parameter_events |
 
@@ -21,7 +21,7 @@ from .keymap import keymap_entries, metadata_from_keymap, parse_keymap
 from .libcamera import libcamera_status, metadata_from_camera_ros
 from .metadata import metadata_from_diagnostics
 from .parameter_events import metadata_from_parameters, parameter_values, preset_keymap
-from .vendor import SOURCE_TYPES, message_class, metadata_from_vendor
+from .vendor import HELD_SOURCES, SOURCE_TYPES, message_class, metadata_from_vendor
 
 METADATA_SOURCES = ("diagnostics", "keymap", *SOURCE_TYPES, "camera_ros", "parameters")
 PARAMETER_EVENTS_TOPIC = "/parameter_events"
@@ -31,8 +31,8 @@ PARAMETER_EVENTS_TOPIC = "/parameter_events"
 class MetadataSource:
     """A resolved metadata source. ``convert(msg)`` returns CameraMetadata fields (AdapterError on bad
     fields) or None for a message that does not concern this camera (another node's parameter event).
-    ``held``: values persist until changed (parameter events, Basler's header-less CurrentParams) instead
-    of being paired with images by stamp.
+    ``held``: values persist until changed (parameter events, Basler's header-less CurrentParams, camera_aravis2's
+    periodic diagnostics) instead of being paired with images by stamp.
     """
 
     name: str
@@ -95,9 +95,8 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
     if not topic:
         return None
     if source in SOURCE_TYPES:
-        # Basler's CurrentParams has no header: its values are held until the next one, not paired by stamp
         return MetadataSource(source, message_class(source), topic, lambda m: metadata_from_vendor(m, profile),
-                              held=source == "basler")
+                              held=source in HELD_SOURCES)
     from diagnostic_msgs.msg import DiagnosticArray
 
     if source == "camera_ros":

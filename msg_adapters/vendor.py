@@ -16,6 +16,15 @@ that rosbags can deserialise bags recorded with these drivers without their pack
 - Intel RealSense (IntelRealSense/realsense-ros): ``realsense2_camera_msgs/msg/Metadata``, a JSON object
   with librealsense's frame metadata: ``actual_exposure`` in microseconds, ``gain_level`` in the sensor's
   relative gain units (mapped to dB through the profile's ``gain_range_db`` over ``driver_gain_range``).
+- GenICam cameras (GigE Vision, USB3 Vision) through ``camera_aravis2`` (FraunhoferIOSB/camera_aravis2 >= 1.0):
+  ``camera_aravis2_msgs/msg/CameraDiagnostics`` on ``~/diagnostics``, the features its ``diagnostic_yaml_url`` lists
+  as key/values named by the GenICam SFNC (``Feature`` or ``Feature-SelectorValue``), published at
+  ``diagnostic_publishing_rate`` and stamped when published, not per frame (held until the next one): ``ExposureTime``
+  (or ``ExposureTimeAbs``) in us; the gain in dB from ``Gain`` / ``Gain-All``, else ``Gain-AnalogAll`` plus
+  ``Gain-DigitalAll``, else ``GainAbs``, else ``GainRaw`` in the camera's raw units (through ``gain_range_db`` over
+  ``driver_gain_range``); ``DeviceTemperature-Sensor`` (or ``DeviceTemperature`` without a selector) in degC, another
+  selector's temperature (the mainboard's) is not the sensor's and is left out; ``BlackLevel`` (``-All``) through
+  ``driver_black_level_dn``, as Basler's.
 
 A field a driver does not report comes from the camera profile; a reported field that is missing,
 non-numeric or out of range raises :class:`AdapterError` naming the field and value.
@@ -26,6 +35,8 @@ import json
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
+
+from noise_monitor.text import clip
 
 from .errors import AdapterError
 from .metadata import BLACK_LEVEL, black_level_value
@@ -101,12 +112,23 @@ std_msgs/Header header
 string json_data
 """
 
+ARAVIS_CAMERA_DIAGNOSTICS = """\
+std_msgs/Header header
+diagnostic_msgs/KeyValue[] data
+"""
+
 FLIR = "flir_camera_msgs/msg/ImageMetaData"
 BASLER = "pylon_ros2_camera_interfaces/msg/CurrentParams"
 REALSENSE = "realsense2_camera_msgs/msg/Metadata"
-VENDOR_TYPES: dict[str, str] = {FLIR: FLIR_IMAGE_METADATA, BASLER: BASLER_CURRENT_PARAMS, REALSENSE: REALSENSE_METADATA}
+ARAVIS = "camera_aravis2_msgs/msg/CameraDiagnostics"
+VENDOR_TYPES: dict[str, str] = {FLIR: FLIR_IMAGE_METADATA, BASLER: BASLER_CURRENT_PARAMS, REALSENSE: REALSENSE_METADATA,
+                                ARAVIS: ARAVIS_CAMERA_DIAGNOSTICS}
 #: metadata_source name -> message type (the ROS package must be importable for a live subscription)
-SOURCE_TYPES: dict[str, str] = {"flir": FLIR, "basler": BASLER, "realsense": REALSENSE}
+SOURCE_TYPES: dict[str, str] = {"flir": FLIR, "basler": BASLER, "realsense": REALSENSE, "aravis": ARAVIS}
+#: sources whose values are held until the next message instead of paired with images by stamp: Basler's
+#: CurrentParams has no header, camera_aravis2 publishes at its own rate, stamped when it publishes
+HELD_SOURCES = frozenset(("basler", "aravis"))
+HELD_TYPES = frozenset(SOURCE_TYPES[s] for s in HELD_SOURCES)
 _BASLER_UNAVAILABLE = (-10000.0, -20000.0)
 
 
@@ -114,9 +136,9 @@ def _num(field: str, value: Any, unit: str) -> float:
     try:
         out = float(value)
     except (TypeError, ValueError):
-        raise AdapterError(f"driver metadata {field} = {value!r} is not a number ({unit})") from None
+        raise AdapterError(f"driver metadata {field} = {clip(repr(value), 80)} is not a number ({unit})") from None
     if not math.isfinite(out):
-        raise AdapterError(f"driver metadata {field} = {value!r} is not finite ({unit})")
+        raise AdapterError(f"driver metadata {field} = {clip(repr(value), 80)} is not finite ({unit})")
     return out
 
 
@@ -135,8 +157,10 @@ def map_gain(field: str, value: Any, gain_range_db: Sequence[float] | None,
         raise AdapterError(f"driver metadata {field} = {x:g} is a relative gain: the camera profile needs "
                            "gain_range_db: [min_db, max_db] to convert it to dB")
     lo, hi = driver_range
-    if not lo <= x <= hi:
+    slack = 1e-6 * (hi - lo)  # a range end that float32 / JSON rounding put a hair outside is the end
+    if not lo - slack <= x <= hi + slack:
         raise AdapterError(f"driver metadata {field} = {x:g} is outside the driver's gain range [{lo:g}, {hi:g}]")
+    x = min(max(x, lo), hi)
     return gain_range_db[0] + (x - lo) / (hi - lo) * (gain_range_db[1] - gain_range_db[0])
 
 
@@ -158,25 +182,24 @@ def _basler(msg: Any, profile: Any) -> dict[str, float | str]:
     out["gain_db"] = map_gain("gain", msg.gain, _gain_range(profile))
     if float(msg.temperature) != 0.0:  # 0.0: the camera does not report it
         out["sensor_temperature_c"] = _num("temperature", msg.temperature, "degC")
-    black = _basler_black_level(_num("black_level", msg.black_level, "driver units"), profile)
+    value = _num("black_level", msg.black_level, "driver units")
+    black = None if value in _BASLER_UNAVAILABLE else _driver_black_level("black_level", value, profile)
     if black is not None:
         out[BLACK_LEVEL] = black
     return out
 
 
-def _basler_black_level(value: float, profile: Any) -> float | None:
-    """The driver's black level on the 8-bit DN scale; None where the camera has none (the profile's applies)."""
-    if value in _BASLER_UNAVAILABLE:
-        return None
+def _driver_black_level(field: str, value: float, profile: Any) -> float | None:
+    """A driver's black level (camera units) on the 8-bit DN scale; None where the profile's applies."""
     per_unit = getattr(profile, "driver_black_level_dn", None)
     if per_unit is None:  # not convertible: the profile's black level applies (zero is zero in any unit)
         stated: float = getattr(profile, "black_level_dn", None) or 0.0
         if value == 0.0 or stated:
             return None
-        raise AdapterError(f"driver metadata black_level = {value:g} is in the camera's units: the camera profile "
+        raise AdapterError(f"driver metadata {field} = {value:g} is in the camera's units: the camera profile "
                            "needs driver_black_level_dn (8-bit DN per unit; ace GigE BlackLevelRaw at Mono8: 0.0625 "
                            "on most models) or black_level_dn")
-    return black_level_value("black_level", value * per_unit)
+    return black_level_value(field, value * per_unit)
 
 
 def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
@@ -197,6 +220,44 @@ def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
     return out
 
 
+def _aravis(msg: Any, profile: Any) -> dict[str, float | str]:
+    values = {str(kv.key).strip(): kv.value for kv in getattr(msg, "data", None) or ()}
+
+    def first(*keys: str) -> str | None:
+        return next((k for k in keys if k in values), None)
+
+    out: dict[str, float | str] = {}
+    exposure = first("ExposureTime", "ExposureTimeAbs")
+    if exposure:
+        out["exposure_time_s"] = _exposure_us(exposure, values[exposure])
+    overall, absolute, raw = first("Gain", "Gain-All"), first("GainAbs", "GainAbs-All"), first("GainRaw", "GainRaw-All")
+    parts = [k for k in ("Gain-AnalogAll", "Gain-DigitalAll") if k in values]
+    if overall:
+        out["gain_db"] = _num(overall, values[overall], "dB")
+    elif parts:  # analog and digital gains in dB: the image's gain is their sum
+        out["gain_db"] = sum(_num(k, values[k], "dB") for k in parts)
+    elif absolute:
+        out["gain_db"] = _num(absolute, values[absolute], "dB")
+    elif raw:
+        out["gain_db"] = map_gain(raw, values[raw], _gain_range(profile), _driver_range(profile))
+    elif any(k.startswith("Gain") for k in values):
+        raise AdapterError("driver metadata has no overall gain, only "
+                           f"{', '.join(sorted(k for k in values if k.startswith('Gain')))}: list Gain with the "
+                           "selector All (or AnalogAll and DigitalAll) in camera_aravis2's diagnostic_yaml_url")
+    temperature = first("DeviceTemperature-Sensor", "DeviceTemperature")
+    if temperature:
+        out["sensor_temperature_c"] = _num(temperature, values[temperature], "degC")
+    black = first("BlackLevel", "BlackLevel-All")
+    if black:
+        level = _driver_black_level(black, _num(black, values[black], "camera units"), profile)
+        if level is not None:
+            out[BLACK_LEVEL] = level
+    if "exposure_time_s" not in out and "gain_db" not in out:
+        raise AdapterError("driver metadata has neither ExposureTime nor Gain (keys: "
+                           f"{', '.join(sorted(values)) or 'none'}): list them in camera_aravis2's diagnostic_yaml_url")
+    return out
+
+
 def _gain_range(profile: Any) -> Sequence[float] | None:
     return getattr(profile, "gain_range_db", None)
 
@@ -205,7 +266,8 @@ def _driver_range(profile: Any) -> Sequence[float]:
     return getattr(profile, "driver_gain_range", None) or (0.0, 1.0)
 
 
-_CONVERTERS: dict[str, Callable[[Any, Any], dict[str, float | str]]] = {FLIR: _flir, BASLER: _basler, REALSENSE: _realsense}
+_CONVERTERS: dict[str, Callable[[Any, Any], dict[str, float | str]]] = {FLIR: _flir, BASLER: _basler, REALSENSE: _realsense,
+                                                                        ARAVIS: _aravis}
 
 
 def message_type_name(msg: Any) -> str:

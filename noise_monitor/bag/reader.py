@@ -30,7 +30,7 @@ from msg_adapters.metadata import (
     metadata_from_temperature,
 )
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, FRAME
-from msg_adapters.vendor import VENDOR_TYPES, metadata_from_vendor, register_vendor_types
+from msg_adapters.vendor import HELD_TYPES, VENDOR_TYPES, metadata_from_vendor, register_vendor_types
 from noise_monitor import safe_yaml
 from noise_monitor.monitor.frame import Frame
 from noise_monitor.monitor.runtime import FrameOptions
@@ -310,7 +310,9 @@ class BagReader:
         (``msg_adapters.prepare_frame``).
 
         Metadata follows the monitor's matching rule (:func:`noise_monitor.monitor.sync.match_stamp`: the
-        message nearest the image stamp within ``sync_tolerance_s``, else the latest older one); it is merged
+        message nearest the image stamp within ``sync_tolerance_s``, else the latest older one; a driver whose values
+        are held until its next message, Basler's and camera_aravis2's, the latest at or before the image, its age not
+        judged, as the node holds them); it is merged
         over ``profile`` (dynamic values win) and the Temperature matched the same way. Unusable
         CameraInfo/Temperature messages are ignored. ``Frame.skip_reason`` says why a frame cannot be
         evaluated (``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``). Driver
@@ -332,16 +334,17 @@ class BagReader:
         meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap, camera))
         temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
         info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
+        held = self.metadata_topic is not None and self.topics[self.metadata_topic] in HELD_TYPES
         tol = int(sync_tolerance_s * 1e9)
         if self.image_topic is None:
             raise BagError(f"bag {self.path} was opened without topic detection: no image topic")
         for index, (_, log_time, msg) in enumerate(self.messages([self.image_topic])):
             stamp = _stamp_ns(msg, log_time)
-            mi = match_stamp(meta_t, stamp, tol)
+            mi = match_stamp(meta_t, stamp, 0 if held else tol)
             temp = _usable(_at(temp_v, match_stamp(temp_t, stamp, tol)))
             yield prepare_frame(
                 msg, stamp, options, metadata=meta_v[mi] if mi is not None else None,
-                metadata_stamp_ns=meta_t[mi] if mi is not None else None,
+                metadata_stamp_ns=meta_t[mi] if mi is not None and not held else None,
                 temperature_c=temp["sensor_temperature_c"] if temp else None,
                 geometry=_usable(_at(info_v, match_stamp(info_t, stamp, tol))),
                 image_error=msg.reason if isinstance(msg, DamagedMessage) else None,

@@ -15,7 +15,7 @@ from msg_adapters import AdapterError
 from msg_adapters.keymap import metadata_from_keymap, parse_keymap
 from msg_adapters.libcamera import metadata_from_camera_ros
 from msg_adapters.parameter_events import metadata_from_parameters, parameter_values, preset_keymap
-from msg_adapters.vendor import BASLER, FLIR, REALSENSE, metadata_from_vendor
+from msg_adapters.vendor import ARAVIS, BASLER, FLIR, REALSENSE, metadata_from_vendor
 from noise_monitor.bag.errors import BagError
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.simulate import load_truth, simulate_bag
@@ -32,7 +32,8 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
     """A simulated campaign (default: 4 frames) whose metadata topic is re-written as the driver publishes it;
     ``raise_dn(i)``: DN added to image i (a pedestal raised by the operator), ``black_units(i)``: the black level
     the Basler driver reports for it."""
-    src = src or simulate_bag(tmp_path / "src.mcap", "ev76c661", "gain_sweep", seed=4, frames=4, width=48, height=32)
+    src = src or simulate_bag(tmp_path / "src.mcap", "ev76c661", "gain_sweep", seed=4, frames=4, width=48, height=32,
+                              hold_s=0.2)  # a new gain every frame (0, 8, 16, 24 dB): a conversion's scale shows
     truth = load_truth(src)["frames"]
     store = typestore()
     from msg_adapters.vendor import register_vendor_types
@@ -79,6 +80,17 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
                 js = json.dumps({"frame_number": 1, "actual_exposure": int(round(exp_us)),
                                  "gain_level": gain_db / 24.0 * 232 + 16, "auto_exposure": 1})
                 w.write("/camera/color/metadata", t[REALSENSE](header=msg.header, json_data=js), log_time)
+            elif kind.startswith("aravis"):  # camera_aravis2: features published at its own rate (aravis_slow: before
+                # every other frame), stamped when published
+                kv, sent = t["diagnostic_msgs/msg/KeyValue"], msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec - 3_000_000
+                header = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
+                    sec=sent // 10**9, nanosec=sent % 10**9), frame_id="camera_driver_gv")
+                data = [kv(key="ExposureTime", value=f"{exp_us:f}"), kv(key="GainAuto", value="Off"),
+                        kv(key="Gain-AnalogAll", value=f"{gain_db - 1.5:f}"), kv(key="Gain-DigitalAll", value="1.500000"),
+                        kv(key="DeviceTemperature-Mainboard", value=f"{temp + 12:f}"),
+                        kv(key="DeviceTemperature-Sensor", value=f"{temp:f}")]
+                if kind == "aravis" or meta_i % 2:
+                    w.write("/camera_driver_gv/diagnostics", t[ARAVIS](header=header, data=data), log_time)
             elif kind.startswith("camera_ros"):  # libcamera's metadata among other nodes' diagnostics
                 kv, st = t["diagnostic_msgs/msg/KeyValue"], t["diagnostic_msgs/msg/DiagnosticStatus"]
                 arr = t["diagnostic_msgs/msg/DiagnosticArray"]
@@ -103,7 +115,8 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
     return dst, truth
 
 
-@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "keymap", "camera_ros", "camera_ros2"])
+@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "aravis", "aravis_slow", "keymap", "camera_ros",
+                                  "camera_ros2"])
 def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
     """Each driver's metadata in a bag gives the stated metadata; camera_ros's on /diagnostics (found there, other
     nodes' arrays left aside), the camera named by hardware_id where two publish there (a clear error without)."""
@@ -122,10 +135,15 @@ def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
               "acme_cam|SensorTempK|sensor_temperature_c|K"] if kind == "keymap" else None
     with open_bag(bag) as reader:
         frames = list(reader.frames(profile, metadata_keymap=keymap, **camera))
+        if kind.startswith("aravis"):  # stamped 3 ms before an image: the latest at or before it, its age not judged
+            assert reader.metadata_topic == "/camera_driver_gv/diagnostics"
+            assert all(f.metadata_age_s is None for f in frames)
+    if kind == "aravis_slow":  # published before every other frame: the frames between hold the values before them
+        truth = [truth[i - i % 2] for i in range(len(truth))]
         if kind.startswith("camera_ros"):
             assert reader.metadata_topic == "/diagnostics"
             assert reader.hardware_id() == (None if camera else "/base/imx708@1a")
-    assert len(frames) == 4
+    assert len(frames) == 4 and len({r["true_metadata"]["gain_db"] for r in truth}) == (2 if kind == "aravis_slow" else 4)
     for f, r in zip(frames, truth):
         assert f.skip_reason is None, f.skip_reason
         m = r["true_metadata"]
@@ -145,6 +163,7 @@ def test_driver_messages_with_bad_fields_name_them():
         metadata_from_vendor(ns(**basler))  # no profile: a relative gain cannot be converted
     with pytest.raises(AdapterError, match="gain = 1.5 is outside the driver's gain range"):
         metadata_from_vendor(ns(**{**basler, "gain": 1.5}), PROFILE)
+    assert metadata_from_vendor(ns(**{**basler, "gain": 1.0 + 1e-7}), PROFILE)["gain_db"] == 24.0  # rounding: the end
     with pytest.raises(AdapterError, match="exposure = -10000 \\(not available"):
         metadata_from_vendor(ns(**{**basler, "exposure": -10000.0}), PROFILE)
     with pytest.raises(AdapterError, match="success = false \\(camera busy\\)"):
@@ -156,6 +175,57 @@ def test_driver_messages_with_bad_fields_name_them():
     with pytest.raises(AdapterError, match="neither actual_exposure nor gain_level"):
         metadata_from_vendor(ns(__msgtype__=REALSENSE, json_data='{"frame_number": 3}'), PROFILE)
     assert flir
+
+
+def test_aravis_diagnostics_conversion():
+    """camera_aravis2's CameraDiagnostics: GenICam SFNC features as key/values (``Feature-Selector`` with a selector):
+    exposure us, the overall gain in dB (All, else analog + digital, else GainAbs, else GainRaw through the profile's
+    ranges), the sensor's temperature (not the mainboard's), BlackLevel through driver_black_level_dn."""
+    ns = SimpleNamespace
+
+    def meta(profile=PROFILE, **values):
+        return metadata_from_vendor(ns(__msgtype__=ARAVIS, data=[ns(key=k.replace("_", "-"), value=v)
+                                                                  for k, v in values.items()]), profile)
+
+    assert meta(ExposureTime="20000.000000", Gain="6.000000", DeviceTemperature="41.5") == {
+        "exposure_time_s": pytest.approx(0.02), "gain_db": pytest.approx(6.0), "sensor_temperature_c": pytest.approx(41.5)}
+    assert meta(ExposureTimeAbs="500", Gain_AnalogAll="4.5", Gain_DigitalAll="2.0",
+                DeviceTemperature_Mainboard="55.0") == {"exposure_time_s": pytest.approx(5e-4), "gain_db": pytest.approx(6.5)}
+    assert meta(Gain_All="3.0", Gain_AnalogAll="9.0")["gain_db"] == pytest.approx(3.0)  # the overall gain first
+    assert meta(GainAbs="12.0")["gain_db"] == pytest.approx(12.0)
+    raw = dataclasses.replace(PROFILE, driver_gain_range=(0.0, 1023.0))
+    assert meta(raw, GainRaw="511.5")["gain_db"] == pytest.approx(12.0)  # 0..1023 over 0..24 dB
+    with pytest.raises(AdapterError, match="GainRaw = 511.5 is a relative gain: the camera profile needs gain_range_db"):
+        meta(None, GainRaw="511.5")
+    with pytest.raises(AdapterError, match="no overall gain, only Gain-Blue, Gain-Red: list Gain with the selector All"):
+        meta(ExposureTime="100", Gain_Red="1.0", Gain_Blue="2.0")
+    with pytest.raises(AdapterError, match=r"neither ExposureTime nor Gain \(keys: DeviceTemperature-Sensor, PtpStatus\)"):
+        meta(DeviceTemperature_Sensor="40.0", PtpStatus="Slave")
+    with pytest.raises(AdapterError, match="ExposureTime = -5 us is not a valid exposure"):
+        meta(ExposureTime="-5.000000")
+    with pytest.raises(AdapterError, match="Gain = 'x' is not a number"):
+        meta(Gain="x")
+    with pytest.raises(AdapterError, match="BlackLevel = 64 is in the camera's units: the camera profile needs "
+                                           "driver_black_level_dn"):
+        meta(Gain="0.0", BlackLevel="64")
+    pedestal = dataclasses.replace(PROFILE, driver_black_level_dn=0.25)
+    assert meta(pedestal, Gain="0.0", BlackLevel_All="64")["black_level_dn"] == pytest.approx(16.0)
+
+
+def test_the_bundled_camera_aravis2_diagnostics_config_gives_what_the_monitor_reads():
+    """config/camera_aravis2_diagnostics.yaml, published as camera_aravis2 names its features (``Feature`` or
+    ``Feature-SelectorValue``), gives exposure, gain, temperature and black level."""
+    import yaml
+
+    from noise_monitor.paths import share_dir
+
+    features = yaml.safe_load((share_dir() / "config" / "camera_aravis2_diagnostics.yaml").read_text())
+    keys = [f["FeatureName"] + "".join(f"-{s['Value']}" for s in f.get("Selectors", [])[:1]) for f in features]
+    value = {"ExposureTime": "8000.000000", "Gain": "12.000000", "DeviceTemperature": "47.250000", "BlackLevel": "32.0"}
+    msg = SimpleNamespace(__msgtype__=ARAVIS, data=[SimpleNamespace(key=k, value=value[k.split("-")[0]]) for k in keys])
+    assert metadata_from_vendor(msg, dataclasses.replace(PROFILE, driver_black_level_dn=0.25)) == {
+        "exposure_time_s": pytest.approx(0.008), "gain_db": pytest.approx(12.0),
+        "sensor_temperature_c": pytest.approx(47.25), "black_level_dn": pytest.approx(8.0)}
 
 
 def test_camera_ros_metadata_conversion():

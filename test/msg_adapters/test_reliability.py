@@ -204,7 +204,8 @@ def test_unknown_vendor_message_type_names_the_supported_ones():
     rosbags_info = TS.types["sensor_msgs/msg/CameraInfo"]
     for msg in (CameraInfo(), both(CameraInfo(), "sensor_msgs/msg/CameraInfo")[1]):
         with pytest.raises(AdapterError, match="no metadata adapter for sensor_msgs/msg/CameraInfo; supported "
-                                               "vendor types: flir_camera_msgs/msg/ImageMetaData"):
+                                               "vendor types: camera_aravis2_msgs/msg/CameraDiagnostics, "
+                                               "flir_camera_msgs/msg/ImageMetaData"):
             metadata_from_vendor(msg)
     assert rosbags_info.__msgtype__ == "sensor_msgs/msg/CameraInfo"
 

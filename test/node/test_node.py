@@ -688,9 +688,11 @@ def test_driver_metadata_source_without_its_package_names_it():
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     try:
-        with pytest.raises(ValueError, match="install the ROS package flir_camera_msgs"):
-            node_class()(node_name="flir_monitor", context=ctx, parameter_overrides=[
-                Parameter("metadata_source", value="flir"), Parameter("profile", value="icx285")], estimator=object())
+        for source, package in (("flir", "flir_camera_msgs"), ("aravis", "camera_aravis2_msgs")):
+            with pytest.raises(ValueError, match=f"metadata_source {source} subscribes to {package}/msg/.*: install "
+                                                 f"the ROS package {package}"):
+                node_class()(node_name=f"{source}_monitor", context=ctx, parameter_overrides=[
+                    Parameter("metadata_source", value=source), Parameter("profile", value="icx285")], estimator=object())
         with pytest.raises(ValueError, match="metadata_source must be one of diagnostics, keymap, flir"):
             node_class()(node_name="bad_monitor", context=ctx, parameter_overrides=[
                 Parameter("metadata_source", value="spinnaker")], estimator=object())
