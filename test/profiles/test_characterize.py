@@ -121,6 +121,42 @@ def test_profile_runs_in_replay_and_lab(recording, tmp_path):
     assert summary["frames_processed"] == 4
 
 
+def test_a_camera_ros_recording_gives_the_same_figures(recording, tmp_path):
+    """A Raspberry Pi camera's photon-transfer recording through camera_ros: the same images with libcamera's metadata
+    on /diagnostics (ExposureTime in whole us, AnalogueGain and DigitalGain factors, SensorTemperature; other nodes'
+    arrays beside it) give the figures of the recording with the camera's own metadata."""
+    from msg_adapters.metadata import metadata_from_diagnostics
+    from msg_adapters.vendor import register_vendor_types
+    from noise_monitor.bag.reader import open_bag
+    from noise_monitor.bag.writer import typestore
+
+    store = typestore()
+    register_vendor_types(store)
+    kv, st, arr = (store.types[f"diagnostic_msgs/msg/{n}"] for n in ("KeyValue", "DiagnosticStatus", "DiagnosticArray"))
+    bag = tmp_path / "camera_ros_ptc.mcap"
+    with open_bag(recording["bag"]) as reader, BagWriter(bag, store=store) as w:
+        for topic, log_time, msg in reader.messages([reader.image_topic, reader.metadata_topic]):
+            if topic == reader.image_topic:
+                w.write("/camera/image_raw", msg, log_time)
+                continue
+            m = metadata_from_diagnostics(msg)
+            libcamera = [kv(key="AnalogueGain", value=f"{10 ** (m['gain_db'] / 20):.6f}"),
+                         kv(key="DigitalGain", value="1.000000"),
+                         kv(key="ExposureTime", value=str(round(m["exposure_time_s"] * 1e6))),
+                         kv(key="SensorTemperature", value=f"{m['sensor_temperature_c']:.6f}")]
+            w.write("/diagnostics", arr(header=msg.header, status=[st(level=0, name="battery", message="",
+                    hardware_id="bms", values=[kv(key="voltage", value="12.1")])]), log_time)
+            w.write("/diagnostics", arr(header=msg.header, status=[st(level=0, name="", message="",
+                    hardware_id="/base/axi/pcie@120000/rp1/i2c@88000/imx477@1a", values=libcamera)]), log_time)
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "char"), "--json", str(tmp_path / "c.json"),
+                 "--bit-depth", "12", "--sensor-type", "cmos", "--pixel-size-um", "3.45"]) == 0
+    got, want = json.loads((tmp_path / "c.json").read_text())["figures"], recording["result"]["figures"]
+    for field in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
+                  "doubling_temperature_k", "dsnu_e", "prnu_pct", "black_level_dn"):
+        assert got[field]["value"] == pytest.approx(want[field]["value"], rel=1e-4), field  # whole us: 1e-7 apart
+    assert (tmp_path / "char" / "profile.yaml").is_file()
+
+
 def test_ptc_plan_needs_enough_frames():
     frames = plan(MIN_FRAMES)
     assert len(frames) <= MIN_FRAMES and {f.kind for f in frames} == {"flat", "dark"}
