@@ -15,7 +15,7 @@ from .camera_info import CameraGeometry
 from .compressed import decompress, is_compressed
 from .errors import AdapterError
 from .image import image_to_gray_dn
-from .libcamera import RAW_GAIN
+from .libcamera import RAW_BLACK_LEVEL, RAW_GAIN
 from .metadata import BLACK_LEVEL, black_level_value, resolve_metadata
 
 
@@ -29,11 +29,15 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
     ``metadata``: the per-frame key/values (merged over the profile of ``options`` and the latest
     ``temperature_c``), or the error (an exception or its text) of a metadata message that could not be
     read. ``geometry``: the latest CameraInfo, checked against the image size. ``image_error``: the image
-    message is known to be unusable (e.g. damaged bytes in a bag). A raw Bayer image takes the gain of the sensor's
-    output where the metadata tells it apart (``RAW_GAIN``: camera_ros's, without the ISP's digital gain).
+    message is known to be unusable (e.g. damaged bytes in a bag). A raw Bayer image takes the gain and black level of
+    the sensor's output where the metadata tells them apart (camera_ros's ``RAW_GAIN``, without the ISP's digital gain,
+    and ``RAW_BLACK_LEVEL``, the pedestal the ISP takes off).
     Problems end up in the Frame's ``image_error`` / ``metadata_error`` / ``missing``, never as exceptions.
     """
     raw = metadata if isinstance(metadata, Mapping) else {}
+    if _is_bayer(image_msg):  # the sensor's raw output: its own gain and pedestal where the metadata tells them apart
+        raw = {**raw, **{key: raw[own] for key, own in (("gain_db", RAW_GAIN), (BLACK_LEVEL, RAW_BLACK_LEVEL))
+                         if own in raw}}
     header = getattr(image_msg, "header", None)
     frame = Frame(stamp_ns, None, None, index=index, log_time_ns=log_time_ns, raw_metadata=dict(raw),
                   frame_id=clip(str(getattr(header, "frame_id", "") or ""), 200),
@@ -53,9 +57,6 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
             frame.black_level_dn = black
         if geometry is not None:
             geometry.check_image(int(image_msg.height), int(image_msg.width))
-        if RAW_GAIN in raw and str(image_msg.encoding).strip().lower().startswith("bayer_"):
-            raw = {**raw, "gain_db": raw[RAW_GAIN]}
-            frame.raw_metadata = dict(raw)  # the gain of this image, as characterize and the lab read it
     except AdapterError as exc:
         frame.image_dn = None
         frame.image_error = str(exc)
@@ -81,3 +82,9 @@ def black_level(options: FrameOptions, raw: Mapping[str, Any]) -> tuple[float, s
         except (TypeError, ValueError):
             raise AdapterError(f"metadata {BLACK_LEVEL} = {raw[BLACK_LEVEL]!r} is not a number") from None
     return options.black_level, "profile"
+
+
+def _is_bayer(image_msg: Any) -> bool:
+    """A raw Bayer image: an Image's encoding, or a CompressedImage's format (``"bayer_rggb8; png compressed ..."``)."""
+    encoding = getattr(image_msg, "encoding", None) or str(getattr(image_msg, "format", "")).split(";")[0]
+    return str(encoding).strip().lower().startswith("bayer_")

@@ -7,7 +7,10 @@ control names and values as libcamera prints them. Read here: ``ExposureTime`` (
 ``DigitalGain`` (factors: the gain of a processed image is their product, the digital gain being applied in the ISP
 that produces it; a raw Bayer stream is the sensor's output, whose gain is the analogue gain alone, kept as
 :data:`RAW_GAIN` for :func:`msg_adapters.frames.prepare_frame`) and ``SensorTemperature`` (degC, where the sensor
-reports one). ``/diagnostics`` carries every node's
+reports one). ``SensorBlackLevels`` (R, Gr, Gb, B on a 16-bit scale, as libcamera prints an array: ``[ 4096, 4096,
+4096, 4096 ]``) is the pedestal the raw Bayer output keeps, which the ISP takes off before its processed output: kept
+as :data:`RAW_BLACK_LEVEL` (the green sites' mean on the 8-bit scale, the sites the monitor reads of a Bayer image) for
+:func:`msg_adapters.frames.prepare_frame`. ``/diagnostics`` carries every node's
 diagnostics, the monitor's own among them: an array without a libcamera status (or only other cameras', when a
 ``hardware_id`` is asked for) is not this camera's (None).
 """
@@ -21,10 +24,13 @@ from noise_monitor.text import clip
 from .errors import AdapterError
 
 EXPOSURE, ANALOGUE_GAIN, DIGITAL_GAIN, TEMPERATURE = "ExposureTime", "AnalogueGain", "DigitalGain", "SensorTemperature"
+BLACK_LEVELS = "SensorBlackLevels"
 #: keys only a libcamera metadata status has (camera_ros prints every control of the request's metadata)
 LIBCAMERA_KEYS = frozenset((EXPOSURE, ANALOGUE_GAIN))
 #: the gain (dB) of the sensor's raw output, without the ISP's digital gain: a raw Bayer image's
 RAW_GAIN = "raw_gain_db"
+#: the black level (8-bit DN) of the sensor's raw output, which the ISP's processed output no longer has
+RAW_BLACK_LEVEL = "raw_black_level_dn"
 
 
 def is_libcamera(status: Any) -> bool:
@@ -69,4 +75,19 @@ def metadata_from_camera_ros(msg: Any, hardware_id: str = "") -> dict[str, float
         out[RAW_GAIN] = 20.0 * math.log10(analogue)
     if TEMPERATURE in values:
         out["sensor_temperature_c"] = _number(TEMPERATURE, values[TEMPERATURE], positive=False)
+    if BLACK_LEVELS in values:
+        out[RAW_BLACK_LEVEL] = _green_black_level(values[BLACK_LEVELS])
     return out
+
+
+def _green_black_level(value: Any) -> float:
+    """libcamera's SensorBlackLevels text (R, Gr, Gb, B on a 16-bit scale) -> the green sites' mean, 8-bit DN."""
+    items = str(value).strip().removeprefix("[").removesuffix("]").split(",")
+    try:
+        levels = [float(x) for x in items]
+    except ValueError:
+        levels = []
+    if len(levels) != 4 or not all(math.isfinite(x) and 0 <= x < 65536 for x in levels):
+        raise AdapterError(f"camera_ros metadata {BLACK_LEVELS} = {clip(repr(value), 80)} is not four levels "
+                           "(R, Gr, Gb, B) on the 16-bit scale")
+    return (levels[1] + levels[2]) / 2 * 255.0 / 65535.0

@@ -254,29 +254,41 @@ def test_camera_ros_metadata_conversion():
             metadata_from_camera_ros(ns(status=[bad]))
 
 
-def test_camera_ros_gain_of_a_raw_bayer_image_leaves_out_the_isps_digital_gain():
+def test_camera_ros_gain_and_black_level_of_a_raw_bayer_image_leave_out_the_isp():
     """AnalogueGain 4 x DigitalGain 2: a processed (mono8) image's gain is 18.06 dB, a raw Bayer image's (the sensor's
-    output, before the ISP) 12.04 dB; other drivers' gain is taken as it is for both."""
+    output, before the ISP) 12.04 dB; the SensorBlackLevels' green sites (16-bit scale) come off the raw image alone,
+    the ISP having taken them off its output; other drivers' gain is taken as it is for both."""
     from msg_adapters import prepare_frame
     from noise_monitor.monitor.runtime import FrameOptions
 
     kv, ns = lambda k, v: SimpleNamespace(key=k, value=v), SimpleNamespace  # noqa: E731
     values = [kv("AnalogueGain", "4.0"), kv("DigitalGain", "2.0"), kv("ExposureTime", "10000"),
-              kv("SensorTemperature", "40.0")]
+              kv("SensorBlackLevels", "[ 4096, 4000, 4200, 4096 ]"), kv("SensorTemperature", "40.0")]
     meta = metadata_from_camera_ros(ns(status=[ns(name="", hardware_id="imx477", values=values)]))
     options = FrameOptions(load_profile("ev76c661"), None, "luma", None)
+    pedestal = 4100 * 255 / 65535  # 15.95 DN: a 12-bit sensor's 256 codes
 
-    def gain(encoding: str, metadata: dict) -> float:
-        img = ns(header=None, height=4, width=4, step=4, encoding=encoding, is_bigendian=0, data=bytes(range(16)))
+    def frame_of(encoding: str, metadata: dict):
+        data = bytes(range(40, 56))
+        img = ns(header=None, height=4, width=4, step=4, encoding=encoding, is_bigendian=0, data=data)
         frame = prepare_frame(img, 1, options, metadata=metadata)
         assert frame.metadata is not None, (frame.image_error, frame.metadata_error, frame.missing)
         assert frame.raw_metadata["gain_db"] == pytest.approx(frame.metadata.gain_db)  # what characterize reads
-        return frame.metadata.gain_db
+        return frame
 
-    assert gain("mono8", meta) == pytest.approx(18.0618, abs=1e-4)
-    assert gain("bayer_rggb8", meta) == pytest.approx(12.0412, abs=1e-4)
-    plain = {k: v for k, v in meta.items() if k != "raw_gain_db"}
-    assert gain("bayer_rggb8", plain) == gain("mono8", plain) == pytest.approx(18.0618, abs=1e-4)
+    processed, bayer = frame_of("mono8", meta), frame_of("bayer_rggb8", meta)
+    assert processed.metadata.gain_db == pytest.approx(18.0618, abs=1e-4)
+    assert bayer.metadata.gain_db == pytest.approx(12.0412, abs=1e-4)
+    assert (processed.black_level_dn, processed.black_level_source) == (0.0, "profile")
+    assert (bayer.black_level_dn, bayer.black_level_source) == (pytest.approx(pedestal), "metadata")
+    assert bayer.image_dn[0, 0] == pytest.approx(41 - pedestal)  # the green site of the first 2x2 cell (R G / G B)
+    plain = {k: v for k, v in meta.items() if not k.startswith("raw_")}
+    assert frame_of("bayer_rggb8", plain).metadata.gain_db == pytest.approx(18.0618, abs=1e-4)
+    assert frame_of("bayer_rggb8", plain).black_level_dn == 0.0
+    for bad in ("[ 4096, 4096 ]", "4096", "[ 4096, -1, 4096, 4096 ]", "[ a, b, c, d ]"):
+        with pytest.raises(AdapterError, match=r"SensorBlackLevels = .* is not four levels \(R, Gr, Gb, B\)"):
+            metadata_from_camera_ros(ns(status=[ns(name="", hardware_id="imx477", values=[
+                kv("ExposureTime", "10000"), kv("SensorBlackLevels", bad)])]))
 
 
 def test_keymap_validation_and_conversion():
