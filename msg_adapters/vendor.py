@@ -242,7 +242,7 @@ def _aravis(msg: Any, profile: Any) -> dict[str, float | str]:
         out["gain_db"] = map_gain(raw, values[raw], _gain_range(profile), _driver_range(profile))
     elif any(k.startswith("Gain") for k in values):
         raise AdapterError("driver metadata has no overall gain, only "
-                           f"{', '.join(sorted(k for k in values if k.startswith('Gain')))}: list Gain with the "
+                           f"{clip(', '.join(sorted(k for k in values if k.startswith('Gain'))))}: list Gain with the "
                            "selector All (or AnalogAll and DigitalAll) in camera_aravis2's diagnostic_yaml_url")
     temperature = first("DeviceTemperature-Sensor", "DeviceTemperature")
     if temperature:
@@ -254,7 +254,7 @@ def _aravis(msg: Any, profile: Any) -> dict[str, float | str]:
             out[BLACK_LEVEL] = level
     if "exposure_time_s" not in out and "gain_db" not in out:
         raise AdapterError("driver metadata has neither ExposureTime nor Gain (keys: "
-                           f"{', '.join(sorted(values)) or 'none'}): list them in camera_aravis2's diagnostic_yaml_url")
+                           f"{clip(', '.join(sorted(values))) or 'none'}): list them in camera_aravis2's diagnostic_yaml_url")
     return out
 
 
