@@ -1,16 +1,20 @@
 """A configurable key map from a driver's key/values to CameraMetadata fields, with units.
 
-Used for a generic ``diagnostic_msgs/DiagnosticArray`` (status name + key) and for drivers that expose
-exposure and gain as ROS parameters (parameter name as key, see :mod:`msg_adapters.parameter_events`).
+Used for a generic ``diagnostic_msgs/DiagnosticArray`` (status name + key), for drivers that expose
+exposure and gain as ROS parameters (parameter name as key, see :mod:`msg_adapters.parameter_events`) and for a
+driver's JSON frame metadata (Orbbec's: the JSON object's keys, STATUS ``*``).
 An entry is the string ``"STATUS|KEY|FIELD|UNIT|SCALE"`` (STATUS ``*`` = any status; SCALE optional,
 default 1): the value is multiplied by SCALE, then converted from UNIT to the field's SI unit.
 """
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+from noise_monitor.text import clip
 
 from .errors import AdapterError
 from .metadata import BLACK_LEVEL, black_level_value
@@ -102,6 +106,27 @@ def metadata_from_keymap(msg: Any, keymap: Sequence[KeyMapEntry], profile: Any =
     if not out:
         wanted = ", ".join(f"{e.status}|{e.key}" for e in keymap)
         raise AdapterError(f"metadata DiagnosticArray has none of the mapped keys ({wanted})")
+    return out
+
+
+def metadata_from_json_keymap(msg: Any, keymap: Sequence[KeyMapEntry], profile: Any = None) -> dict[str, float]:
+    """Fields from a driver message carrying its frame metadata as a JSON object (``json_data``: Orbbec's) through a
+    key map (the object's keys, STATUS ``*``); AdapterError without a key map, for JSON that is no object or holds
+    none of the mapped keys."""
+    if not keymap:
+        raise AdapterError("Orbbec frame metadata is read through metadata_keymap: its units differ by sensor "
+                           "(exposure usually in 100 us on the color stream, 1 us on the IR streams; gain a level), "
+                           "e.g. '*|exposure|exposure_time_s|100us; *|gain|gain_db|relative'")
+    try:
+        data = json.loads(str(msg.json_data))
+    except json.JSONDecodeError as exc:
+        raise AdapterError(f"driver metadata json_data is not JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise AdapterError("driver metadata json_data is not a JSON object")
+    out = apply_keymap({("", str(k)): v for k, v in data.items()}, keymap, profile)
+    if not out:
+        raise AdapterError(f"driver metadata json_data has none of the mapped keys ({', '.join(e.key for e in keymap)}; "
+                           f"keys: {clip(', '.join(sorted(map(str, data))))})")
     return out
 
 

@@ -5,6 +5,7 @@
 | ``diagnostics`` (default) | diagnostic_msgs/DiagnosticArray with CameraMetadata key names | metadata_topic |
 | ``keymap`` | diagnostic_msgs/DiagnosticArray read through ``metadata_keymap`` | metadata_topic |
 | ``flir`` / ``basler`` / ``realsense`` / ``aravis`` | the driver's metadata message (:mod:`msg_adapters.vendor`) | metadata_topic |
+| ``orbbec`` | Orbbec's JSON frame metadata read through ``metadata_keymap`` (its units differ by sensor) | metadata_topic |
 | ``camera_ros`` | diagnostic_msgs/DiagnosticArray with libcamera's metadata (:mod:`msg_adapters.libcamera`) | metadata_topic (``/diagnostics``) |
 | ``parameters`` | rcl_interfaces/ParameterEvent of ``metadata_driver_node`` (v4l2_camera, usb_cam) | /parameter_events |
 
@@ -17,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from .keymap import keymap_entries, metadata_from_keymap, parse_keymap
+from .keymap import keymap_entries, metadata_from_json_keymap, metadata_from_keymap, parse_keymap
 from .libcamera import libcamera_status, metadata_from_camera_ros
 from .metadata import metadata_from_diagnostics
 from .parameter_events import metadata_from_parameters, parameter_values, preset_keymap
@@ -68,6 +69,10 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
     entries = parse_keymap(keymap_entries(keymap)) if keymap else None
     if source == "keymap" and not entries:
         raise ValueError("metadata_source keymap needs metadata_keymap entries 'STATUS|KEY|FIELD|UNIT[|SCALE]'")
+    if source == "orbbec" and not entries:
+        raise ValueError("metadata_source orbbec needs metadata_keymap entries for the stream's JSON metadata: its units "
+                         "differ by sensor (exposure usually in 100 us on the color stream, 1 us on the IR streams; "
+                         "gain a level), e.g. '*|exposure|exposure_time_s|100us; *|gain|gain_db|relative'")
     if source == "parameters":
         if not driver_node.startswith("/"):
             raise ValueError("metadata_source parameters needs metadata_driver_node, the driver node's fully "
@@ -94,6 +99,10 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
                               from_values=from_values)
     if not topic:
         return None
+    if source == "orbbec":
+        mapped_json = entries or []
+        return MetadataSource(source, message_class(source), topic,
+                              lambda m: metadata_from_json_keymap(m, mapped_json, profile))
     if source in SOURCE_TYPES:
         return MetadataSource(source, message_class(source), topic, lambda m: metadata_from_vendor(m, profile),
                               held=source in HELD_SOURCES)

@@ -16,6 +16,10 @@ that rosbags can deserialise bags recorded with these drivers without their pack
 - Intel RealSense (IntelRealSense/realsense-ros): ``realsense2_camera_msgs/msg/Metadata``, a JSON object
   with librealsense's frame metadata: ``actual_exposure`` in microseconds, ``gain_level`` in the sensor's
   relative gain units (mapped to dB through the profile's ``gain_range_db`` over ``driver_gain_range``).
+- Orbbec (orbbec/OrbbecSDK_ROS2, Gemini 330 series): ``orbbec_camera_msgs/msg/Metadata`` on ``<stream>/metadata``, the
+  SDK's frame metadata as JSON with the image's header. Its units differ by sensor (``exposure`` "usually 100 us for
+  the color sensor and 1 us for depth/infrared", ``gain`` a level on some models), so it is read through the node's
+  ``metadata_keymap`` (:func:`msg_adapters.keymap.metadata_from_json_keymap`), not converted here.
 - GenICam cameras (GigE Vision, USB3 Vision) through ``camera_aravis2`` (FraunhoferIOSB/camera_aravis2 >= 1.0):
   ``camera_aravis2_msgs/msg/CameraDiagnostics`` on ``~/diagnostics``, the features its ``diagnostic_yaml_url`` lists
   as key/values named by the GenICam SFNC (``Feature`` or ``Feature-SelectorValue``), published at
@@ -121,10 +125,13 @@ FLIR = "flir_camera_msgs/msg/ImageMetaData"
 BASLER = "pylon_ros2_camera_interfaces/msg/CurrentParams"
 REALSENSE = "realsense2_camera_msgs/msg/Metadata"
 ARAVIS = "camera_aravis2_msgs/msg/CameraDiagnostics"
+ORBBEC = "orbbec_camera_msgs/msg/Metadata"
 VENDOR_TYPES: dict[str, str] = {FLIR: FLIR_IMAGE_METADATA, BASLER: BASLER_CURRENT_PARAMS, REALSENSE: REALSENSE_METADATA,
-                                ARAVIS: ARAVIS_CAMERA_DIAGNOSTICS}
+                                ARAVIS: ARAVIS_CAMERA_DIAGNOSTICS, ORBBEC: REALSENSE_METADATA}
 #: metadata_source name -> message type (the ROS package must be importable for a live subscription)
-SOURCE_TYPES: dict[str, str] = {"flir": FLIR, "basler": BASLER, "realsense": REALSENSE, "aravis": ARAVIS}
+SOURCE_TYPES: dict[str, str] = {"flir": FLIR, "basler": BASLER, "realsense": REALSENSE, "aravis": ARAVIS, "orbbec": ORBBEC}
+#: driver messages read through the node's ``metadata_keymap`` (JSON keys) rather than converted here
+KEYMAP_TYPES = frozenset((ORBBEC,))
 #: sources whose values are held until the next message instead of paired with images by stamp: Basler's
 #: CurrentParams has no header, camera_aravis2 publishes at its own rate, stamped when it publishes
 HELD_SOURCES = frozenset(("basler", "aravis"))

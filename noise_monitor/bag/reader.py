@@ -20,7 +20,7 @@ from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, get_typestore
 
 from msg_adapters import AdapterError, camera_geometry, prepare_frame
-from msg_adapters.keymap import KeyMapEntry, metadata_from_keymap, parse_keymap
+from msg_adapters.keymap import KeyMapEntry, metadata_from_json_keymap, metadata_from_keymap, parse_keymap
 from msg_adapters.libcamera import is_libcamera, metadata_from_camera_ros
 from msg_adapters.metadata import (
     ALIASES,
@@ -30,7 +30,7 @@ from msg_adapters.metadata import (
     metadata_from_temperature,
 )
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, FRAME
-from msg_adapters.vendor import HELD_TYPES, VENDOR_TYPES, metadata_from_vendor, register_vendor_types
+from msg_adapters.vendor import HELD_TYPES, KEYMAP_TYPES, VENDOR_TYPES, metadata_from_vendor, register_vendor_types
 from noise_monitor import safe_yaml
 from noise_monitor.monitor.frame import Frame
 from noise_monitor.monitor.runtime import FrameOptions
@@ -279,6 +279,8 @@ class BagReader:
             return metadata_from_camera_ros(msg, camera)  # None: another node's diagnostics or another camera's
         if mtype == DIAGNOSTIC_TYPE:
             return metadata_from_keymap(msg, keymap, profile) if keymap else metadata_from_diagnostics(msg)
+        if mtype in KEYMAP_TYPES:
+            return metadata_from_json_keymap(msg, keymap or [], profile)
         if mtype in VENDOR_TYPES:
             return metadata_from_vendor(msg, profile)
         return metadata_from_mapping({k: getattr(msg, k) for k in _METADATA_NAMES if hasattr(msg, k)})
@@ -318,7 +320,7 @@ class BagReader:
         evaluated (``image unusable: ...``, ``metadata invalid: ...``, ``metadata missing: ...``). Driver
         metadata messages (:mod:`msg_adapters.vendor`) are converted with the profile (relative gains);
         ``metadata_keymap`` (``STATUS|KEY|FIELD|UNIT[|SCALE]`` entries) reads a DiagnosticArray of a
-        driver's own key names (:mod:`msg_adapters.keymap`; a bad entry is a ValueError). ``black_level_dn``: the
+        driver's own key names, or Orbbec's JSON frame metadata (:mod:`msg_adapters.keymap`; a bad entry is a ValueError). ``black_level_dn``: the
         black level taken off every image (default: the profile's). camera_ros's libcamera metadata on /diagnostics
         (:mod:`msg_adapters.libcamera`) is read from its camera's statuses, ``hardware_id``'s when several cameras
         publish there (a BagError naming them without it).

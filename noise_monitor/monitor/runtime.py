@@ -41,7 +41,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
     "metadata_source": ("diagnostics", "diagnostics (DiagnosticArray with CameraMetadata key names), keymap "
                                        "(DiagnosticArray through metadata_keymap), flir, basler, realsense, aravis (the "
                                        "driver's metadata message, aravis: camera_aravis2's CameraDiagnostics on its "
-                                       "~/diagnostics; its ROS package must be importable), camera_ros (libcamera's "
+                                       "~/diagnostics; its ROS package must be importable), orbbec (the stream's "
+                                       "JSON metadata through metadata_keymap), camera_ros (libcamera's "
                                        "metadata on /diagnostics: set metadata_topic /diagnostics) or parameters (the "
                                        "driver node's /parameter_events)"),
     "metadata_keymap": ("", "key map 'STATUS|KEY|FIELD|UNIT[|SCALE]; ...' (FIELD: exposure_time_s, gain_db, "

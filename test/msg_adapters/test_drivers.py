@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from msg_adapters import AdapterError
-from msg_adapters.keymap import metadata_from_keymap, parse_keymap
+from msg_adapters.keymap import metadata_from_json_keymap, metadata_from_keymap, parse_keymap
 from msg_adapters.libcamera import metadata_from_camera_ros
 from msg_adapters.parameter_events import metadata_from_parameters, parameter_values, preset_keymap
-from msg_adapters.vendor import ARAVIS, BASLER, FLIR, REALSENSE, metadata_from_vendor
+from msg_adapters.vendor import ARAVIS, BASLER, FLIR, ORBBEC, REALSENSE, metadata_from_vendor
 from noise_monitor.bag.errors import BagError
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.simulate import load_truth, simulate_bag
@@ -56,7 +56,7 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
                 continue
             m, meta_i = next(stated), meta_i + 1
             exp_us, gain_db, temp = m["exposure_time_s"] * 1e6, m["gain_db"], m["sensor_temperature_c"]
-            if kind in ("flir", "realsense"):  # these report no temperature: a sensor_msgs/Temperature does
+            if kind in ("flir", "realsense", "orbbec"):  # these report no temperature: a sensor_msgs/Temperature does
                 w.write("/camera/temperature", t["sensor_msgs/msg/Temperature"](
                     header=msg.header, temperature=temp, variance=0.0), log_time)
             if kind == "flir":
@@ -80,6 +80,10 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
                 js = json.dumps({"frame_number": 1, "actual_exposure": int(round(exp_us)),
                                  "gain_level": gain_db / 24.0 * 232 + 16, "auto_exposure": 1})
                 w.write("/camera/color/metadata", t[REALSENSE](header=msg.header, json_data=js), log_time)
+            elif kind == "orbbec":  # the SDK's frame metadata, exposure in 100 us on the color stream, gain a level
+                js = json.dumps({"frame_number": meta_i, "auto_exposure": 0, "exposure": round(exp_us / 100),
+                                 "gain": round(gain_db * 10), "white_balance": 4600})  # a level 0..240 (int)
+                w.write("/camera/color/metadata", t[ORBBEC](header=msg.header, json_data=js), log_time)
             elif kind.startswith("aravis"):  # camera_aravis2: features published at its own rate (aravis_slow: before
                 # every other frame), stamped when published
                 kv, sent = t["diagnostic_msgs/msg/KeyValue"], msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec - 3_000_000
@@ -115,8 +119,8 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
     return dst, truth
 
 
-@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "aravis", "aravis_slow", "keymap", "camera_ros",
-                                  "camera_ros2"])
+@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "orbbec", "aravis", "aravis_slow", "keymap",
+                                  "camera_ros", "camera_ros2"])
 def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
     """Each driver's metadata in a bag gives the stated metadata; camera_ros's on /diagnostics (found there, other
     nodes' arrays left aside), the camera named by hardware_id where two publish there (a clear error without)."""
@@ -128,11 +132,16 @@ def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
             next(reader.frames(PROFILE))
         camera = {"hardware_id": "/base/imx708@1a"}
     profile = PROFILE
-    if kind == "realsense":
+    if kind in ("realsense", "orbbec"):
         profile = profile_from_mapping({**load_profile("ev76c661").values, "gain_range_db": [0.0, 24.0],
-                                        "driver_gain_range": [16, 248]})
+                                        "driver_gain_range": [16, 248] if kind == "realsense" else [0, 240]})
     keymap = ["acme_cam|ExposureMs|exposure_time_s|ms", "*|GainX|gain_db|factor",
               "acme_cam|SensorTempK|sensor_temperature_c|K"] if kind == "keymap" else None
+    if kind == "orbbec":
+        keymap = ["*|exposure|exposure_time_s|100us", "*|gain|gain_db|relative"]
+        with open_bag(bag) as reader:  # its units differ by sensor: read through a key map, asked for without one
+            first = next(reader.frames(profile))
+        assert "Orbbec frame metadata is read through metadata_keymap" in first.skip_reason
     with open_bag(bag) as reader:
         frames = list(reader.frames(profile, metadata_keymap=keymap, **camera))
         if kind.startswith("aravis"):  # stamped 3 ms before an image: the latest at or before it, its age not judged
@@ -175,6 +184,23 @@ def test_driver_messages_with_bad_fields_name_them():
     with pytest.raises(AdapterError, match="neither actual_exposure nor gain_level"):
         metadata_from_vendor(ns(__msgtype__=REALSENSE, json_data='{"frame_number": 3}'), PROFILE)
     assert flir
+
+
+def test_orbbec_json_metadata_through_a_key_map():
+    """Orbbec's frame metadata (JSON) through the key map: 100 us exposure units, a gain level over the profile's range;
+    JSON that is no object or lacks the mapped keys is named."""
+    ns = SimpleNamespace
+    km = parse_keymap(["*|exposure|exposure_time_s|100us", "*|gain|gain_db|relative"])
+    profile = dataclasses.replace(PROFILE, driver_gain_range=(16.0, 248.0))
+    msg = ns(__msgtype__=ORBBEC, json_data='{\n  "exposure": 200,\n  "gain": 132,\n  "frame_number": 7\n}')
+    assert metadata_from_json_keymap(msg, km, profile) == {"exposure_time_s": pytest.approx(0.02),
+                                                          "gain_db": pytest.approx(12.0)}
+    with pytest.raises(AdapterError, match=r"none of the mapped keys \(exposure, gain; keys: frame_number\)"):
+        metadata_from_json_keymap(ns(json_data='{"frame_number": 7}'), km, profile)
+    with pytest.raises(AdapterError, match="json_data is not a JSON object"):
+        metadata_from_json_keymap(ns(json_data="[1, 2]"), km, profile)
+    with pytest.raises(AdapterError, match="Orbbec frame metadata is read through metadata_keymap"):
+        metadata_from_json_keymap(msg, [], profile)
 
 
 def test_aravis_diagnostics_conversion():

@@ -688,11 +688,18 @@ def test_driver_metadata_source_without_its_package_names_it():
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     try:
-        for source, package in (("flir", "flir_camera_msgs"), ("aravis", "camera_aravis2_msgs")):
+        orbbec_keys = "*|exposure|exposure_time_s|100us; *|gain|gain_db|relative"
+        for source, package, keys in (("flir", "flir_camera_msgs", ""), ("aravis", "camera_aravis2_msgs", ""),
+                                      ("orbbec", "orbbec_camera_msgs", orbbec_keys)):
             with pytest.raises(ValueError, match=f"metadata_source {source} subscribes to {package}/msg/.*: install "
                                                  f"the ROS package {package}"):
                 node_class()(node_name=f"{source}_monitor", context=ctx, parameter_overrides=[
-                    Parameter("metadata_source", value=source), Parameter("profile", value="icx285")], estimator=object())
+                    Parameter("metadata_source", value=source), Parameter("profile", value="icx285"),
+                    Parameter("metadata_keymap", value=keys)], estimator=object())
+        with pytest.raises(ValueError, match="metadata_source orbbec needs metadata_keymap entries .*exposure usually "
+                                             "in 100 us on the color stream"):
+            node_class()(node_name="orbbec_monitor", context=ctx, parameter_overrides=[
+                Parameter("metadata_source", value="orbbec")], estimator=object())
         with pytest.raises(ValueError, match="metadata_source must be one of diagnostics, keymap, flir"):
             node_class()(node_name="bad_monitor", context=ctx, parameter_overrides=[
                 Parameter("metadata_source", value="spinnaker")], estimator=object())
