@@ -8,7 +8,6 @@ default 1): the value is multiplied by SCALE, then converted from UNIT to the fi
 """
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -18,7 +17,7 @@ from noise_monitor.text import clip
 
 from .errors import AdapterError
 from .metadata import BLACK_LEVEL, black_level_value
-from .vendor import map_gain
+from .vendor import json_metadata, map_gain
 
 #: field -> unit -> (factor, offset) to the field's unit; ``factor`` / ``relative`` gains are special
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
@@ -117,12 +116,7 @@ def metadata_from_json_keymap(msg: Any, keymap: Sequence[KeyMapEntry], profile: 
         raise AdapterError("Orbbec frame metadata is read through metadata_keymap: its units differ by sensor "
                            "(exposure usually in 100 us on the color stream, 1 us on the IR streams; gain a level), "
                            "e.g. '*|exposure|exposure_time_s|100us; *|gain|gain_db|relative'")
-    try:
-        data = json.loads(str(msg.json_data))
-    except json.JSONDecodeError as exc:
-        raise AdapterError(f"driver metadata json_data is not JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise AdapterError("driver metadata json_data is not a JSON object")
+    data = json_metadata(msg)
     out = apply_keymap({("", str(k)): v for k, v in data.items()}, keymap, profile)
     if not out:
         raise AdapterError(f"driver metadata json_data has none of the mapped keys ({', '.join(e.key for e in keymap)}; "

@@ -209,13 +209,19 @@ def _driver_black_level(field: str, value: float, profile: Any) -> float | None:
     return black_level_value(field, value * per_unit)
 
 
-def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
+def json_metadata(msg: Any) -> dict[str, Any]:
+    """The JSON object of a driver's frame metadata message (``json_data``: RealSense's, Orbbec's)."""
     try:
         data = json.loads(str(msg.json_data))
     except json.JSONDecodeError as exc:
         raise AdapterError(f"driver metadata json_data is not JSON: {exc}") from None
     if not isinstance(data, dict):
         raise AdapterError("driver metadata json_data is not a JSON object")
+    return data
+
+
+def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
+    data = json_metadata(msg)
     out: dict[str, float | str] = {}
     if "actual_exposure" in data:
         out["exposure_time_s"] = _exposure_us("actual_exposure", data["actual_exposure"])
