@@ -19,6 +19,9 @@ from .errors import AdapterError
 from .metadata import BLACK_LEVEL, black_level_value
 from .vendor import json_metadata, map_gain
 
+#: why Orbbec's JSON metadata needs a key map, with an example (its SDK's units differ by sensor)
+ORBBEC_UNITS = ("its units differ by sensor (exposure usually in 100 us on the color stream, 1 us on the IR streams; "
+                "gain a level), e.g. '*|exposure|exposure_time_s|100us; *|gain|gain_db|relative'")
 #: field -> unit -> (factor, offset) to the field's unit; ``factor`` / ``relative`` gains are special
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "exposure_time_s": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "us": (1e-6, 0.0), "100us": (1e-4, 0.0), "ns": (1e-9, 0.0)},
@@ -113,9 +116,7 @@ def metadata_from_json_keymap(msg: Any, keymap: Sequence[KeyMapEntry], profile: 
     key map (the object's keys, STATUS ``*``); AdapterError without a key map, for JSON that is no object or holds
     none of the mapped keys."""
     if not keymap:
-        raise AdapterError("Orbbec frame metadata is read through metadata_keymap: its units differ by sensor "
-                           "(exposure usually in 100 us on the color stream, 1 us on the IR streams; gain a level), "
-                           "e.g. '*|exposure|exposure_time_s|100us; *|gain|gain_db|relative'")
+        raise AdapterError(f"Orbbec frame metadata is read through metadata_keymap: {ORBBEC_UNITS}")
     data = json_metadata(msg)
     out = apply_keymap({("", str(k)): v for k, v in data.items()}, keymap, profile)
     if not out:

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from .keymap import keymap_entries, metadata_from_json_keymap, metadata_from_keymap, parse_keymap
+from .keymap import ORBBEC_UNITS, keymap_entries, metadata_from_json_keymap, metadata_from_keymap, parse_keymap
 from .libcamera import libcamera_status, metadata_from_camera_ros
 from .metadata import metadata_from_diagnostics
 from .parameter_events import metadata_from_parameters, parameter_values, preset_keymap
@@ -70,9 +70,8 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
     if source == "keymap" and not entries:
         raise ValueError("metadata_source keymap needs metadata_keymap entries 'STATUS|KEY|FIELD|UNIT[|SCALE]'")
     if source == "orbbec" and not entries:
-        raise ValueError("metadata_source orbbec needs metadata_keymap entries for the stream's JSON metadata: its units "
-                         "differ by sensor (exposure usually in 100 us on the color stream, 1 us on the IR streams; "
-                         "gain a level), e.g. '*|exposure|exposure_time_s|100us; *|gain|gain_db|relative'")
+        raise ValueError(f"metadata_source orbbec needs metadata_keymap entries for the stream's JSON metadata: "
+                         f"{ORBBEC_UNITS}")
     if source == "parameters":
         if not driver_node.startswith("/"):
             raise ValueError("metadata_source parameters needs metadata_driver_node, the driver node's fully "

@@ -24,9 +24,9 @@ from scipy.fft import dct
 
 from noise_monitor.estimator import images
 from noise_monitor.estimator.data import PARTS, generate, metas_of
-from noise_monitor.estimator.features import SIGMA_MODEL_FLOOR, reference_sigma
+from noise_monitor.estimator.features import SIGMA_MODEL_FLOOR, reference_sigma, sigma_shape
 from noise_monitor.estimator.inference import load
-from noise_monitor.estimator.physics_prior import SIGMA_MAP_FLOOR, box_smooth, predict_from_tables
+from noise_monitor.estimator.physics_prior import box_smooth, predict_from_tables
 
 #: DCT block (Zoran & Weiss use 8x8) and the stride of the windows over the patch.
 BLOCK, STRIDE = 8, 2
@@ -53,8 +53,7 @@ def shape_of(est, noisy: np.ndarray, metas) -> np.ndarray:
     uniq = list(dict.fromkeys(metas))
     tables = np.stack([prior.tables(m) for m in uniq])
     group_of = np.array([uniq.index(m) for m in metas])
-    smap = np.maximum(predict_from_tables(box_smooth(noisy), tables, group_of, with_map=True)["sigma_map"], SIGMA_MAP_FLOOR)
-    return smap / np.sqrt(np.mean(smap ** 2, axis=(1, 2), keepdims=True))
+    return sigma_shape(predict_from_tables(box_smooth(noisy), tables, group_of, with_map=True)["sigma_map"])
 
 
 def rms(e: np.ndarray) -> float:

@@ -37,6 +37,13 @@ TREND_QUANTILE = 0.25
 N_SPECTRAL = 1
 
 
+def sigma_shape(sigma_map: np.ndarray) -> np.ndarray:
+    """The model's per-pixel sigma (N, H, W), floored, normalised to unit RMS over each patch: how the noise varies
+    with the intensity, which a gain error leaves unchanged."""
+    floored = np.maximum(sigma_map, SIGMA_MAP_FLOOR)
+    return floored / np.sqrt(np.mean(np.square(floored), axis=(1, 2), keepdims=True))
+
+
 def block_energy_quantiles(resid: np.ndarray, block: int = BLOCK) -> np.ndarray:
     """log of low quantiles of the mean squared residual per ``block`` x ``block`` block (N, Q).
 
@@ -117,8 +124,7 @@ def compact_inputs(noisy: np.ndarray, tables: np.ndarray, group_of: np.ndarray,
     """
     smooth = box_smooth(noisy)
     phys = predict_from_tables(smooth, tables, group_of, with_map=True)
-    sigma_map = np.maximum(phys.pop("sigma_map"), SIGMA_MAP_FLOOR)
-    shape = sigma_map / np.sqrt(np.mean(np.square(sigma_map), axis=(1, 2), keepdims=True))
+    shape = sigma_shape(phys.pop("sigma_map"))
     fine = immerkaer(noisy)  # shared by the reference and the texture evidence
     shaped = block_energies(fine / shape)
     ref = reference_sigma(noisy, shape, shaped)
