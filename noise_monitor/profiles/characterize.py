@@ -24,7 +24,8 @@ also in the camera's native DN:
   of saturation, in % of the line;
 - dark sets with pixels at code 0 (a black level too low for the dark signal's spread) are left out, said in a note.
 
-Quantum efficiency (and so anything in photons) needs a calibrated irradiance: not determined.
+Quantum efficiency (and so anything in photons) needs a calibrated irradiance: determined from an EMVA 1288 image
+set's photon counts (:mod:`.emva_images`), not from a bag.
 """
 from __future__ import annotations
 
@@ -46,9 +47,10 @@ DARK_TOLERANCE = 0.02
 #: A new set starts where the mean jumps by more than this fraction of the range.
 SET_SPLIT = 0.005
 K_FIT_MAX = 0.70
-#: A set with this share of its pixels at the ADC's ends is clipped: a flat at 255 leaves the K fit, a dark at 0 every
-#: dark figure.
+#: A set with this share of its pixels at the ADC's ends, and at least CLIPPED_MIN_PIXELS of them, is clipped: a flat at
+#: 255 leaves the K fit, a dark at 0 every dark figure (a pixel or two of a small image, a noise tail or a defect, do not).
 CLIPPED_MAX = 1e-4
+CLIPPED_MIN_PIXELS = 10
 #: Below this dark variance (native DN^2) the dark noise is under the ADC step: not determined.
 QUANTIZATION_LIMIT_DN2 = 0.24
 LINEARITY_RANGE = (0.05, 0.95)
@@ -73,8 +75,11 @@ class FrameSet:
     mean: float = 0.0
     temporal_var: float = 0.0
     spatial_var: float = 0.0
-    clipped_fraction: float = 0.0
-    underflow_fraction: float = 0.0  # pixels at code 0: the black level too low for the dark signal's spread
+    clipped_pixels: int = 0  # at the ADC's top
+    underflow_pixels: int = 0  # at code 0: the black level too low for the dark signal's spread
+    pixels: int = 0
+    photons: float | None = None  # per pixel during the exposure, where the irradiance was calibrated
+    temporal: bool = True  # False: a set for the spatial noise only (an EMVA image set's), kept out of the PTC
 
     def add(self, image: np.ndarray) -> None:
         if not self.images:
@@ -89,8 +94,9 @@ class FrameSet:
         pairs = [np.var(stack[i] - stack[i + 1]) / 2.0 for i in range(0, len(stack) - 1, 2)]
         self.temporal_var = float(np.mean(pairs))
         self.spatial_var = float(np.var(stack.mean(axis=0)) - self.temporal_var / len(stack))
-        self.clipped_fraction = float(np.mean(stack >= 255.0 - 1e-3))
-        self.underflow_fraction = float(np.mean(stack <= 1e-3))
+        self.clipped_pixels = int(np.count_nonzero(stack >= 255.0 - 1e-3))
+        self.underflow_pixels = int(np.count_nonzero(stack <= 1e-3))
+        self.pixels = stack.size
         self.images = []
 
 
@@ -103,6 +109,7 @@ class Recording:
     skipped: dict[str, int]
     static: dict[str, Any]
     unusable: str = ""  # the frames skipped as unusable, said (empty: none)
+    kinds_given: bool = False  # each set's kind (dark / flat) stated by the recording (an EMVA image set)
 
     @property
     def lsb(self) -> float:
@@ -190,6 +197,11 @@ def _skips(skipped: dict[str, int], example: dict[str, str], count: int) -> str:
     return f"{sum(skipped[k] for k in example)} of {count} frames skipped, e.g. {example[kind]}"
 
 
+def _clipped(count: int, s: FrameSet) -> bool:
+    """Whether ``count`` pixels at one end of the ADC make the set clipped (see CLIPPED_MAX)."""
+    return count >= max(CLIPPED_MAX * s.pixels, CLIPPED_MIN_PIXELS)
+
+
 def _fit_line(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares line (slope, intercept) and their standard errors."""
     if len(x) < 3:
@@ -199,6 +211,12 @@ def _fit_line(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     resid = y - np.polyval(p, x)
     s2 = float(resid @ resid) / (len(x) - 2)
     return p, np.sqrt(np.diag(cov) * s2)
+
+
+def _level(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A constant as a line of slope 0 (sets at one exposure): (0, mean) and (nan, its standard error)."""
+    se = float(np.std(y, ddof=1) / math.sqrt(len(y))) if len(y) > 1 else float("nan")
+    return np.array([0.0, float(np.mean(y))]), np.array([float("nan"), se])
 
 
 def _doubling_fit(t: np.ndarray, log_rate: np.ndarray, rel_se: list[float | None]
@@ -278,13 +296,14 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
     groups: dict[tuple[float, float | None], list[FrameSet]] = {}
     for s in rec.sets:
         groups.setdefault((s.gain_db, s.temperature_c), []).append(s)
-    _classify(groups, dark_tolerance * 255.0)
-    underflow = [s for s in rec.sets if s.kind == "dark" and s.underflow_fraction >= CLIPPED_MAX]
+    if not rec.kinds_given:
+        _classify(groups, dark_tolerance * 255.0)
+    underflow = [s for s in rec.sets if s.kind == "dark" and _clipped(s.underflow_pixels, s)]
     for s in underflow:  # their mean and variance are the clipped signal's: every dark figure would be biased
         s.kind = "dark at code 0"
     if underflow:
-        worst = max(underflow, key=lambda s: s.underflow_fraction)
-        notes.append(f"{len(underflow)} dark set(s) left out: up to {worst.underflow_fraction:.1%} of their pixels at "
+        worst = max(underflow, key=lambda s: s.underflow_pixels / s.pixels)
+        notes.append(f"{len(underflow)} dark set(s) left out: up to {worst.underflow_pixels / worst.pixels:.2%} of their pixels at "
                      f"code 0 ({worst.exposure_time_s:g} s"
                      f"{'' if worst.temperature_c is None else f', {worst.temperature_c:g} degC'}): the black level is "
                      "too low for the dark signal's spread there; raise it (e.g. BlackLevel) to characterize those "
@@ -294,19 +313,28 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
     gain0, temp0 = base
     if len({g for g, _ in groups}) > 1:
         notes.append(f"several gains recorded: the analysis uses {gain0:g} dB (the one with most flat fields)")
-    flats = sorted(flats_by_group[base], key=lambda s: s.exposure_time_s)
+    flats = sorted((s for s in flats_by_group[base] if s.temporal), key=lambda s: s.exposure_time_s)
+    spatial = [s for s in flats_by_group[base] if not s.temporal]  # for the PRNU only
     darks = sorted((s for s in groups[base] if s.kind == "dark"), key=lambda s: s.exposure_time_s)
     dark_t = np.array([s.exposure_time_s for s in darks])
-    if len(np.unique(dark_t)) < 2:
+    # an irradiance series at one exposure time (EMVA's other method): its dark set subtracts, no dark current
+    one_exposure = len(np.unique(dark_t)) == 1 and all(
+        math.isclose(s.exposure_time_s, dark_t[0], rel_tol=1e-9) for s in flats)
+    if len(np.unique(dark_t)) < 2 and not one_exposure:
         raise CharacterizeError("no dark frames (lens cap on) at two or more exposure times"
-                                f"{'' if temp0 is None else f' at {temp0:g} degC'}: dark subtraction and dark "
-                                "current cannot be determined")
-    unclipped = [s for s in flats if s.clipped_fraction < CLIPPED_MAX]
+                                f"{'' if temp0 is None else f' at {temp0:g} degC'} (nor flat fields all at the "
+                                "exposure of the dark frames): dark subtraction and dark current cannot be determined")
+    unclipped = [s for s in flats if not _clipped(s.clipped_pixels, s)]
     if len(unclipped) < 3:
         raise CharacterizeError(f"only {len(unclipped)} flat-field set(s) without saturated pixels (of {len(flats)}): "
                                 "the photon transfer curve (K) cannot be determined")
-    dark_mean_fit, dark_mean_se = _fit_line(dark_t, np.array([s.mean for s in darks]))
-    dark_var_fit, dark_var_se = _fit_line(dark_t, np.array([s.temporal_var for s in darks]))
+    line = _level if one_exposure else _fit_line
+    dark_mean_fit, dark_mean_se = line(dark_t, np.array([s.mean for s in darks]))
+    dark_var_fit, dark_var_se = line(dark_t, np.array([s.temporal_var for s in darks]))
+    if one_exposure:
+        notes.append(f"one exposure time ({dark_t[0]:g} s; the irradiance varied): the dark current, the read noise "
+                     "(dark noise at zero exposure) and the black level (dark offset at zero exposure) are not "
+                     "determined; the temporal dark noise is that of this exposure")
 
     def dark_at(s: FrameSet) -> tuple[float, float, float]:
         same = [d for d in darks if math.isclose(d.exposure_time_s, s.exposure_time_s, rel_tol=1e-9)]
@@ -330,7 +358,7 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
     else:
         notes.append("saturation not determined: the variance has no maximum inside the exposure series "
                      "(record flat fields beyond saturation)")
-    whole = np.array([s.clipped_fraction < CLIPPED_MAX for s in flats])  # flats without saturated pixels
+    whole = np.array([not _clipped(s.clipped_pixels, s) for s in flats])  # flats without saturated pixels
     limit = K_FIT_MAX * (sat_dn if sat_dn else x[whole].max())
     sel = (x <= limit) & whole & (x > 0)
     if sel.sum() < 3:
@@ -349,15 +377,17 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
     sd2 = max(dark_var0 - q, 0.0)
     sd_value = math.sqrt(sd2) / k8
     sd: float | None = sd_value
-    sd_se: float | None = sd_value * math.hypot(rel_k, 0.5 * math.hypot(dark_var_se[1], dark_var_se[0] * d0.exposure_time_s) / max(sd2, 1e-30))
+    sd_se: float | None = sd_value * math.hypot(rel_k, 0.5 * math.hypot(dark_var_se[1], np.nan_to_num(dark_var_se[0]) * d0.exposure_time_s) / max(sd2, 1e-30))
     rn2 = dark_var_fit[1] - q
-    read: float | None = math.sqrt(rn2) / k8 if rn2 > 0 else None
+    read: float | None = math.sqrt(rn2) / k8 if rn2 > 0 and not one_exposure else None
     read_se: float | None = read * math.hypot(rel_k, 0.5 * dark_var_se[1] / rn2) if read else None
     native2 = ((2**rec.bit_depth - 1) / 255.0) ** 2
     if dark_var0 * native2 < QUANTIZATION_LIMIT_DN2:
+        bound = math.sqrt(QUANTIZATION_LIMIT_DN2 - 1.0 / 12.0) / (k8 * adc / 255.0)
         notes.append(f"temporal dark noise not determined: sigma_y.dark^2 = {dark_var0 * native2:.3g} DN^2 is below the "
                      f"quantization limit {QUANTIZATION_LIMIT_DN2} DN^2 (dark noise below the ADC step: the LSB^2/12 "
-                     "subtraction fails, and K is biased too); record with more bits or a higher gain")
+                     "subtraction fails, and K is biased too); record with more bits or a higher gain. EMVA 1288 takes "
+                     f"sigma_y.dark = 0.49 DN here, an upper bound: sigma_d <= {bound:.3g} e-")
         sd = sd_se = read = read_se = None
     # dark current per temperature and its doubling temperature
     currents: dict[str, dict[str, Any]] = {}
@@ -420,50 +450,68 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
         dsnu = dsnu_se = None
     prnu = _value(None, None, "%")
     if sat_dn:
-        cands = [j for j in range(len(flats)) if sel[j] or x[j] <= 0.7 * sat_dn]
-        j = min(cands, key=lambda j: (-flats[j].size, abs(x[j] - 0.5 * sat_dn)))
-        _, _, s2_dark = dark_at(flats[j])
+        signal = {id(s): s.mean - dark_at(s)[0] for s in flats + spatial}
+        cands = [s for s in flats + spatial if 0.0 < signal[id(s)] <= 0.7 * sat_dn]
+        best = min(cands, key=lambda s: (-s.size, abs(signal[id(s)] - 0.5 * sat_dn)))
+        _, _, s2_dark = dark_at(best)
         if math.isfinite(s2_dark):
-            s2 = flats[j].spatial_var - s2_dark
-            val = 100.0 * math.sqrt(max(s2, 0.0)) / x[j]
-            se = val * 0.5 * math.sqrt(2.0 / npix) * (flats[j].spatial_var + flats[j].temporal_var / flats[j].size) \
-                / max(s2, 1e-30)
-            prnu = _value(val, se, "%")
+            s2 = best.spatial_var - s2_dark
+            val = 100.0 * math.sqrt(max(s2, 0.0)) / signal[id(best)]
+            val_se = val * 0.5 * math.sqrt(2.0 / npix) * (best.spatial_var + best.temporal_var / best.size) / max(s2, 1e-30)
+            prnu = _value(val, val_se, "%")
         else:
             notes.append("PRNU not determined: no dark set at the exposure of the 50 % flat field")
-    # linearity
-    lin = {"exposure_s": t_flat.tolist(), "signal_dn": x.tolist()}
+    # linearity: in the photons where the irradiance was calibrated (EMVA's own abscissa), else in the exposure
+    # (constant irradiance)
+    photons = np.array([np.nan if s.photons is None else s.photons for s in flats])
+    calibrated = bool(np.isfinite(photons).all())
+    lin = {"exposure_s": t_flat.tolist(), "signal_dn": x.tolist(), **({"photons": photons.tolist()} if calibrated else {})}
+    abscissa = photons if calibrated else t_flat
     le = _value(None, None, "%")
     if sat_dn:
         m = (x >= LINEARITY_RANGE[0] * sat_dn) & (x <= LINEARITY_RANGE[1] * sat_dn)
-        if m.sum() >= 3:
-            p = np.polyfit(t_flat[m], x[m], 1)
-            dev = 100.0 * (x[m] - np.polyval(p, t_flat[m])) / np.polyval(p, t_flat[m])
+        if m.sum() >= 3 and np.ptp(abscissa[m]) > 0:
+            p = np.polyfit(abscissa[m], x[m], 1, w=1.0 / x[m])  # EMVA: the line minimising the relative deviations
+            dev = 100.0 * (x[m] - np.polyval(p, abscissa[m])) / np.polyval(p, abscissa[m])
             j = int(np.argmax(np.abs(dev)))
             # the worst point's own error: its flat and dark means' temporal noise over the pixels and frames (the
             # dark set taken as long as its flat), relative to the line there (largest at the lowest signal)
             sets = [s for s, keep in zip(flats, m) if keep]
             se_dn = math.sqrt((sets[j].temporal_var + ref[m][j, 1]) / (sets[j].size * npix))
-            le = _value(float(dev[j]), 100.0 * se_dn / float(np.polyval(p, t_flat[m][j])), "%")
+            le = _value(float(dev[j]), 100.0 * se_dn / float(np.polyval(p, abscissa[m][j])), "%")
             lin.update(fit=p.tolist(), range_mask=m.tolist(), deviation_pct=dev.tolist())
+    # the sensitivity threshold from sigma_y.dark, at least the 0.49 DN EMVA 1288 takes below the quantization limit
+    sigma_dark8 = math.sqrt(max(dark_var0, QUANTIZATION_LIMIT_DN2 / native2))
+    photon_figures = _photon_figures(photons[sel], x[sel], k8, rel_k, adc, photons[i] if sat_dn else None,
+                                     sigma_dark8) if calibrated else {
+        "quantum_efficiency": _value(None, None, "%"), "responsivity_dn_per_p": _value(None, None, "DN/p"),
+        "saturation_capacity_p": _value(None, None, "p"), "sensitivity_threshold_p": _value(None, None, "p"),
+        "dynamic_range_db": _value(None, None, "dB")}
+    if not calibrated:
+        notes.append("quantum efficiency not determined: it needs a calibrated irradiance (photons per pixel)")
+    saturation_e = _value(sat_dn / k8 if sat_dn else None,
+                          math.hypot(sat_dn * rel_k, sat_se_dn) / k8 if sat_dn else None, "e-")
+    if calibrated and sat_dn:  # EMVA: eta mu_p.sat, the photons of the variance maximum converted by the QE
+        qe = photon_figures["quantum_efficiency"]
+        sat_p = float(photons[i])
+        saturation_e = _value(qe["value"] / 100.0 * sat_p, qe["stderr"] / 100.0 * sat_p, "e-")
     figures = {
         "system_gain_dn_per_e": _value(k8 * adc / 255.0, k8_se * adc / 255.0, f"DN/e- ({rec.bit_depth} bit)"),
         "system_gain_dn8_per_e": _value(k8, k8_se, "DN/e- (8-bit scale)"),
         "temporal_dark_noise_e": _value(sd, sd_se, "e-"),
         "read_noise_e": _value(read, read_se, "e-"),
-        "saturation_capacity_e": _value(sat_dn / k8 if sat_dn else None,
-                                        math.hypot(sat_dn * rel_k, sat_se_dn) / k8 if sat_dn else None, "e-"),
+        "saturation_capacity_e": saturation_e,
         "dark_current_e_per_s": currents,
         "doubling_temperature_k": doubling,
         "dsnu_e": _value(dsnu, dsnu_se, "e-"),
         "prnu_pct": prnu,
         # the dark mean at zero exposure: the camera's black level (offset), which the node takes off every image
-        "black_level_dn": _value(float(dark_mean_fit[1]) * adc / 255.0, float(dark_mean_se[1]) * adc / 255.0,
+        "black_level_dn": _value(None if one_exposure else float(dark_mean_fit[1]) * adc / 255.0,
+                                 None if one_exposure else float(dark_mean_se[1]) * adc / 255.0,
                                  f"DN ({rec.bit_depth} bit)"),
         "linearity_error_pct": le,
-        "quantum_efficiency": _value(None, None, "%"),
+        **photon_figures,
     }
-    notes.append("quantum efficiency not determined: it needs a calibrated irradiance (photons per pixel)")
     return {
         "figures": figures,
         "conditions": {"gain_db": gain0, "temperature_c": temp0, "bit_depth": rec.bit_depth,
@@ -482,6 +530,27 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
                    "dark": series, "linearity": lin,
                    "dark_variance": {"exposure_s": dark_t.tolist(), "variance_dn2": [s.temporal_var for s in darks]}},
         "static": rec.static,
+    }
+
+
+def _photon_figures(photons: np.ndarray, signal: np.ndarray, k8: float, rel_k: float, adc: int,
+                    sat_photons: float | None, sigma_dark8: float) -> dict[str, dict[str, Any]]:
+    """The figures in photons (an EMVA image set's calibrated irradiance): responsivity R (slope of the dark-subtracted
+    signal vs the photons through the origin over K's range), quantum efficiency R / K, saturation in photons (the
+    photons of the variance maximum), absolute sensitivity threshold (sigma_y.dark / K + 1/2) / eta and the dynamic
+    range between the two, as the EMVA's reference implementation computes them."""
+    r8 = float(photons @ signal / (photons @ photons))
+    resid = signal - r8 * photons
+    r8_se = math.sqrt(float(resid @ resid) / max(len(photons) - 1, 1) / float(photons @ photons))
+    eta = r8 / k8
+    eta_se = eta * math.hypot(rel_k, r8_se / r8)
+    threshold = (sigma_dark8 / k8 + 0.5) / eta
+    return {
+        "quantum_efficiency": _value(100.0 * eta, 100.0 * eta_se, "%"),
+        "responsivity_dn_per_p": _value(r8 * adc / 255.0, r8_se * adc / 255.0, "DN/p (native)"),
+        "saturation_capacity_p": _value(sat_photons, None, "p"),
+        "sensitivity_threshold_p": _value(threshold, threshold * eta_se / eta, "p"),
+        "dynamic_range_db": _value(20.0 * math.log10(sat_photons / threshold) if sat_photons else None, None, "dB"),
     }
 
 
@@ -533,6 +602,6 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
                          "doubling_temperature_k": td},
         "dsnu_e": f["dsnu_e"]["value"], "prnu_pct": f["prnu_pct"]["value"],
         "measurement": {"exposure_time_s": cond["dsnu_exposure_s"], "temperature_c": temp},
-        "dark_offset_dn": max(f["black_level_dn"]["value"], 0.0),
+        "dark_offset_dn": max(f["black_level_dn"]["value"] or 0.0, 0.0),
     }
     return datasheet_from_mapping(doc, source=name), notes

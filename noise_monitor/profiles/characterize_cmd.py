@@ -1,4 +1,5 @@
-"""`noise-monitor characterize BAG --out DIR`: EMVA 1288 figures, report and profile from a recording."""
+"""`noise-monitor characterize BAG_OR_EMVA_SET --out DIR`: EMVA 1288 figures, report and profile from a recording
+(a bag, or an EMVA 1288 image set: its descriptor file and images)."""
 from __future__ import annotations
 
 import argparse
@@ -7,13 +8,16 @@ from pathlib import Path
 
 from .characterize import DARK_TOLERANCE, characterize, datasheet_from_result, read_recording
 from .emva import TOLERANCE, dark_current_e_per_s, profile_from_datasheet, round_trip
+from .emva_images import EXPOSURE_UNITS, find_descriptor, read_image_set
 from .profile_cmd import print_round_trip
 from .report import plots, write_html
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="recording: flat fields over an exposure series with dark frames (lens cap) "
-                                    "at the exposures, optionally at several temperatures (simulate-bag --scenario ptc)")
+    parser.add_argument("bag", help="recording: a bag of flat fields over an exposure series with dark frames (lens "
+                                    "cap) at the exposures, optionally at several temperatures (simulate-bag --scenario "
+                                    "ptc); or an EMVA 1288 image set: its descriptor file (EMVA1288_Data.txt) or the "
+                                    "folder holding it")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder: report.html, PNG plots, "
                                                                     "characterize.json, profile.yaml")
     parser.add_argument("--json", metavar="PATH", help="also write the figures JSON here")
@@ -26,6 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"sets within this fraction of the range above the dark level (the line of the lower "
                              f"sets at the exposures recorded twice, else the darkest set) are dark "
                              f"(default {DARK_TOLERANCE})")
+    parser.add_argument("--exposure-unit", choices=tuple(EXPOSURE_UNITS), default="ns",
+                        help="EMVA image set: the unit of the descriptor's exposure times (default ns, the format's)")
+    parser.add_argument("--temperature-c", type=float, help="EMVA image set: the sensor temperature during the "
+                                                            "measurement (the format has none; needed for a profile)")
     parser.add_argument("--image-topic", help="override the auto-detected image topic")
     parser.add_argument("--metadata-topic", help="override the auto-detected metadata topic")
     parser.add_argument("--temperature-topic", help="override the auto-detected Temperature topic")
@@ -49,12 +57,20 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--bit-depth must be in 1..16, got {args.bit_depth}")
     if not 0 < args.dark_tolerance < 1:
         raise ValueError(f"--dark-tolerance must be in (0, 1), got {args.dark_tolerance}")
-    rec = read_recording(args.bag, bit_depth=args.bit_depth, image_topic=args.image_topic,
-                         metadata_topic=args.metadata_topic, temperature_topic=args.temperature_topic)
+    descriptor = find_descriptor(args.bag)
+    if descriptor is not None:
+        rec = read_image_set(descriptor, exposure_unit=args.exposure_unit, temperature_c=args.temperature_c)
+        if args.bit_depth not in (None, rec.bit_depth):
+            raise ValueError(f"--bit-depth {args.bit_depth}: the EMVA descriptor {descriptor} states {rec.bit_depth} bits")
+    else:
+        if args.temperature_c is not None:
+            raise ValueError("--temperature-c is for EMVA image sets; a bag's metadata gives the temperature")
+        rec = read_recording(args.bag, bit_depth=args.bit_depth, image_topic=args.image_topic,
+                             metadata_topic=args.metadata_topic, temperature_topic=args.temperature_topic)
     result = characterize(rec, dark_tolerance=args.dark_tolerance)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    name = args.name or Path(args.bag.rstrip("/")).name.split(".")[0]
+    name = args.name or (descriptor.parent.name if descriptor else Path(args.bag.rstrip("/")).name.split(".")[0])
     ds, notes = datasheet_from_result(result, name, args.sensor_type, args.pixel_size_um)
     result["notes"] += notes
     profile = rows = profile_file = None
@@ -76,7 +92,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.bag}: {result['conditions']['frames']} frames, {result['conditions']['flat_sets']} flat and "
           f"{result['conditions']['dark_sets']} dark sets")
     for key in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
-                "doubling_temperature_k", "dsnu_e", "prnu_pct", "linearity_error_pct"):
+                "doubling_temperature_k", "dsnu_e", "prnu_pct", "linearity_error_pct", *(
+                    ("quantum_efficiency", "responsivity_dn_per_p", "saturation_capacity_p", "sensitivity_threshold_p",
+                     "dynamic_range_db") if f["quantum_efficiency"]["value"] is not None else ())):
         v = f[key]
         val = "not determined" if v["value"] is None else f"{v['value']:.5g}" + (
             f" +- {v['stderr']:.2g}" if v["stderr"] is not None else "")

@@ -27,6 +27,10 @@ _LABELS = {
     "prnu_pct": "PRNU1288",
     "linearity_error_pct": "Linearity error (largest deviation)",
     "quantum_efficiency": "Quantum efficiency",
+    "responsivity_dn_per_p": "Responsivity R",
+    "saturation_capacity_p": "Saturation capacity (photons)",
+    "sensitivity_threshold_p": "Absolute sensitivity threshold",
+    "dynamic_range_db": "Dynamic range",
 }
 
 
@@ -90,23 +94,24 @@ def plots(result: dict[str, Any], out: Path, profile: CameraProfile | None) -> d
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     files["snr"] = _save(f, out / "snr.png")
-    # dark signal vs exposure per temperature
-    f, ax = plt.subplots(figsize=(6.4, 4.4))
-    for i, s in enumerate(pts["dark"]):
-        t = np.array(s["exposure_s"])
-        lbl = "unknown T" if s["temperature_c"] is None else f"{s['temperature_c']:g} degC"
-        ax.plot(t * 1e3, np.array(s["mean_dn"]) * to_nat, "o", ms=4, color=f"C{i}",
-                label=f"{lbl} measured" if s["fit"] else f"{lbl} measured (within ADC steps: not determined)")
-        if s["fit"]:
-            tt = np.linspace(0, t.max(), 20)
-            ax.plot(tt * 1e3, np.polyval(s["fit"], tt) * to_nat, "-", color=f"C{i}",
-                    label=f"{lbl} fit: {s['rate_e_per_s']:.3g} e-/s")
-    ax.set_xlabel("exposure time [ms]")
-    ax.set_ylabel(f"dark signal mu_y.dark [DN, {bits} bit]")
-    ax.set_title("Dark signal vs exposure time")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    files["dark_exposure"] = _save(f, out / "dark_vs_exposure.png")
+    # dark signal vs exposure per temperature (none from a recording at one exposure)
+    if pts["dark"]:
+        f, ax = plt.subplots(figsize=(6.4, 4.4))
+        for i, s in enumerate(pts["dark"]):
+            t = np.array(s["exposure_s"])
+            lbl = "unknown T" if s["temperature_c"] is None else f"{s['temperature_c']:g} degC"
+            ax.plot(t * 1e3, np.array(s["mean_dn"]) * to_nat, "o", ms=4, color=f"C{i}",
+                    label=f"{lbl} measured" if s["fit"] else f"{lbl} measured (within ADC steps: not determined)")
+            if s["fit"]:
+                tt = np.linspace(0, t.max(), 20)
+                ax.plot(tt * 1e3, np.polyval(s["fit"], tt) * to_nat, "-", color=f"C{i}",
+                        label=f"{lbl} fit: {s['rate_e_per_s']:.3g} e-/s")
+        ax.set_xlabel("exposure time [ms]")
+        ax.set_ylabel(f"dark signal mu_y.dark [DN, {bits} bit]")
+        ax.set_title("Dark signal vs exposure time")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        files["dark_exposure"] = _save(f, out / "dark_vs_exposure.png")
     # dark current vs temperature
     temps = [(s["temperature_c"], s["rate_e_per_s"]) for s in pts["dark"] if s["temperature_c"] is not None
              and (s["rate_e_per_s"] or 0.0) > 0]
@@ -133,20 +138,22 @@ def plots(result: dict[str, Any], out: Path, profile: CameraProfile | None) -> d
         files["dark_temperature"] = _save(f, out / "dark_vs_temperature.png")
     # linearity
     lin = pts["linearity"]
-    if "fit" in lin:
-        t, s = np.array(lin["exposure_s"]), np.array(lin["signal_dn"])
+    if "fit" in lin:  # against the photons where the set states them (EMVA's abscissa), else the exposure
+        t, scale, axis = ((np.array(lin["photons"]), 1.0, "photons per pixel mu_p [p]") if "photons" in lin
+                          else (np.array(lin["exposure_s"]), 1e3, "exposure time [ms]"))
+        s = np.array(lin["signal_dn"])
         m = np.array(lin["range_mask"], bool)
         f, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 6.0), sharex=True)
-        a1.plot(t * 1e3, s * to_nat, "o", ms=4, color="0.55", label="measured")
-        a1.plot(t[m] * 1e3, s[m] * to_nat, "o", ms=4, color="C0", label="measured, 5-95 % of saturation")
-        a1.plot(t * 1e3, np.polyval(lin["fit"], t) * to_nat, "-", color="C0", label="straight-line fit")
+        a1.plot(t * scale, s * to_nat, "o", ms=4, color="0.55", label="measured")
+        a1.plot(t[m] * scale, s[m] * to_nat, "o", ms=4, color="C0", label="measured, 5-95 % of saturation")
+        a1.plot(t * scale, np.polyval(lin["fit"], t) * to_nat, "-", color="C0", label="straight-line fit")
         a1.set_ylabel(f"mu_y - mu_y.dark [DN, {bits} bit]")
         a1.set_title("Linearity")
         a1.grid(alpha=0.3)
         a1.legend(fontsize=8)
-        a2.plot(t[m] * 1e3, lin["deviation_pct"], "o-", ms=4)
+        a2.plot(t[m] * scale, lin["deviation_pct"], "o-", ms=4)
         a2.axhline(0, color="0.5", lw=1)
-        a2.set_xlabel("exposure time [ms]")
+        a2.set_xlabel(axis)
         a2.set_ylabel("deviation from the line [%]")
         a2.grid(alpha=0.3)
         files["linearity"] = _save(f, out / "linearity.png")

@@ -1,0 +1,153 @@
+"""EMVA 1288 image sets (a descriptor file and its images) characterized: a real CCD's measurement against the
+EMVA's reference implementation, a simulated irradiance series against its truth, and descriptors that cannot be
+read."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from noise_monitor.cli import main
+from noise_monitor.profiles.characterize import CharacterizeError, characterize
+from noise_monitor.profiles.emva_images import find_descriptor, parse_descriptor, read_image_set
+
+CCD = Path(__file__).resolve().parents[1] / "data" / "emva1288_ccd"
+REFERENCE = json.loads((CCD / "reference.json").read_text())["results"]
+
+
+@pytest.fixture(scope="module")
+def ccd():
+    return characterize(read_image_set(CCD))
+
+
+# figure, the reference's name, relative tolerance: the same definitions agree to rounding; the dark current's fit and
+# the PRNU's temporal correction (pair differences here, the stack's variance there) differ a little by method
+@pytest.mark.parametrize("field, ref, rel", [
+    ("system_gain_dn_per_e", "K", 1e-4), ("temporal_dark_noise_e", "sigma_d", 5e-4),
+    ("saturation_capacity_e", "u_e_sat", 1e-4), ("quantum_efficiency", "QE", 1e-4),
+    ("responsivity_dn_per_p", "R", 1e-4), ("saturation_capacity_p", "u_p_sat", 1e-9),
+    ("sensitivity_threshold_p", "u_p_min", 5e-4), ("linearity_error_pct", "LE_min", 1e-4),
+    ("prnu_pct", "PRNU1288", 0.02)])
+def test_a_real_ccds_measurement_agrees_with_the_reference_implementation(ccd, field, ref, rel):
+    """A 64 x 64 crop of the EMVA's reference set 001 (a 12-bit CCD measured by Basler), which emva1288 1.0.2 read
+    itself (reference.json)."""
+    assert ccd["figures"][field]["value"] == pytest.approx(REFERENCE[ref], rel=rel)
+
+
+def test_the_real_ccds_dark_current_and_dsnu(ccd):
+    rate = ccd["figures"]["dark_current_e_per_s"]["unknown"]  # the format states no temperature
+    assert rate["value"] == pytest.approx(REFERENCE["u_I_mean"], rel=0.01)
+    dsnu = ccd["figures"]["dsnu_e"]  # 0.1 DN over 8 frames of 4096 pixels: within its standard error
+    assert abs(dsnu["value"] - REFERENCE["DSNU1288"]) <= dsnu["stderr"]
+    assert ccd["conditions"]["flat_sets"] == 25 and ccd["conditions"]["dark_sets"] == 26  # spatial dark set included
+
+
+def test_characterize_command_on_the_ccd_writes_report_and_profile(tmp_path, capsys):
+    out = tmp_path / "char"
+    assert main(["characterize", str(CCD / "EMVA1288_Data.txt"), "--out", str(out), "--sensor-type", "ccd",
+                 "--pixel-size-um", "7.4", "--temperature-c", "30"]) == 0
+    printed = capsys.readouterr().out
+    assert "quantum_efficiency       43.92" in printed and "profile " in printed
+    for name in ("report.html", "ptc.png", "linearity.png", "profile.yaml", "characterize.json"):
+        assert (out / name).is_file(), name
+    assert "Quantum efficiency" in (out / "report.html").read_text()
+    assert json.loads((out / "characterize.json").read_text())["points"]["linearity"]["photons"][0] == 120.0
+
+
+def _irradiance_series(root: Path, rng: np.random.Generator) -> dict[str, float]:
+    """A 12-bit camera at one exposure, the irradiance stepped (EMVA's second method): K 0.1 DN/e-, QE 0.6, dark noise
+    8 e-, PRNU 1 %, offset 60 DN; pairs at 24 levels to beyond saturation, 16-frame spatial sets at 50 %."""
+    k, qe, dark_e, prnu, offset = 0.1, 0.6, 8.0, 0.01, 60.0
+    shape = (48, 48)
+    gain = 1.0 + prnu * rng.standard_normal(shape)
+    (root / "img").mkdir()
+    lines = ["# simulated irradiance series", "v 4.0", f"n 12 {shape[1]} {shape[0]}"]
+
+    def frames(tag: str, photons: float, count: int) -> list[str]:
+        names = []
+        for j in range(count):
+            electrons = rng.poisson(qe * photons * gain) + dark_e * rng.standard_normal(shape)
+            codes = np.clip(np.rint(offset + k * electrons), 0, 4095).astype(np.uint16)
+            name = f"{tag}_{j}.png"
+            cv2.imwrite(str(root / "img" / name), codes)
+            names.append(f"i img\\{name}")
+        return names
+
+    full = (4095 - offset) / k / qe
+    for n, photons in enumerate(np.linspace(0.02, 1.15, 24) * full):
+        lines += [f"b 2000000 {photons:.1f}", *frames(f"b{n}", photons, 2)]
+    lines += [f"b 2000000 {0.5 * full:.1f}", *frames("bs", 0.5 * full, 16)]
+    lines += ["d 2000000", *frames("d", 0.0, 2), "d 2000000", *frames("ds", 0.0, 16)]
+    (root / "EMVA1288_Data.txt").write_text("\n".join(lines) + "\n")
+    return {"k": k, "qe": 100.0 * qe, "dark": dark_e, "prnu": 100.0 * prnu,
+            "sat_e": (4095 - offset) / k}
+
+
+def test_an_irradiance_series_at_one_exposure_recovers_the_truth(tmp_path):
+    truth = _irradiance_series(tmp_path, np.random.default_rng(11))
+    result = characterize(read_image_set(tmp_path))
+    f = result["figures"]
+    assert f["system_gain_dn_per_e"]["value"] == pytest.approx(truth["k"], rel=0.02)
+    assert f["quantum_efficiency"]["value"] == pytest.approx(truth["qe"], rel=0.02)
+    assert f["temporal_dark_noise_e"]["value"] == pytest.approx(truth["dark"], rel=0.03)
+    assert f["prnu_pct"]["value"] == pytest.approx(truth["prnu"], rel=0.1)
+    assert f["saturation_capacity_e"]["value"] == pytest.approx(truth["sat_e"], rel=0.08)
+    assert abs(f["linearity_error_pct"]["value"]) < 0.5  # the simulated camera is linear
+    # what one exposure cannot tell, said rather than invented
+    assert f["dark_current_e_per_s"] == {} and f["read_noise_e"]["value"] is None
+    assert f["black_level_dn"]["value"] is None
+    assert any("one exposure time" in n for n in result["notes"])
+
+
+def test_find_descriptor_tells_image_sets_from_bags(tmp_path):
+    (tmp_path / "set").mkdir()
+    (tmp_path / "set" / "notes.txt").write_text("measured on Tuesday\n")
+    assert find_descriptor(tmp_path / "set") is None  # a folder without a descriptor
+    (tmp_path / "set" / "my_camera.txt").write_text("n 8 4 4\n")
+    assert find_descriptor(tmp_path / "set") == tmp_path / "set" / "my_camera.txt"
+    (tmp_path / "set" / "other.txt").write_text("n 8 4 4\n")
+    with pytest.raises(CharacterizeError, match="several EMVA 1288 descriptor files"):
+        find_descriptor(tmp_path / "set")
+    assert find_descriptor(Path(__file__).resolve().parents[2] / "bags" / "ev76c661_field.mcap") is None
+
+
+@pytest.mark.parametrize("text, message", [
+    ("b 1 2\ni a.png\ni b.png\n", "no 'n bits width height' line"),
+    ("n 12 4\n", "'n' takes bits, width and height"),
+    ("n 20 4 4\n", "20 bits per pixel"),
+    ("n 8 4 4\ni a.png\n", "an image before any 'b' or 'd' line"),
+    ("n 8 4 4\nb 1 2\ni a.png\n", "line 2: a set needs two images or more, it lists 1"),
+    ("n 8 4 4\nb 1 x\ni a.png\ni b.png\n", "'x' is not a number"),
+    ("n 8 4 4\nq 1\n", "is not an EMVA 1288 descriptor line"),
+    ("n 8 4 4\nd -5\ni a.png\ni b.png\n", "a negative exposure"),
+])
+def test_bad_descriptors_are_refused_with_the_line(tmp_path, text, message):
+    (tmp_path / "EMVA1288_Data.txt").write_text(text)
+    with pytest.raises(CharacterizeError, match=message):
+        parse_descriptor(tmp_path / "EMVA1288_Data.txt")
+
+
+@pytest.mark.parametrize("image, message", [
+    (None, "not found"),
+    (np.zeros((4, 5), np.uint16), "is 5x4 pixels, the descriptor states 4x4"),
+    (np.full((4, 4), 4000, np.uint16), "code 4000 above the 10-bit range"),
+    (np.zeros((4, 4, 3), np.uint8), "a single-channel integer image is needed"),
+])
+def test_images_that_do_not_fit_the_descriptor_are_named(tmp_path, image, message):
+    (tmp_path / "EMVA1288_Data.txt").write_text("n 10 4 4\nd 1000\ni a.png\ni b.png\n")
+    if image is not None:
+        for name in ("a.png", "b.png"):
+            cv2.imwrite(str(tmp_path / name), image)
+    with pytest.raises(CharacterizeError, match=message):
+        read_image_set(tmp_path)
+
+
+def test_the_command_refuses_a_temperature_for_a_bag_and_a_wrong_bit_depth(tmp_path, capsys):
+    bag = Path(__file__).resolve().parents[2] / "bags" / "ev76c661_field.mcap"
+    assert main(["characterize", str(bag), "--out", str(tmp_path), "--temperature-c", "30"]) == 2
+    assert "--temperature-c is for EMVA image sets" in capsys.readouterr().err
+    assert main(["characterize", str(CCD), "--out", str(tmp_path), "--bit-depth", "8"]) == 2
+    assert "states 12 bits" in capsys.readouterr().err
