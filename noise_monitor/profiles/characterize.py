@@ -19,7 +19,8 @@ also in the camera's native DN:
 - dark current: slope of mu_y.dark vs exposure / K per temperature; doubling temperature: ln 2 / slope
   of ln(dark current) vs temperature (two temperatures or more);
 - DSNU: sqrt(spatial variance of the dark set) / K; PRNU: sqrt(s_y^2 - s_y.dark^2) / (mu_y - mu_y.dark)
-  on the flat set nearest 50 % of saturation (the largest sets are used);
+  on the flat set nearest 50 % of saturation (the largest sets are used); both also at the pixel scale (the mean
+  image less its 5x5 box mean: a light source's or lens's smooth shading off), which the profile takes;
 - linearity error: deviation of mu_y - mu_y.dark from a straight line in exposure between 5 % and 95 %
   of saturation, in % of the line;
 - dark sets with pixels at code 0 (a black level too low for the dark signal's spread) are left out, said in a note.
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import uniform_filter
 
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.monitor.period import skip_category
@@ -54,6 +56,10 @@ CLIPPED_MIN_PIXELS = 10
 #: Below this dark variance (native DN^2) the dark noise is under the ADC step: not determined.
 QUANTIZATION_LIMIT_DN2 = 0.24
 LINEARITY_RANGE = (0.05, 0.95)
+#: The pixel-scale non-uniformity: a set's mean image less its HPF_SIZE x HPF_SIZE box mean (the smooth shading of a
+#: light source, lens or amplifier glow taken off), its variance divided by what the filter leaves of white noise.
+HPF_SIZE = 5
+HPF_WHITE = (1.0 - 1.0 / HPF_SIZE**2) ** 2 + (HPF_SIZE**2 - 1) / HPF_SIZE**4
 
 
 class CharacterizeError(ValueError):
@@ -75,6 +81,7 @@ class FrameSet:
     mean: float = 0.0
     temporal_var: float = 0.0
     spatial_var: float = 0.0
+    spatial_var_hpf: float = 0.0  # its pixel-scale part (HPF_SIZE)
     clipped_pixels: int = 0  # at the ADC's top
     underflow_pixels: int = 0  # at code 0: the black level too low for the dark signal's spread
     pixels: int = 0
@@ -93,7 +100,9 @@ class FrameSet:
         self.mean = float(stack.mean())
         pairs = [np.var(stack[i] - stack[i + 1]) / 2.0 for i in range(0, len(stack) - 1, 2)]
         self.temporal_var = float(np.mean(pairs))
-        self.spatial_var = float(np.var(stack.mean(axis=0)) - self.temporal_var / len(stack))
+        mean_image = stack.mean(axis=0)
+        self.spatial_var = float(np.var(mean_image) - self.temporal_var / len(stack))
+        self.spatial_var_hpf = _highpass_var(mean_image) - self.temporal_var / len(stack)
         self.clipped_pixels = int(np.count_nonzero(stack >= 255.0 - 1e-3))
         self.underflow_pixels = int(np.count_nonzero(stack <= 1e-3))
         self.pixels = stack.size
@@ -195,6 +204,16 @@ def _skips(skipped: dict[str, int], example: dict[str, str], count: int) -> str:
         return "every frame unusable"
     kind = max(example, key=lambda k: skipped[k])
     return f"{sum(skipped[k] for k in example)} of {count} frames skipped, e.g. {example[kind]}"
+
+
+def _highpass_var(image: np.ndarray) -> float:
+    """The variance of an image's pixel-scale part (see HPF_SIZE), edges left out; an image too small for the filter
+    gives its whole variance."""
+    if min(image.shape) <= 2 * HPF_SIZE:
+        return float(np.var(image))
+    edge = HPF_SIZE // 2
+    high = image - uniform_filter(image, HPF_SIZE, mode="reflect")
+    return float(np.var(high[edge:-edge, edge:-edge])) / HPF_WHITE
 
 
 def _clipped(count: int, s: FrameSet) -> bool:
@@ -336,15 +355,16 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
                      "(dark noise at zero exposure) and the black level (dark offset at zero exposure) are not "
                      "determined; the temporal dark noise is that of this exposure")
 
-    def dark_at(s: FrameSet) -> tuple[float, float, float]:
+    def dark_at(s: FrameSet) -> tuple[float, float, float, float]:
+        """The dark set at a set's exposure: mean, temporal variance, spatial variance (whole, pixel-scale)."""
         same = [d for d in darks if math.isclose(d.exposure_time_s, s.exposure_time_s, rel_tol=1e-9)]
         if same:
             d = max(same, key=lambda d: d.size)
-            return d.mean, d.temporal_var, d.spatial_var
+            return d.mean, d.temporal_var, d.spatial_var, d.spatial_var_hpf
         t = s.exposure_time_s
-        return float(np.polyval(dark_mean_fit, t)), float(np.polyval(dark_var_fit, t)), float("nan")
+        return float(np.polyval(dark_mean_fit, t)), float(np.polyval(dark_var_fit, t)), float("nan"), float("nan")
 
-    ref = np.array([dark_at(s) for s in flats])
+    ref = np.array([dark_at(s)[:2] for s in flats])
     x = np.array([s.mean for s in flats]) - ref[:, 0]  # mu_y - mu_y.dark (8-bit DN)
     y = np.array([s.temporal_var for s in flats]) - ref[:, 1]
     t_flat = np.array([s.exposure_time_s for s in flats])
@@ -438,27 +458,35 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
                      "(below half a step); record longer or warmer darks, more bits or a higher gain")
     # DSNU: the largest dark set at the longest exposure; PRNU: the largest flat set nearest 50 % saturation
     dsnu_set = max(darks, key=lambda s: (s.size, s.exposure_time_s))
-    s2d = max(dsnu_set.spatial_var, 0.0)
-    dsnu_value = math.sqrt(s2d) / k8
-    dsnu: float | None = dsnu_value
-    dsnu_se: float | None = dsnu_value * math.hypot(rel_k, 0.5 * math.sqrt(2.0 / npix) * (
-        dsnu_set.spatial_var + dsnu_set.temporal_var / dsnu_set.size) / max(s2d, 1e-30))
+
+    def nonuniformity(s2: float, s: FrameSet) -> tuple[float, float]:
+        """sqrt of a spatial variance and its relative standard error (the set's pixels and frames)."""
+        return math.sqrt(max(s2, 0.0)), 0.5 * math.sqrt(2.0 / npix) * (s.spatial_var + s.temporal_var / s.size) / max(
+            s2, 1e-30)
+
+    dsnu_dn, dsnu_rel = nonuniformity(dsnu_set.spatial_var, dsnu_set)
+    dsnu: float | None = dsnu_dn / k8
+    dsnu_se: float | None = dsnu_dn / k8 * math.hypot(rel_k, dsnu_rel)
+    dsnu_hpf_dn, dsnu_hpf_rel = nonuniformity(dsnu_set.spatial_var_hpf, dsnu_set)
+    dsnu_hpf = _value(dsnu_hpf_dn / k8, dsnu_hpf_dn / k8 * math.hypot(rel_k, dsnu_hpf_rel), "e-")
     if not _dithered(dsnu_set, native2) and dsnu_set.spatial_var * native2 < 1.0:
         notes.append(f"DSNU not determined: its dark set's pattern spreads by {dsnu_set.spatial_var * native2:.3g} "
                      "DN^2 and its temporal noise is below one ADC step: the ADC rounds such a pattern to one or two "
                      "levels; record with more bits or a higher gain")
         dsnu = dsnu_se = None
-    prnu = _value(None, None, "%")
+        dsnu_hpf = _value(None, None, "e-")
+    prnu = prnu_hpf = _value(None, None, "%")
     if sat_dn:
         signal = {id(s): s.mean - dark_at(s)[0] for s in flats + spatial}
         cands = [s for s in flats + spatial if 0.0 < signal[id(s)] <= 0.7 * sat_dn]
         best = min(cands, key=lambda s: (-s.size, abs(signal[id(s)] - 0.5 * sat_dn)))
-        _, _, s2_dark = dark_at(best)
+        _, _, s2_dark, s2_dark_hpf = dark_at(best)
         if math.isfinite(s2_dark):
-            s2 = best.spatial_var - s2_dark
-            val = 100.0 * math.sqrt(max(s2, 0.0)) / signal[id(best)]
-            val_se = val * 0.5 * math.sqrt(2.0 / npix) * (best.spatial_var + best.temporal_var / best.size) / max(s2, 1e-30)
-            prnu = _value(val, val_se, "%")
+            def prnu_of(s2: float) -> dict[str, Any]:
+                val, rel = nonuniformity(s2, best)
+                return _value(100.0 * val / signal[id(best)], 100.0 * val / signal[id(best)] * rel, "%")
+
+            prnu, prnu_hpf = prnu_of(best.spatial_var - s2_dark), prnu_of(best.spatial_var_hpf - s2_dark_hpf)
         else:
             notes.append("PRNU not determined: no dark set at the exposure of the 50 % flat field")
     # linearity: in the photons where the irradiance was calibrated (EMVA's own abscissa), else in the exposure
@@ -505,6 +533,8 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
         "doubling_temperature_k": doubling,
         "dsnu_e": _value(dsnu, dsnu_se, "e-"),
         "prnu_pct": prnu,
+        "dsnu_hpf_e": dsnu_hpf,
+        "prnu_hpf_pct": prnu_hpf,
         # the dark mean at zero exposure: the camera's black level (offset), which the node takes off every image
         "black_level_dn": _value(None if one_exposure else float(dark_mean_fit[1]) * adc / 255.0,
                                  None if one_exposure else float(dark_mean_se[1]) * adc / 255.0,
@@ -593,6 +623,15 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
         mu, td = fit_dark_law(pixel_size_um * 1e-6, *map(list, zip(*measured)))
         notes.append(f"profile: the model's dark-current law fitted to {len(measured)} temperatures "
                      f"({mu:.4g} e-/s at {temp:g} degC, doubling {td:.3g} K there)")
+    # the model's DSNU and PRNU are the pixels' (pixel-scale): the smooth shading of a light source, lens or amplifier
+    # glow in the total is no noise of an image patch
+    dsnu, prnu = (f[hpf]["value"] if f[hpf]["value"] is not None else f[whole]["value"]
+                  for hpf, whole in (("dsnu_hpf_e", "dsnu_e"), ("prnu_hpf_pct", "prnu_pct")))
+    if prnu is not None and f["prnu_pct"]["value"] is not None:
+        notes.append(f"profile: the pixel-scale non-uniformities (5x5 high-pass), PRNU {prnu:.3g} % and DSNU "
+                     f"{dsnu:.3g} e-, rather than the totals {f['prnu_pct']['value']:.3g} % and "
+                     f"{f['dsnu_e']['value'] if f['dsnu_e']['value'] is not None else float('nan'):.3g} e-, whose "
+                     "smooth shading is no noise of an image patch")
     doc = {
         "name": name, "sensor_type": sensor_type, "bit_depth": cond["bit_depth"], "pixel_size_um": pixel_size_um,
         "system_gain_dn_per_e": f["system_gain_dn_per_e"]["value"],
@@ -600,7 +639,7 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
         "saturation_capacity_e": f["saturation_capacity_e"]["value"],
         "dark_current": {"e_per_s": mu, "temperature_c": temp,
                          "doubling_temperature_k": td},
-        "dsnu_e": f["dsnu_e"]["value"], "prnu_pct": f["prnu_pct"]["value"],
+        "dsnu_e": dsnu, "prnu_pct": prnu,
         "measurement": {"exposure_time_s": cond["dsnu_exposure_s"], "temperature_c": temp},
         "dark_offset_dn": max(f["black_level_dn"]["value"] or 0.0, 0.0),
     }

@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.bag}: {result['conditions']['frames']} frames, {result['conditions']['flat_sets']} flat and "
           f"{result['conditions']['dark_sets']} dark sets")
     for key in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
-                "doubling_temperature_k", "dsnu_e", "prnu_pct", "linearity_error_pct", *(
+                "doubling_temperature_k", "dsnu_e", "dsnu_hpf_e", "prnu_pct", "prnu_hpf_pct", "linearity_error_pct", *(
                     ("quantum_efficiency", "responsivity_dn_per_p", "saturation_capacity_p", "sensitivity_threshold_p",
                      "dynamic_range_db") if f["quantum_efficiency"]["value"] is not None else ())):
         v = f[key]

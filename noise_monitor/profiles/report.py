@@ -25,6 +25,8 @@ _LABELS = {
     "doubling_temperature_k": "Dark current doubling temperature",
     "dsnu_e": "DSNU1288",
     "prnu_pct": "PRNU1288",
+    "dsnu_hpf_e": "DSNU of the pixels (5x5 high-pass: smooth shading off; the profile's)",
+    "prnu_hpf_pct": "PRNU of the pixels (5x5 high-pass: smooth shading off; the profile's)",
     "linearity_error_pct": "Linearity error (largest deviation)",
     "quantum_efficiency": "Quantum efficiency",
     "responsivity_dn_per_p": "Responsivity R",

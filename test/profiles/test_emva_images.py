@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from noise_monitor.cli import main
-from noise_monitor.profiles.characterize import CharacterizeError, characterize
+from noise_monitor.profiles.characterize import CharacterizeError, characterize, datasheet_from_result
 from noise_monitor.profiles.emva_images import find_descriptor, parse_descriptor, read_image_set
 
 CCD = Path(__file__).resolve().parents[1] / "data" / "emva1288_ccd"
@@ -57,12 +57,14 @@ def test_characterize_command_on_the_ccd_writes_report_and_profile(tmp_path, cap
     assert json.loads((out / "characterize.json").read_text())["points"]["linearity"]["photons"][0] == 120.0
 
 
-def _irradiance_series(root: Path, rng: np.random.Generator) -> dict[str, float]:
+def _irradiance_series(root: Path, rng: np.random.Generator, shading: float = 0.0) -> dict[str, float]:
     """A 12-bit camera at one exposure, the irradiance stepped (EMVA's second method): K 0.1 DN/e-, QE 0.6, dark noise
-    8 e-, PRNU 1 %, offset 60 DN; pairs at 24 levels to beyond saturation, 16-frame spatial sets at 50 %."""
+    8 e-, PRNU 1 %, offset 60 DN; pairs at 24 levels to beyond saturation, 16-frame spatial sets at 50 %. ``shading``:
+    the light falls off quadratically towards the corners by that fraction (a real light source's or lens's)."""
     k, qe, dark_e, prnu, offset = 0.1, 0.6, 8.0, 0.01, 60.0
     shape = (48, 48)
-    gain = 1.0 + prnu * rng.standard_normal(shape)
+    yy, xx = np.mgrid[-1:1:shape[0] * 1j, -1:1:shape[1] * 1j]
+    gain = (1.0 + prnu * rng.standard_normal(shape)) * (1.0 - shading * (xx**2 + yy**2) / 2.0)
     (root / "img").mkdir()
     lines = ["# simulated irradiance series", "v 4.0", f"n 12 {shape[1]} {shape[0]}"]
 
@@ -100,6 +102,27 @@ def test_an_irradiance_series_at_one_exposure_recovers_the_truth(tmp_path):
     assert f["dark_current_e_per_s"] == {} and f["read_noise_e"]["value"] is None
     assert f["black_level_dn"]["value"] is None
     assert any("one exposure time" in n for n in result["notes"])
+
+
+def test_the_profile_takes_the_pixels_non_uniformity_not_the_lights_shading(tmp_path):
+    """A light source falling off by 4 % towards the corners: the total PRNU (EMVA's) carries the shading, the
+    pixel-scale one (5x5 high-pass) the pixels' 1 %, and the profile for the node takes the latter (on the EMVA's
+    real CCD the two read 0.43 and 0.26 %, and the node's xi on its flat fields fell from +0.048 to +0.024 DN mean)."""
+    truth = _irradiance_series(tmp_path, np.random.default_rng(5), shading=0.04)
+    f = characterize(read_image_set(tmp_path))["figures"]
+    assert f["prnu_pct"]["value"] > 1.3 * truth["prnu"]
+    assert f["prnu_hpf_pct"]["value"] == pytest.approx(truth["prnu"], rel=0.1)
+
+
+def test_the_ccds_profile_carries_its_pixel_scale_prnu():
+    result = characterize(read_image_set(CCD, temperature_c=30.0))
+    ds, notes = datasheet_from_result(result, "ccd", "ccd", 7.4)
+    f = result["figures"]
+    assert ds is not None and ds.prnu_pct == pytest.approx(f["prnu_hpf_pct"]["value"])
+    # the crop is the frame's centre, where the light's shading is flat: 0.26 % of the pixels either way (the whole
+    # frame: 0.43 % total)
+    assert f["prnu_hpf_pct"]["value"] == pytest.approx(f["prnu_pct"]["value"], rel=0.05)
+    assert any("pixel-scale non-uniformities" in n for n in notes)
 
 
 def test_find_descriptor_tells_image_sets_from_bags(tmp_path):

@@ -1,0 +1,131 @@
+"""The monitor on a real CCD's flat fields (the EMVA's reference set 001): see README.md for the rule.
+
+    .venv/bin/python experiments/real_sensor_flats/run.py PATH/EMVA1288_ReferenceSet_001_CCD_12Bit --out out/real_ccd
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from noise_monitor.bag.messages import image_msg, metadata_msg
+from noise_monitor.bag.replay import replay
+from noise_monitor.bag.results import FrameTable, alarm_episodes
+from noise_monitor.bag.stream_eval import MIN_TRUE_XI, detected, stated_gain_copy
+from noise_monitor.bag.writer import BagWriter
+from noise_monitor.cli import main as cli
+from noise_monitor.physics import load_profile
+from noise_monitor.profiles.emva_images import find_descriptor, parse_descriptor
+
+FPS = 10.0
+START_NS = 1_700_000_000_000_000_000
+TEMPERATURE_C = 30.0
+#: the camera ran at 0 dB, the bottom of the gain range: the wrong metadata states 6 dB more
+GAIN_OFFSET_DB = 6.0
+
+
+def frames(descriptor: Path) -> list[tuple[float, float, Path, int]]:
+    """(exposure s, photons, image, level) of the flat fields: the pairs by photons, then the spatial set."""
+    d = parse_descriptor(descriptor)
+    flats = [b for b in d.blocks if b.kind == "flat"]
+    pairs = sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0)
+    spatial = [b for b in flats if len(b.files) > 2]
+    return [(b.exposure * 1e-9, b.photons or 0.0, f, level)
+            for level, b in enumerate(pairs + spatial) for f in b.files]
+
+
+def write_bag(path: Path, rows: list[tuple[float, float, Path, int]], profile) -> None:
+    with BagWriter(path) as w:
+        for i, (exposure, _, file, _) in enumerate(rows):
+            stamp = START_NS + int(i * 1e9 / FPS)
+            meta = profile.metadata(gain_db=0.0, exposure_time_s=exposure, sensor_temperature_c=TEMPERATURE_C)
+            w.write("/camera/metadata", metadata_msg(meta, stamp, "emva1288-set-001"), stamp)
+            w.write("/camera/image_raw", image_msg(cv2.imread(str(file), cv2.IMREAD_UNCHANGED), stamp), stamp)
+
+
+def pair_noise(rows: list[tuple[float, float, Path, int]], dark: dict[float, list[Path]]) -> dict[int, float]:
+    """Temporal noise per level from its first two frames' difference image (8-bit DN, 12-bit codes / 4095 * 255)."""
+    out = {}
+    for level in sorted({r[3] for r in rows}):
+        files = [r[2] for r in rows if r[3] == level][:2]
+        a, b = (cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.float64) for f in files)
+        out[level] = float(np.sqrt(np.var(a - b) / 2.0)) * 255.0 / 4095.0
+    return out
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("dataset", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    args = p.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    descriptor = find_descriptor(args.dataset)
+    if descriptor is None:
+        raise SystemExit(f"{args.dataset}: no EMVA descriptor")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert cli(["characterize", str(descriptor), "--out", str(args.out / "char"), "--sensor-type", "ccd",
+                    "--pixel-size-um", "7.4", "--temperature-c", str(TEMPERATURE_C)]) == 0
+    char = json.loads((args.out / "char" / "characterize.json").read_text())
+    sat_dn8 = char["points"]["ptc"]["saturation_dn"]
+    profile_path = args.out / "char" / "profile.yaml"
+    profile = load_profile(profile_path)
+    rows = frames(descriptor)
+    clean, wrong = args.out / "flats.mcap", args.out / "flats_gain_low.mcap"
+    for f in (clean, wrong):
+        f.unlink(missing_ok=True)
+    write_bag(clean, rows, profile)
+    stated_gain_copy(clean, wrong, GAIN_OFFSET_DB)
+    tables = {}
+    for label, bag in (("clean", clean), ("wrong", wrong)):
+        t = FrameTable()
+        replay(bag, profile_path, None, progress=False, table=t)
+        tables[label] = t
+    c, w = tables["clean"], tables["wrong"]
+    ok = c.column("processed").astype(bool)
+    both = ok & w.column("processed").astype(bool)
+    xi = c.numbers("xi").astype(float)
+    true_xi = w.numbers("sigma_model").astype(float) - c.numbers("sigma_model").astype(float)
+    level = np.array([r[3] for r in rows])
+    # the frame's signal above black (8-bit DN) from the image itself, for the 5-70 % window
+    signal = np.array([cv2.imread(str(r[2]), cv2.IMREAD_UNCHANGED).mean() * 255.0 / 4095.0 for r in rows])
+    signal -= char["figures"]["black_level_dn"]["value"] * 255.0 / 4095.0
+    window = ok & (signal >= 0.05 * sat_dn8) & (signal <= 0.70 * sat_dn8)
+    need = np.flatnonzero(window & both & (np.abs(true_xi) >= MIN_TRUE_XI))
+    alarm = w.column("alarm").astype(bool)
+    hits = [detected(alarm, level, int(i)) for i in need]
+    noise = pair_noise(rows, {})
+    spatial = level == level.max()
+    sig_t = c.numbers("sigma_temporal").astype(float)
+    frames_t = c.numbers("temporal_frames").astype(float)
+    after10 = np.flatnonzero(spatial & (frames_t >= 10) & np.isfinite(sig_t))
+    summary = {
+        "frames": len(rows), "processed": int(ok.sum()), "in_window": int(window.sum()),
+        "saturation_dn8": sat_dn8,
+        "clean_xi_rms": float(np.sqrt(np.mean(xi[window] ** 2))), "clean_xi_mean": float(np.mean(xi[window])),
+        "clean_alarm_episodes": len(alarm_episodes(c)),
+        "need": len(need), "hits": int(sum(hits)), "detection": float(np.mean(hits)) if hits else float("nan"),
+        "true_xi_of_need": [round(float(true_xi[i]), 2) for i in need],
+        "true_xi_gain_high_range": [float(np.nanmin(true_xi[window & both])), float(np.nanmax(true_xi[window & both]))],
+        "gain_high_xi_error_rms": float(np.sqrt(np.mean((w.numbers("xi").astype(float) - true_xi)[window & both] ** 2))),
+        "profile_prnu_pct": load_profile(profile_path).effects.get("prnu", {}).get("sigma_pct"),
+        "wrong_gain_alarm_episodes": len(alarm_episodes(w)),
+        "temporal_truth_dn": noise[int(level.max())],
+        "sigma_temporal_after_10": [float(sig_t[i]) for i in after10[:5]],
+        "per_frame": [{"index": i, "level": int(level[i]), "signal_dn": round(float(signal[i]), 2),
+                       "sigma_image": float(c.numbers("sigma_image")[i]), "sigma_model": float(c.numbers("sigma_model")[i]),
+                       "xi": float(xi[i]), "processed": bool(ok[i]), "in_window": bool(window[i]),
+                       "true_xi_gain_low": float(true_xi[i]), "alarm_gain_low": bool(alarm[i]),
+                       "pair_noise_dn": noise[int(level[i])]} for i in range(len(rows))],
+    }
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    print(json.dumps({k: v for k, v in summary.items() if k != "per_frame"}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
