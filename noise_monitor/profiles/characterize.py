@@ -546,7 +546,7 @@ def _characterize(rec: Recording, dark_tolerance: float) -> dict[str, Any]:
         "figures": figures,
         "conditions": {"gain_db": gain0, "temperature_c": temp0, "bit_depth": rec.bit_depth,
                        "width": rec.shape[1], "height": rec.shape[0], "frames": rec.frames,
-                       "sets": len(rec.sets), "flat_sets": len(flats), "dark_sets": len(darks),
+                       "sets": len(rec.sets), "flat_sets": len(flats) + len(spatial), "dark_sets": len(darks),
                        "temporal_dark_noise_exposure_s": d0.exposure_time_s,
                        "dsnu_exposure_s": dsnu_set.exposure_time_s,
                        "dark_noise_at_dsnu_exposure_e": None if sd is None else math.sqrt(max(float(

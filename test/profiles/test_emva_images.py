@@ -42,7 +42,7 @@ def test_the_real_ccds_dark_current_and_dsnu(ccd):
     assert rate["value"] == pytest.approx(REFERENCE["u_I_mean"], rel=0.01)
     dsnu = ccd["figures"]["dsnu_e"]  # 0.1 DN over 8 frames of 4096 pixels: within its standard error
     assert abs(dsnu["value"] - REFERENCE["DSNU1288"]) <= dsnu["stderr"]
-    assert ccd["conditions"]["flat_sets"] == 25 and ccd["conditions"]["dark_sets"] == 26  # spatial dark set included
+    assert ccd["conditions"]["flat_sets"] == 26 and ccd["conditions"]["dark_sets"] == 26  # 25 pairs and a spatial set each
 
 
 def test_characterize_command_on_the_ccd_writes_report_and_profile(tmp_path, capsys):
