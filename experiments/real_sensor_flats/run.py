@@ -13,17 +13,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import FrameTable, alarm_episodes
 from noise_monitor.bag.stream_eval import MIN_TRUE_XI, detected, stated_gain_copy
-from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main as cli
 from noise_monitor.physics import load_profile
-from noise_monitor.profiles.emva_images import find_descriptor, parse_descriptor
+from noise_monitor.profiles.emva_images import find_descriptor, parse_descriptor, write_flats_bag
 
-FPS = 10.0
-START_NS = 1_700_000_000_000_000_000
 TEMPERATURE_C = 30.0
 #: the camera ran at 0 dB, the bottom of the gain range: the wrong metadata states 6 dB more
 GAIN_OFFSET_DB = 6.0
@@ -39,16 +35,7 @@ def frames(descriptor: Path) -> list[tuple[float, float, Path, int]]:
             for level, b in enumerate(pairs + spatial) for f in b.files]
 
 
-def write_bag(path: Path, rows: list[tuple[float, float, Path, int]], profile) -> None:
-    with BagWriter(path) as w:
-        for i, (exposure, _, file, _) in enumerate(rows):
-            stamp = START_NS + int(i * 1e9 / FPS)
-            meta = profile.metadata(gain_db=0.0, exposure_time_s=exposure, sensor_temperature_c=TEMPERATURE_C)
-            w.write("/camera/metadata", metadata_msg(meta, stamp, "emva1288-set-001"), stamp)
-            w.write("/camera/image_raw", image_msg(cv2.imread(str(file), cv2.IMREAD_UNCHANGED), stamp), stamp)
-
-
-def pair_noise(rows: list[tuple[float, float, Path, int]], dark: dict[float, list[Path]]) -> dict[int, float]:
+def pair_noise(rows: list[tuple[float, float, Path, int]]) -> dict[int, float]:
     """Temporal noise per level from its first two frames' difference image (8-bit DN, 12-bit codes / 4095 * 255)."""
     out = {}
     for level in sorted({r[3] for r in rows}):
@@ -78,7 +65,7 @@ def main() -> int:
     clean, wrong = args.out / "flats.mcap", args.out / "flats_gain_low.mcap"
     for f in (clean, wrong):
         f.unlink(missing_ok=True)
-    write_bag(clean, rows, profile)
+    assert write_flats_bag(descriptor, clean, profile, temperature_c=TEMPERATURE_C) == len(rows)  # in rows' order
     stated_gain_copy(clean, wrong, GAIN_OFFSET_DB)
     tables = {}
     for label, bag in (("clean", clean), ("wrong", wrong)):
@@ -98,7 +85,7 @@ def main() -> int:
     need = np.flatnonzero(window & both & (np.abs(true_xi) >= MIN_TRUE_XI))
     alarm = w.column("alarm").astype(bool)
     hits = [detected(alarm, level, int(i)) for i in need]
-    noise = pair_noise(rows, {})
+    noise = pair_noise(rows)
     spatial = level == level.max()
     sig_t = c.numbers("sigma_temporal").astype(float)
     frames_t = c.numbers("temporal_frames").astype(float)

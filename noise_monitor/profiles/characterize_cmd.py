@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .characterize import DARK_TOLERANCE, characterize, datasheet_from_result, read_recording
 from .emva import TOLERANCE, dark_current_e_per_s, profile_from_datasheet, round_trip
-from .emva_images import EXPOSURE_UNITS, find_descriptor, read_image_set
+from .emva_images import EXPOSURE_UNITS, find_descriptor, read_image_set, write_flats_bag
 from .profile_cmd import print_round_trip
 from .report import plots, write_html
 
@@ -34,6 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="EMVA image set: the unit of the descriptor's exposure times (default ns, the format's)")
     parser.add_argument("--temperature-c", type=float, help="EMVA image set: the sensor temperature during the "
                                                             "measurement (the format has none; needed for a profile)")
+    parser.add_argument("--flats-bag", metavar="BAG", help="EMVA image set: also write its flat fields as a bag with "
+                                                        "the new profile's metadata, to replay through the monitor "
+                                                        "(noise-monitor replay BAG --profile OUT/profile.yaml)")
     parser.add_argument("--image-topic", help="override the auto-detected image topic")
     parser.add_argument("--metadata-topic", help="override the auto-detected metadata topic")
     parser.add_argument("--temperature-topic", help="override the auto-detected Temperature topic")
@@ -63,8 +66,9 @@ def run(args: argparse.Namespace) -> int:
         if args.bit_depth not in (None, rec.bit_depth):
             raise ValueError(f"--bit-depth {args.bit_depth}: the EMVA descriptor {descriptor} states {rec.bit_depth} bits")
     else:
-        if args.temperature_c is not None:
-            raise ValueError("--temperature-c is for EMVA image sets; a bag's metadata gives the temperature")
+        if args.temperature_c is not None or args.flats_bag:
+            raise ValueError("--temperature-c and --flats-bag are for EMVA image sets (a bag's metadata gives the "
+                             "temperature; a bag is replayed as it is)")
         rec = read_recording(args.bag, bit_depth=args.bit_depth, image_topic=args.image_topic,
                              metadata_topic=args.metadata_topic, temperature_topic=args.temperature_topic)
     result = characterize(rec, dark_tolerance=args.dark_tolerance)
@@ -82,6 +86,13 @@ def run(args: argparse.Namespace) -> int:
                                                         "(noise-monitor characterize)"))
         result["notes"] += made.notes
         result["profile"] = {"path": str(profile_file), "round_trip": rows}
+    if args.flats_bag and descriptor is not None:
+        if profile is None:
+            raise ValueError("--flats-bag needs the profile, which was not written: " + "; ".join(notes))
+        frames = write_flats_bag(descriptor, args.flats_bag, profile, args.exposure_unit,
+                                 25.0 if args.temperature_c is None else args.temperature_c)
+        result["notes"].append(f"flat fields as a bag: {args.flats_bag} ({frames} frames; noise-monitor replay "
+                               f"{args.flats_bag} --profile {profile_file})")
     files = plots(result, out, profile)
     report = write_html(result, out, files, args.bag, rows, str(profile_file) if profile_file else None)
     text = json.dumps(result, indent=2)

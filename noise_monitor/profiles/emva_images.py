@@ -26,6 +26,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from noise_monitor.bag.messages import image_msg, metadata_msg
+from noise_monitor.bag.writer import BagWriter
+from noise_monitor.physics import CameraProfile
+
 from .characterize import CharacterizeError, FrameSet, Recording
 
 #: Exposure units a descriptor's times may be in (the format's own is ns).
@@ -176,3 +180,28 @@ def read_image_set(path: str | Path, exposure_unit: str = "ns", temperature_c: f
         sets.append(s)
     static = {"emva_release": d.version, **({"info": d.info} if d.info else {})}
     return Recording(sets, d.bits, (d.height, d.width), frames, {}, static, kinds_given=True)
+
+
+def write_flats_bag(path: str | Path, out: str | Path, profile: CameraProfile, exposure_unit: str = "ns",
+                    temperature_c: float = 25.0, fps: float = 10.0, start_ns: int = 1_700_000_000_000_000_000) -> int:
+    """An EMVA image set's flat fields as a bag to replay through the monitor (``camera/image_raw``: mono8 or mono16;
+    ``camera/metadata``: the profile's metadata at each frame's exposure, 0 dB, ``temperature_c``): the temporal
+    pairs by photon count, then the spatial sets, each a static hold. Returns the frames written."""
+    descriptor = find_descriptor(path)
+    if descriptor is None:
+        raise CharacterizeError(f"{path}: no EMVA 1288 descriptor file")
+    d = parse_descriptor(descriptor)
+    flats = [b for b in d.blocks if b.kind == "flat"]
+    ordered = sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0) + [
+        b for b in flats if len(b.files) > 2]
+    count = 0
+    with BagWriter(out) as w:
+        for b in ordered:
+            meta = profile.metadata(gain_db=0.0, exposure_time_s=b.exposure * EXPOSURE_UNITS[exposure_unit],
+                                    sensor_temperature_c=temperature_c)
+            for file in b.files:
+                stamp = start_ns + int(count * 1e9 / fps)
+                w.write("/camera/metadata", metadata_msg(meta, stamp, f"emva1288/{descriptor.parent.name}"), stamp)
+                w.write("/camera/image_raw", image_msg(_image(file, d), stamp), stamp)
+                count += 1
+    return count
