@@ -96,7 +96,8 @@ class FrameSet:
 
     def compute(self) -> None:
         """Mean, temporal and spatial variance, clipped fraction; frees the pixels."""
-        stack = np.stack(self.images).astype(np.float64)
+        stack = np.stack(self.images).astype(np.float64, copy=False)
+        self.images = []  # the stack holds the pixels now
         self.mean = float(stack.mean())
         pairs = [np.var(stack[i] - stack[i + 1]) / 2.0 for i in range(0, len(stack) - 1, 2)]
         self.temporal_var = float(np.mean(pairs))
@@ -106,7 +107,6 @@ class FrameSet:
         self.clipped_pixels = int(np.count_nonzero(stack >= 255.0 - 1e-3))
         self.underflow_pixels = int(np.count_nonzero(stack <= 1e-3))
         self.pixels = stack.size
-        self.images = []
 
 
 @dataclass
