@@ -627,11 +627,12 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
     # glow in the total is no noise of an image patch
     dsnu, prnu = (f[hpf]["value"] if f[hpf]["value"] is not None else f[whole]["value"]
                   for hpf, whole in (("dsnu_hpf_e", "dsnu_e"), ("prnu_hpf_pct", "prnu_pct")))
-    if prnu is not None and f["prnu_pct"]["value"] is not None:
-        notes.append(f"profile: the pixel-scale non-uniformities (5x5 high-pass), PRNU {prnu:.3g} % and DSNU "
-                     f"{dsnu:.3g} e-, rather than the totals {f['prnu_pct']['value']:.3g} % and "
-                     f"{f['dsnu_e']['value'] if f['dsnu_e']['value'] is not None else float('nan'):.3g} e-, whose "
-                     "smooth shading is no noise of an image patch")
+    said = [f"{label} {f[hpf]['value']:.3g} {unit} (total {f[whole]['value']:.3g})"
+            for label, hpf, whole, unit in (("PRNU", "prnu_hpf_pct", "prnu_pct", "%"), ("DSNU", "dsnu_hpf_e", "dsnu_e", "e-"))
+            if f[hpf]["value"] is not None and f[whole]["value"] is not None]
+    if said:
+        notes.append(f"profile: the pixel-scale non-uniformities (5x5 high-pass), {' and '.join(said)}: a light "
+                     "source's, lens's or amplifier's smooth shading in the totals is no noise of an image patch")
     doc = {
         "name": name, "sensor_type": sensor_type, "bit_depth": cond["bit_depth"], "pixel_size_um": pixel_size_um,
         "system_gain_dn_per_e": f["system_gain_dn_per_e"]["value"],
