@@ -10,6 +10,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from noise_monitor.cli import main
 from noise_monitor.profiles.characterize import CharacterizeError, characterize, datasheet_from_result
@@ -193,3 +195,23 @@ def test_the_command_refuses_a_temperature_for_a_bag_and_a_wrong_bit_depth(tmp_p
     assert "--temperature-c and --flats-bag are for EMVA image sets" in capsys.readouterr().err
     assert main(["characterize", str(CCD), "--out", str(tmp_path), "--bit-depth", "8"]) == 2
     assert "states 12 bits" in capsys.readouterr().err
+
+
+_LINE = st.one_of(
+    st.sampled_from(["v 3.0", "n 12 4 4", "n 8 4 4", "b 100 20", "d 100", "i a.png", "i sub\\b.png", "l Vendor X",
+                     "# comment", "", "n 12 4", "b -1 2", "d x", "q 1", "n 99 4 4", "b 1,5 2,5"]),
+    st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=30))
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(_LINE, max_size=12))
+def test_any_descriptor_text_parses_or_is_refused_with_a_reason(tmp_path_factory, lines):
+    """Whatever a descriptor holds, reading it gives a Descriptor or a CharacterizeError, never another exception."""
+    path = tmp_path_factory.mktemp("d") / "EMVA1288_Data.txt"
+    path.write_text("\n".join(lines), errors="surrogateescape")
+    try:
+        d = parse_descriptor(path)
+    except CharacterizeError as exc:
+        assert str(exc)
+    else:
+        assert 1 <= d.bits <= 16 and all(len(b.files) >= 2 for b in d.blocks)
