@@ -1,6 +1,9 @@
-"""The monitor on a real CCD's flat fields (the EMVA's reference set 001): see README.md for the rule.
+"""The monitor on a real camera's flat fields (the EMVA's reference sets 001 and 002): see README.md for the rules.
 
     .venv/bin/python experiments/real_sensor_flats/run.py PATH/EMVA1288_ReferenceSet_001_CCD_12Bit --out out/real_ccd
+    .venv/bin/python experiments/real_sensor_flats/run.py PATH/EMVA1288_ReferenceSet_002_CMOS_08Bit --out out/real_cmos \
+        --exposure-unit us --sensor-type cmos --assume-undetermined
+    ... --total-prnu     # the profile with the EMVA totals of PRNU / DSNU instead of the pixel-scale figures
 """
 from __future__ import annotations
 
@@ -18,54 +21,93 @@ from noise_monitor.bag.results import FrameTable, alarm_episodes
 from noise_monitor.bag.stream_eval import MIN_TRUE_XI, detected, stated_gain_copy
 from noise_monitor.cli import main as cli
 from noise_monitor.physics import load_profile
-from noise_monitor.profiles.emva_images import find_descriptor, parse_descriptor, write_flats_bag
+from noise_monitor.profiles.characterize import datasheet_from_result
+from noise_monitor.profiles.emva import profile_from_datasheet
+from noise_monitor.profiles.emva_images import EXPOSURE_UNITS, find_descriptor, parse_descriptor, write_flats_bag
 
 TEMPERATURE_C = 30.0
 #: the camera ran at 0 dB, the bottom of the gain range: the wrong metadata states 6 dB more
 GAIN_OFFSET_DB = 6.0
 
 
-def frames(descriptor: Path) -> list[tuple[float, float, Path, int]]:
+def frames(descriptor: Path, unit: str = "ns") -> list[tuple[float, float, Path, int]]:
     """(exposure s, photons, image, level) of the flat fields: the pairs by photons, then the spatial set."""
     d = parse_descriptor(descriptor)
     flats = [b for b in d.blocks if b.kind == "flat"]
     pairs = sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0)
     spatial = [b for b in flats if len(b.files) > 2]
-    return [(b.exposure * 1e-9, b.photons or 0.0, f, level)
+    return [(b.exposure * EXPOSURE_UNITS[unit], b.photons or 0.0, f, level)
             for level, b in enumerate(pairs + spatial) for f in b.files]
 
 
-def pair_noise(rows: list[tuple[float, float, Path, int]]) -> dict[int, float]:
-    """Temporal noise per level from its first two frames' difference image (8-bit DN, 12-bit codes / 4095 * 255)."""
+def pair_noise(rows: list[tuple[float, float, Path, int]], scale: float) -> dict[int, float]:
+    """Temporal noise per level from its first two frames' difference image (8-bit DN: codes x ``scale``)."""
     out = {}
     for level in sorted({r[3] for r in rows}):
         files = [r[2] for r in rows if r[3] == level][:2]
         a, b = (cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.float64) for f in files)
-        out[level] = float(np.sqrt(np.var(a - b) / 2.0)) * 255.0 / 4095.0
+        out[level] = float(np.sqrt(np.var(a - b) / 2.0)) * scale
     return out
+
+
+def make_profile(char: dict, out: Path, name: str, args: argparse.Namespace) -> Path:
+    """The profile `characterize` wrote, or (``--total-prnu``, ``--assume-undetermined``) one made from its figures
+    with the EMVA totals of PRNU / DSNU, and sigma_d at EMVA's 0.49 DN bound and a dark current of 0 where the set
+    determines neither."""
+    written = out / "char" / "profile.yaml"
+    if written.is_file() and not args.total_prnu:
+        return written
+    f, cond = char["figures"], dict(char["conditions"])
+    if args.total_prnu:
+        f["prnu_hpf_pct"], f["dsnu_hpf_e"] = f["prnu_pct"], f["dsnu_e"]
+    if args.assume_undetermined:
+        k_native = f["system_gain_dn_per_e"]["value"]
+        if cond["dark_noise_at_dsnu_exposure_e"] is None:
+            cond["dark_noise_at_dsnu_exposure_e"] = float(np.sqrt(0.24 - 1.0 / 12.0)) / k_native
+        f["dark_current_e_per_s"].setdefault(f"{TEMPERATURE_C:g}", {"value": 0.0, "stderr": 1.0, "unit": "e-/s"})
+    ds, notes = datasheet_from_result({**char, "figures": f, "conditions": cond}, name, args.sensor_type,
+                                      args.pixel_size_um)
+    if ds is None:
+        raise SystemExit("; ".join(notes))
+    made = profile_from_datasheet(ds)
+    path = out / "profile.yaml"
+    path.write_text(made.to_yaml(ds, source=f"{name}, run.py's assumptions: {vars(args)}"))
+    return path
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("dataset", type=Path)
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--exposure-unit", default="ns", choices=tuple(EXPOSURE_UNITS))
+    p.add_argument("--sensor-type", default="ccd", choices=("ccd", "cmos"))
+    p.add_argument("--pixel-size-um", type=float, default=7.4)
+    p.add_argument("--assume-undetermined", action="store_true",
+                   help="sigma_d at EMVA's 0.49 DN bound and a dark current of 0 where the set determines neither")
+    p.add_argument("--total-prnu", action="store_true", help="the profile with the EMVA totals of PRNU and DSNU")
     args = p.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     descriptor = find_descriptor(args.dataset)
     if descriptor is None:
         raise SystemExit(f"{args.dataset}: no EMVA descriptor")
     with contextlib.redirect_stdout(io.StringIO()):
-        assert cli(["characterize", str(descriptor), "--out", str(args.out / "char"), "--sensor-type", "ccd",
-                    "--pixel-size-um", "7.4", "--temperature-c", str(TEMPERATURE_C)]) == 0
+        assert cli(["characterize", str(descriptor), "--out", str(args.out / "char"), "--sensor-type", args.sensor_type,
+                    "--pixel-size-um", str(args.pixel_size_um), "--temperature-c", str(TEMPERATURE_C),
+                    "--exposure-unit", args.exposure_unit]) == 0
     char = json.loads((args.out / "char" / "characterize.json").read_text())
     sat_dn8 = char["points"]["ptc"]["saturation_dn"]
-    profile_path = args.out / "char" / "profile.yaml"
+    scale = 255.0 / (2 ** char["conditions"]["bit_depth"] - 1)
+    profile_path = make_profile(char, args.out, descriptor.parent.name, args)
     profile = load_profile(profile_path)
-    rows = frames(descriptor)
+    rows = frames(descriptor, args.exposure_unit)
     clean, wrong = args.out / "flats.mcap", args.out / "flats_gain_low.mcap"
     for f in (clean, wrong):
         f.unlink(missing_ok=True)
-    assert write_flats_bag(descriptor, clean, profile, temperature_c=TEMPERATURE_C) == len(rows)  # in rows' order
+    written, left_out = write_flats_bag(descriptor, clean, profile, args.exposure_unit, TEMPERATURE_C)
+    keep = {r[2] for r in rows} - {f for b in parse_descriptor(descriptor).blocks for f in b.files
+                                    if any(f"line {b.line} " in reason for reason in left_out)}
+    rows = [r for r in rows if r[2] in keep]  # in the bag's order
+    assert written == len(rows), (written, len(rows), left_out)
     stated_gain_copy(clean, wrong, GAIN_OFFSET_DB)
     tables = {}
     for label, bag in (("clean", clean), ("wrong", wrong)):
@@ -79,19 +121,19 @@ def main() -> int:
     true_xi = w.numbers("sigma_model").astype(float) - c.numbers("sigma_model").astype(float)
     level = np.array([r[3] for r in rows])
     # the frame's signal above black (8-bit DN) from the image itself, for the 5-70 % window
-    signal = np.array([cv2.imread(str(r[2]), cv2.IMREAD_UNCHANGED).mean() * 255.0 / 4095.0 for r in rows])
-    signal -= char["figures"]["black_level_dn"]["value"] * 255.0 / 4095.0
+    signal = np.array([cv2.imread(str(r[2]), cv2.IMREAD_UNCHANGED).mean() * scale for r in rows])
+    signal -= (char["figures"]["black_level_dn"]["value"] or 0.0) * scale
     window = ok & (signal >= 0.05 * sat_dn8) & (signal <= 0.70 * sat_dn8)
     need = np.flatnonzero(window & both & (np.abs(true_xi) >= MIN_TRUE_XI))
     alarm = w.column("alarm").astype(bool)
     hits = [detected(alarm, level, int(i)) for i in need]
-    noise = pair_noise(rows)
+    noise = pair_noise(rows, scale)
     spatial = level == level.max()
     sig_t = c.numbers("sigma_temporal").astype(float)
     frames_t = c.numbers("temporal_frames").astype(float)
     after10 = np.flatnonzero(spatial & (frames_t >= 10) & np.isfinite(sig_t))
     summary = {
-        "frames": len(rows), "processed": int(ok.sum()), "in_window": int(window.sum()),
+        "frames": len(rows), "left_out": left_out, "processed": int(ok.sum()), "in_window": int(window.sum()),
         "saturation_dn8": sat_dn8,
         "clean_xi_rms": float(np.sqrt(np.mean(xi[window] ** 2))), "clean_xi_mean": float(np.mean(xi[window])),
         "clean_alarm_episodes": len(alarm_episodes(c)),

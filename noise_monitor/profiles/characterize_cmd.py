@@ -89,10 +89,11 @@ def run(args: argparse.Namespace) -> int:
     if args.flats_bag and descriptor is not None:
         if profile is None:
             raise ValueError("--flats-bag needs the profile, which was not written: " + "; ".join(notes))
-        frames = write_flats_bag(descriptor, args.flats_bag, profile, args.exposure_unit,
-                                 25.0 if args.temperature_c is None else args.temperature_c)
+        frames, left_out = write_flats_bag(descriptor, args.flats_bag, profile, args.exposure_unit,
+                                           25.0 if args.temperature_c is None else args.temperature_c)
         result["notes"].append(f"flat fields as a bag: {args.flats_bag} ({frames} frames; noise-monitor replay "
                                f"{args.flats_bag} --profile {profile_file})")
+        result["notes"] += [f"left out of the bag: {reason}" for reason in left_out]
     files = plots(result, out, profile)
     report = write_html(result, out, files, args.bag, rows, str(profile_file) if profile_file else None)
     text = json.dumps(result, indent=2)

@@ -28,7 +28,7 @@ import numpy as np
 
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.writer import BagWriter
-from noise_monitor.physics import CameraProfile
+from noise_monitor.physics import CameraProfile, MetadataError
 
 from .characterize import CharacterizeError, FrameSet, Recording
 
@@ -183,10 +183,12 @@ def read_image_set(path: str | Path, exposure_unit: str = "ns", temperature_c: f
 
 
 def write_flats_bag(path: str | Path, out: str | Path, profile: CameraProfile, exposure_unit: str = "ns",
-                    temperature_c: float = 25.0, fps: float = 10.0, start_ns: int = 1_700_000_000_000_000_000) -> int:
+                    temperature_c: float = 25.0, fps: float = 10.0, start_ns: int = 1_700_000_000_000_000_000
+                    ) -> tuple[int, list[str]]:
     """An EMVA image set's flat fields as a bag to replay through the monitor (``camera/image_raw``: mono8 or mono16;
     ``camera/metadata``: the profile's metadata at each frame's exposure, 0 dB, ``temperature_c``): the temporal
-    pairs by photon count, then the spatial sets, each a static hold. Returns the frames written."""
+    pairs by photon count, then the spatial sets, each a static hold. Returns the frames written and, for each set
+    left out (metadata the model refuses, e.g. an exposure of 0 s), the reason."""
     descriptor = find_descriptor(path)
     if descriptor is None:
         raise CharacterizeError(f"{path}: no EMVA 1288 descriptor file")
@@ -194,14 +196,18 @@ def write_flats_bag(path: str | Path, out: str | Path, profile: CameraProfile, e
     flats = [b for b in d.blocks if b.kind == "flat"]
     ordered = sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0) + [
         b for b in flats if len(b.files) > 2]
-    count = 0
+    count, left_out = 0, []
     with BagWriter(out) as w:
         for b in ordered:
-            meta = profile.metadata(gain_db=0.0, exposure_time_s=b.exposure * EXPOSURE_UNITS[exposure_unit],
-                                    sensor_temperature_c=temperature_c)
+            try:
+                meta = profile.metadata(gain_db=0.0, exposure_time_s=b.exposure * EXPOSURE_UNITS[exposure_unit],
+                                        sensor_temperature_c=temperature_c)
+            except MetadataError as exc:
+                left_out.append(f"{descriptor.name} line {b.line} ({len(b.files)} images): {exc}")
+                continue
             for file in b.files:
                 stamp = start_ns + int(count * 1e9 / fps)
                 w.write("/camera/metadata", metadata_msg(meta, stamp, f"emva1288/{descriptor.parent.name}"), stamp)
                 w.write("/camera/image_raw", image_msg(_image(file, d), stamp), stamp)
                 count += 1
-    return count
+    return count, left_out

@@ -78,6 +78,22 @@ def test_the_monitor_reads_the_real_ccds_noise(tmp_path, capsys):
     assert np.sqrt(np.mean(xi**2)) <= 0.15
 
 
+def test_a_set_the_model_cannot_state_is_left_out_of_the_flats_bag_with_the_reason(tmp_path, capsys):
+    """EMVA set 002 starts with a flat field at 0 s of exposure, which no camera metadata can state: the bag leaves it
+    out and says so, the rest is written (before: the command failed on the metadata's range)."""
+    import shutil
+
+    shutil.copytree(CCD, tmp_path / "set")
+    with (tmp_path / "set" / "EMVA1288_Data.txt").open("a") as f:
+        f.write("b 0 0.35\ni images\\b_000_snap_001.png\ni images\\b_000_snap_002.png\n")
+    bag = tmp_path / "flats.mcap"
+    assert main(["characterize", str(tmp_path / "set"), "--out", str(tmp_path / "char"), "--sensor-type", "ccd",
+                 "--pixel-size-um", "7.4", "--temperature-c", "30", "--flats-bag", str(bag)]) == 0
+    printed = capsys.readouterr().out
+    assert f"flat fields as a bag: {bag} (58 frames" in printed
+    assert "left out of the bag: EMVA1288_Data.txt line" in printed and "exposure_time_s = 0 s is outside" in printed
+
+
 def _irradiance_series(root: Path, rng: np.random.Generator, shading: float = 0.0) -> dict[str, float]:
     """A 12-bit camera at one exposure, the irradiance stepped (EMVA's second method): K 0.1 DN/e-, QE 0.6, dark noise
     8 e-, PRNU 1 %, offset 60 DN; pairs at 24 levels to beyond saturation, 16-frame spatial sets at 50 %. ``shading``:
