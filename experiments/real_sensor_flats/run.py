@@ -52,21 +52,16 @@ def pair_noise(rows: list[tuple[float, float, Path, int]], scale: float) -> dict
 
 def make_profile(char: dict, out: Path, name: str, args: argparse.Namespace) -> Path:
     """The profile `characterize` wrote, or (``--total-prnu``, ``--assume-undetermined``) one made from its figures
-    with the EMVA totals of PRNU / DSNU, and sigma_d at EMVA's 0.49 DN bound and a dark current of 0 where the set
-    determines neither."""
+    with the EMVA totals of PRNU / DSNU, and EMVA's bounds where the set determines neither dark noise nor current
+    (`characterize --dark-bounds`)."""
     written = out / "char" / "profile.yaml"
     if written.is_file() and not args.total_prnu:
         return written
-    f, cond = char["figures"], dict(char["conditions"])
+    f = dict(char["figures"])
     if args.total_prnu:
         f["prnu_hpf_pct"], f["dsnu_hpf_e"] = f["prnu_pct"], f["dsnu_e"]
-    if args.assume_undetermined:
-        k_native = f["system_gain_dn_per_e"]["value"]
-        if cond["dark_noise_at_dsnu_exposure_e"] is None:
-            cond["dark_noise_at_dsnu_exposure_e"] = float(np.sqrt(0.24 - 1.0 / 12.0)) / k_native
-        f["dark_current_e_per_s"].setdefault(f"{TEMPERATURE_C:g}", {"value": 0.0, "stderr": 1.0, "unit": "e-/s"})
-    ds, notes = datasheet_from_result({**char, "figures": f, "conditions": cond}, name, args.sensor_type,
-                                      args.pixel_size_um)
+    ds, notes = datasheet_from_result({**char, "figures": f}, name, args.sensor_type, args.pixel_size_um,
+                                      bounds=args.assume_undetermined)
     if ds is None:
         raise SystemExit("; ".join(notes))
     made = profile_from_datasheet(ds)

@@ -585,9 +585,23 @@ def _photon_figures(photons: np.ndarray, signal: np.ndarray, k8: float, rel_k: f
 
 
 def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | None = None,
-                          pixel_size_um: float | None = None) -> tuple[Datasheet | None, list[str]]:
-    """The measured figures as a datasheet for :func:`profile_from_datasheet`, or None and the reasons."""
+                          pixel_size_um: float | None = None, bounds: bool = False) -> tuple[Datasheet | None, list[str]]:
+    """The measured figures as a datasheet for :func:`profile_from_datasheet`, or None and the reasons. ``bounds``:
+    what the recording cannot determine taken as EMVA 1288 takes it, said in the notes: a temporal dark noise below
+    the ADC step at the standard's 0.49 DN (an upper bound), an unmeasured dark current as 0."""
     f, cond, static = result["figures"], result["conditions"], result["static"]
+    notes = []
+    temp = cond["temperature_c"]
+    if bounds and cond["dark_noise_at_dsnu_exposure_e"] is None and f["system_gain_dn_per_e"]["value"]:
+        bound = math.sqrt(QUANTIZATION_LIMIT_DN2 - 1.0 / 12.0) / f["system_gain_dn_per_e"]["value"]
+        cond = {**cond, "dark_noise_at_dsnu_exposure_e": bound}
+        notes.append(f"profile: temporal dark noise {bound:.3g} e-, EMVA 1288's 0.49 DN bound for a dark noise below the "
+                     "ADC step (--dark-bounds): the model's dark noise is an upper bound")
+    key = "unknown" if temp is None else f"{temp:g}"
+    if bounds and temp is not None and key not in f["dark_current_e_per_s"]:
+        f = {**f, "dark_current_e_per_s": {**f["dark_current_e_per_s"], key: _value(0.0, None, "e-/s")}}
+        notes.append(f"profile: dark current 0 at {temp:g} degC, not measured (--dark-bounds): the dark signal moved "
+                     "less than the recording resolves, or darks at one exposure only")
     sensor_type = sensor_type or static.get("sensor_type")
     if pixel_size_um is None and static.get("pixel_size_m") is not None:
         pixel_size_um = float(static["pixel_size_m"]) * 1e6
@@ -600,15 +614,15 @@ def datasheet_from_result(result: dict[str, Any], name: str, sensor_type: str | 
         missing.append("the temporal dark noise (quantization-limited)")
     if f["saturation_capacity_e"]["value"] is None:
         missing.append("the saturation capacity")
-    temp = cond["temperature_c"]
     if temp is None:
         missing.append("the sensor temperature of the dark frames")
-    rate = f["dark_current_e_per_s"].get(f"{temp:g}" if temp is not None else "unknown")
+    rate = f["dark_current_e_per_s"].get(key)
     if rate is None:
         missing.append("the dark current")
     if missing or pixel_size_um is None:
-        return None, ["profile not written: the recording does not determine " + "; ".join(missing)]
-    notes = []
+        hint = "" if bounds or not {"the temporal dark noise (quantization-limited)", "the dark current"} & set(missing) else (
+            " (--dark-bounds takes EMVA 1288's bounds for the dark noise and current)")
+        return None, ["profile not written: the recording does not determine " + "; ".join(missing) + hint]
     mu = rate["value"]
     if mu < 0:
         if rate["stderr"] is None or mu < -2.0 * rate["stderr"]:

@@ -34,6 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="EMVA image set: the unit of the descriptor's exposure times (default ns, the format's)")
     parser.add_argument("--temperature-c", type=float, help="EMVA image set: the sensor temperature during the "
                                                             "measurement (the format has none; needed for a profile)")
+    parser.add_argument("--dark-bounds", action="store_true",
+                        help="write the profile where the recording cannot determine the temporal dark noise (below "
+                             "the ADC step: EMVA 1288's 0.49 DN bound, an upper bound) or the dark current (0); both "
+                             "said in the profile")
     parser.add_argument("--flats-bag", metavar="BAG", help="EMVA image set: also write its flat fields as a bag with "
                                                         "the new profile's metadata, to replay through the monitor "
                                                         "(noise-monitor replay BAG --profile OUT/profile.yaml)")
@@ -75,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = args.name or (descriptor.parent.name if descriptor else Path(args.bag.rstrip("/")).name.split(".")[0])
-    ds, notes = datasheet_from_result(result, name, args.sensor_type, args.pixel_size_um)
+    ds, notes = datasheet_from_result(result, name, args.sensor_type, args.pixel_size_um, bounds=args.dark_bounds)
     result["notes"] += notes
     profile = rows = profile_file = None
     if ds is not None:

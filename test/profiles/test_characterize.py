@@ -272,6 +272,18 @@ def test_8_bit_camera_below_its_adc_step_is_quantization_limited(tmp_path, capsy
     assert fig["dsnu_e"]["value"] is None and fig["doubling_temperature_k"]["value"] is None
     assert fig["dark_current_e_per_s"] == {}
     assert any("dark current not determined at 30 degC, 40 degC, 50 degC, 60 degC" in n for n in res["notes"])
+    assert any("--dark-bounds takes EMVA 1288's bounds" in n for n in res["notes"])
+    # with --dark-bounds the profile is written at what EMVA 1288 takes there, said: sigma_d at the 0.49 DN bound
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "b"), "--json", str(tmp_path / "b.json"),
+                 "--dark-bounds"]) == 0
+    res = json.loads((tmp_path / "b.json").read_text())
+    k = res["figures"]["system_gain_dn_per_e"]["value"]
+    assert any(f"temporal dark noise {np.sqrt(0.24 - 1 / 12) / k:.3g} e-, EMVA 1288's 0.49 DN bound" in n
+               for n in res["notes"])
+    assert any("dark current 0 at 30 degC, not measured" in n for n in res["notes"])
+    made_from = {r["field"]: r for r in res["profile"]["round_trip"]}
+    assert made_from["temporal_dark_noise_e"]["datasheet"] == pytest.approx(np.sqrt(0.24 - 1 / 12) / k)
+    assert load_profile(tmp_path / "b" / "profile.yaml").name
 
 
 def test_dark_sets_clipped_at_code_0_are_left_out_and_said(tmp_path):
