@@ -13,8 +13,9 @@ The exchange format of EMVA 1288 measurements (the EMVA's reference datasets, it
     ...
 
 ``#`` starts a comment, ``l`` a line for the report template (kept as information). Two images make a set for
-the temporal noise (the photon transfer curve, linearity), more a set for the spatial noise (DSNU, PRNU). Paths are relative to the descriptor's folder (``\\`` or
-``/``). Images are 8- or 16-bit single-channel files (PNG, TIFF, PGM, ...), the codes of the stated bit depth.
+the temporal noise (the photon transfer curve, linearity), more a set for the spatial noise (DSNU, PRNU). Paths
+are relative to the descriptor's folder (``\\`` or ``/``). Images are 8- or 16-bit single-channel files (PNG, TIFF,
+PGM, ...), the codes of the stated bit depth.
 The sets' kind (bright or dark) is the file's, not guessed from their level; their photon counts give the
 quantum efficiency that a recording without a calibrated irradiance cannot.
 """
@@ -159,7 +160,8 @@ def _image(file: Path, d: Descriptor) -> np.ndarray:
 def read_image_set(path: str | Path, exposure_unit: str = "ns", temperature_c: float | None = None,
                    gain_db: float = 0.0) -> Recording:
     """An EMVA 1288 image set (its descriptor file or the folder holding it) as a :class:`Recording` (images on the
-    8-bit scale, each set's kind and photons from the descriptor). ``temperature_c`` is the sensor's during the measurement (the format has none)."""
+    8-bit scale, each set's kind and photons from the descriptor). ``temperature_c``: the sensor's during the
+    measurement (the format has none)."""
     if exposure_unit not in EXPOSURE_UNITS:
         raise CharacterizeError(f"exposure unit {exposure_unit!r}: one of {', '.join(EXPOSURE_UNITS)}")
     descriptor = find_descriptor(path)
