@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import io
 import json
+from collections.abc import Iterable
 from pathlib import Path
 
 import cv2
@@ -23,21 +24,25 @@ from noise_monitor.cli import main as cli
 from noise_monitor.physics import load_profile
 from noise_monitor.profiles.characterize import datasheet_from_result
 from noise_monitor.profiles.emva import profile_from_datasheet
-from noise_monitor.profiles.emva_images import EXPOSURE_UNITS, find_descriptor, parse_descriptor, write_flats_bag
+from noise_monitor.profiles.emva_images import (
+    EXPOSURE_UNITS,
+    find_descriptor,
+    flat_blocks,
+    parse_descriptor,
+    write_flats_bag,
+)
 
 TEMPERATURE_C = 30.0
 #: the camera ran at 0 dB, the bottom of the gain range: the wrong metadata states 6 dB more
 GAIN_OFFSET_DB = 6.0
 
 
-def frames(descriptor: Path, unit: str = "ns") -> list[tuple[float, float, Path, int]]:
-    """(exposure s, photons, image, level) of the flat fields: the pairs by photons, then the spatial set."""
-    d = parse_descriptor(descriptor)
-    flats = [b for b in d.blocks if b.kind == "flat"]
-    pairs = sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0)
-    spatial = [b for b in flats if len(b.files) > 2]
+def frames(descriptor: Path, unit: str = "ns", left_out: Iterable[int] = ()) -> list[tuple[float, float, Path, int]]:
+    """(exposure s, photons, image, level) of the flat fields in the flats bag's order, less the sets left out of it
+    (by descriptor line)."""
     return [(b.exposure * EXPOSURE_UNITS[unit], b.photons or 0.0, f, level)
-            for level, b in enumerate(pairs + spatial) for f in b.files]
+            for level, b in enumerate(flat_blocks(parse_descriptor(descriptor))) if b.line not in left_out
+            for f in b.files]
 
 
 def pair_noise(rows: list[tuple[float, float, Path, int]], scale: float) -> dict[int, float]:
@@ -94,14 +99,11 @@ def main() -> int:
     scale = 255.0 / (2 ** char["conditions"]["bit_depth"] - 1)
     profile_path = make_profile(char, args.out, descriptor.parent.name, args)
     profile = load_profile(profile_path)
-    rows = frames(descriptor, args.exposure_unit)
     clean, wrong = args.out / "flats.mcap", args.out / "flats_gain_low.mcap"
     for f in (clean, wrong):
         f.unlink(missing_ok=True)
     written, left_out = write_flats_bag(descriptor, clean, profile, args.exposure_unit, TEMPERATURE_C)
-    keep = {r[2] for r in rows} - {f for b in parse_descriptor(descriptor).blocks for f in b.files
-                                    if any(f"line {b.line} " in reason for reason in left_out)}
-    rows = [r for r in rows if r[2] in keep]  # in the bag's order
+    rows = frames(descriptor, args.exposure_unit, left_out)  # the bag's frames, in its order
     assert written == len(rows), (written, len(rows), left_out)
     stated_gain_copy(clean, wrong, GAIN_OFFSET_DB)
     tables = {}
@@ -128,7 +130,7 @@ def main() -> int:
     frames_t = c.numbers("temporal_frames").astype(float)
     after10 = np.flatnonzero(spatial & (frames_t >= 10) & np.isfinite(sig_t))
     summary = {
-        "frames": len(rows), "left_out": left_out, "processed": int(ok.sum()), "in_window": int(window.sum()),
+        "frames": len(rows), "left_out": {f"line {k}": v for k, v in left_out.items()}, "processed": int(ok.sum()), "in_window": int(window.sum()),
         "saturation_dn8": sat_dn8,
         "clean_xi_rms": float(np.sqrt(np.mean(xi[window] ** 2))), "clean_xi_mean": float(np.mean(xi[window])),
         "clean_alarm_episodes": len(alarm_episodes(c)),

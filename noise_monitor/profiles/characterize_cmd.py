@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
                                            25.0 if args.temperature_c is None else args.temperature_c)
         result["notes"].append(f"flat fields as a bag: {args.flats_bag} ({frames} frames; noise-monitor replay "
                                f"{args.flats_bag} --profile {profile_file})")
-        result["notes"] += [f"left out of the bag: {reason}" for reason in left_out]
+        result["notes"] += [f"left out of the bag: {descriptor.name} line {line} ({reason})"
+                            for line, reason in left_out.items()]
     files = plots(result, out, profile)
     report = write_html(result, out, files, args.bag, rows, str(profile_file) if profile_file else None)
     text = json.dumps(result, indent=2)

@@ -184,28 +184,33 @@ def read_image_set(path: str | Path, exposure_unit: str = "ns", temperature_c: f
     return Recording(sets, d.bits, (d.height, d.width), frames, {}, static, kinds_given=True)
 
 
+def flat_blocks(d: Descriptor) -> list[Block]:
+    """The flat-field sets in the order a flats bag holds them: the temporal pairs by photon count, then the spatial
+    sets."""
+    flats = [b for b in d.blocks if b.kind == "flat"]
+    return sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0) + [
+        b for b in flats if len(b.files) > 2]
+
+
 def write_flats_bag(path: str | Path, out: str | Path, profile: CameraProfile, exposure_unit: str = "ns",
                     temperature_c: float = 25.0, fps: float = 10.0, start_ns: int = 1_700_000_000_000_000_000
-                    ) -> tuple[int, list[str]]:
+                    ) -> tuple[int, dict[int, str]]:
     """An EMVA image set's flat fields as a bag to replay through the monitor (``camera/image_raw``: mono8 or mono16;
     ``camera/metadata``: the profile's metadata at each frame's exposure, 0 dB, ``temperature_c``): the temporal
-    pairs by photon count, then the spatial sets, each a static hold. Returns the frames written and, for each set
-    left out (metadata the model refuses, e.g. an exposure of 0 s), the reason."""
+    pairs by photon count, then the spatial sets (:func:`flat_blocks`), each a static hold. Returns the frames written
+    and the sets left out (metadata the model refuses, e.g. an exposure of 0 s): the reason by descriptor line."""
     descriptor = find_descriptor(path)
     if descriptor is None:
         raise CharacterizeError(f"{path}: no EMVA 1288 descriptor file")
     d = parse_descriptor(descriptor)
-    flats = [b for b in d.blocks if b.kind == "flat"]
-    ordered = sorted((b for b in flats if len(b.files) == 2), key=lambda b: b.photons or 0.0) + [
-        b for b in flats if len(b.files) > 2]
-    count, left_out = 0, []
+    count, left_out = 0, {}
     with BagWriter(out) as w:
-        for b in ordered:
+        for b in flat_blocks(d):
             try:
                 meta = profile.metadata(gain_db=0.0, exposure_time_s=b.exposure * EXPOSURE_UNITS[exposure_unit],
                                         sensor_temperature_c=temperature_c)
             except MetadataError as exc:
-                left_out.append(f"{descriptor.name} line {b.line} ({len(b.files)} images): {exc}")
+                left_out[b.line] = f"{len(b.files)} images: {exc}"
                 continue
             for file in b.files:
                 stamp = start_ns + int(count * 1e9 / fps)
