@@ -85,11 +85,14 @@ def main() -> None:
     print(f"{'  ... alarm on at the frame itself':44s} {t['at_text']:>16s} {h['at_text']:>16s}")
     print(f"{'gain 6 dB low: views with such frames':44s} {t['views_with_need']:>16d} {h['views_with_need']:>16d}")
     print(f"{'gain 6 dB low: xi error RMS (DN)':44s} {t['offset_xi_error_rms']:>16.3f} {h['offset_xi_error_rms']:>16.3f}")
+    for s in (t, h):
+        s["not_due_text"] = f"{s['alarm_not_due']} / {s['not_due']}"
+    print(f"{'gain 6 dB low: alarm on, true |xi| < 0.5 DN':44s} {t['not_due_text']:>16s} {h['not_due_text']:>16s}")
     for label, s in summary.items():
         if label.startswith("photo "):
             print(f"{label[6:]:32s} clean xi error RMS / mean {s['clean_xi_rms']:.3f} / {s['clean_xi_mean']:+.3f} DN, "
                   f"false alarm episodes {s['false_alarm_episodes']}, gain 6 dB low detected {100 * s['detection']:.1f} % "
-                  f"({s['hits']}/{s['need']})")
+                  f"({s['hits']}/{s['need']}), alarm on at {s['alarm_not_due']} of {s['not_due']} frames not due")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps({"summary": summary, "bags": per_bag}, indent=1))

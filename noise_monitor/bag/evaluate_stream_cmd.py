@@ -12,7 +12,14 @@ from noise_monitor.estimator.user_images import load_image_set
 from .campaign import MIN_PHOTO_SIDE, PHOTO_SHARE
 from .scenarios import SCENARIOS
 from .simulate_cmd import add_field_arguments, add_photo_share_argument, field_keywords
-from .stream_eval import GAIN_OFFSET_DB, TARGET_CLEAN_XI_DN, TARGET_DETECTION, WITHIN, evaluate_stream
+from .stream_eval import (
+    GAIN_OFFSET_DB,
+    NOT_DUE_XI,
+    TARGET_CLEAN_XI_DN,
+    TARGET_DETECTION,
+    WITHIN,
+    evaluate_stream,
+)
 
 CAMPAIGNS = sorted(name for name, s in SCENARIOS.items() if s.campaign)
 
@@ -61,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
           f"{s['clean_xi_mean']:+.3f} DN; xi_filtered {s['clean_xi_filtered_rms']:.3f} DN; false-alarm episodes "
           f"{s['false_alarm_episodes']} (target 0)\n"
           f"  gain stated {args.gain_offset_db:+g} dB: frames with true |xi| >= 1 DN detected within {WITHIN} frames "
-          f"{det} (target >= {100 * TARGET_DETECTION:.0f} %); xi error RMS {offset_err}\n"
+          f"{det} (target >= {100 * TARGET_DETECTION:.0f} %); alarm on at {s['alarm_not_due']} of the {s['not_due']} frames "
+          f"with true |xi| < {NOT_DUE_XI} DN; xi error RMS {offset_err}\n"
           f"  {'meets' if s['meets_targets'] else 'does NOT meet'} issue 15's per-frame targets")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -15,7 +15,9 @@ Definitions (per bag, over the images; frames the monitor skipped in either repl
 - detected within ``WITHIN`` frames: the alarm is on at that frame or at one of the next frames of the same view,
   for every frame with true |xi| >= ``MIN_TRUE_XI``;
 - clean xi error: the per-frame ``xi`` (and ``xi_filtered``) of the clean replay against 0;
-- false-alarm episode: an alarm episode in the clean replay.
+- false-alarm episode: an alarm episode in the clean replay;
+- alarm not due: in the offset replay, the alarm on at a frame whose true |xi| is below ``NOT_DUE_XI`` (half the
+  threshold: an offset the node should tolerate).
 Frames whose stated gain would fall below 0 dB are skipped by the monitor as invalid metadata (not counted).
 """
 from __future__ import annotations
@@ -41,6 +43,8 @@ from .writer import BagWriter
 GAIN_OFFSET_DB = -6.0
 WITHIN = 5  # frames: the frame itself and the next 4 of the same view
 MIN_TRUE_XI = 1.0
+#: An offset replay's frame whose true |xi| is below this (DN) is not due an alarm.
+NOT_DUE_XI = 0.5
 #: Issue 15's per-frame targets: clean xi error RMS (DN), share of the frames due an alarm detected in time.
 TARGET_CLEAN_XI_DN = 0.15
 TARGET_DETECTION = 0.97
@@ -101,6 +105,7 @@ def measure_bag(bag: Path, offset: Path, profile: str | Path | CameraProfile, pa
     true_xi = off.numbers("sigma_model").astype(np.float64) - clean.numbers("sigma_model").astype(np.float64)
     alarm = off.column("alarm").astype(bool)  # as published (a skipped frame reports an active alarm too)
     need = np.flatnonzero(ok_c & ok_o & (np.abs(true_xi) >= MIN_TRUE_XI))
+    not_due = ok_c & ok_o & (np.abs(true_xi) < NOT_DUE_XI)
     hits = [detected(alarm, view, int(i)) for i in need]
     xi_o = off.numbers("xi").astype(np.float64)
     both = ok_c & ok_o
@@ -115,6 +120,7 @@ def measure_bag(bag: Path, offset: Path, profile: str | Path | CameraProfile, pa
         "need_true_xi": [round(float(true_xi[i]), 3) for i in need],
         "offset_xi_error": (xi_o[both] - true_xi[both]).tolist(),
         "offset_alarm_episodes": len(alarm_episodes(off)),
+        "not_due": int(not_due.sum()), "alarm_not_due": int((alarm & not_due).sum()),
         "view_of_need": [int(view[i]) for i in need],
     }
 
@@ -136,6 +142,7 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "alarmed_at_frame": at_frame, "at_frame": at_frame / need if need else float("nan"),
         "offset_xi_error_rms": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
         "views_with_need": sum(len(set(r["view_of_need"])) for r in rows),
+        "not_due": sum(r["not_due"] for r in rows), "alarm_not_due": sum(r["alarm_not_due"] for r in rows),
     }
     # no frame due an alarm: detection untested, the targets not met
     out["meets_targets"] = bool(out["clean_xi_rms"] <= TARGET_CLEAN_XI_DN and out["false_alarm_episodes"] == 0

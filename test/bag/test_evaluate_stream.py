@@ -73,9 +73,12 @@ def test_evaluate_stream_on_own_scene_meets_and_fails_the_targets(tmp_path, caps
 def test_targets_are_not_met_when_no_frame_was_due_an_alarm() -> None:
     """Detection untested (no frame with a true |xi| >= 1 DN, e.g. every offset frame skipped) is no pass."""
     row = {"clean_xi": [0.01, -0.02], "clean_xi_filtered": [0.0, 0.0], "offset_xi_error": [], "need": 0, "hits": 0,
-           "alarmed_at_frame": 0, "frames": 2, "false_alarm_episodes": 0, "view_of_need": []}
+           "alarmed_at_frame": 0, "frames": 2, "false_alarm_episodes": 0, "view_of_need": [], "not_due": 2,
+           "alarm_not_due": 0}
     assert not summarize([row])["meets_targets"]
     assert summarize([{**row, "need": 1, "hits": 1, "view_of_need": [0]}])["meets_targets"]
+    both = summarize([row, {**row, "not_due": 3, "alarm_not_due": 1}])  # alarms at frames not due, over the bags
+    assert (both["not_due"], both["alarm_not_due"]) == (5, 1)
 
 
 def test_leds_dimmed_by_pwm_raise_no_false_alarm() -> None:
