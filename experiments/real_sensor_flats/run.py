@@ -33,7 +33,7 @@ from noise_monitor.profiles.emva_images import (
 )
 
 TEMPERATURE_C = 30.0
-#: the camera ran at 0 dB, the bottom of the gain range: the wrong metadata states 6 dB more
+#: the camera ran at 0 dB, the bottom of the gain range: the wrong metadata states more (6 dB unless --gain-offset-db)
 GAIN_OFFSET_DB = 6.0
 
 
@@ -85,7 +85,11 @@ def main() -> int:
     p.add_argument("--assume-undetermined", action="store_true",
                    help="sigma_d at EMVA's 0.49 DN bound and a dark current of 0 where the set determines neither")
     p.add_argument("--total-prnu", action="store_true", help="the profile with the EMVA totals of PRNU and DSNU")
+    p.add_argument("--gain-offset-db", type=float, default=GAIN_OFFSET_DB,
+                   help="how much more gain the wrong-metadata copy states (the cameras ran at 0 dB: > 0)")
     args = p.parse_args()
+    if args.gain_offset_db <= 0:
+        p.error("--gain-offset-db must be > 0: the cameras ran at 0 dB, the bottom of the gain range")
     args.out.mkdir(parents=True, exist_ok=True)
     descriptor = find_descriptor(args.dataset)
     if descriptor is None:
@@ -99,13 +103,13 @@ def main() -> int:
     scale = 255.0 / (2 ** char["conditions"]["bit_depth"] - 1)
     profile_path = make_profile(char, args.out, descriptor.parent.name, args)
     profile = load_profile(profile_path)
-    clean, wrong = args.out / "flats.mcap", args.out / "flats_gain_low.mcap"
+    clean, wrong = args.out / "flats.mcap", args.out / f"flats_gain_plus{args.gain_offset_db:g}db.mcap"
     for f in (clean, wrong):
         f.unlink(missing_ok=True)
     written, left_out = write_flats_bag(descriptor, clean, profile, args.exposure_unit, TEMPERATURE_C)
     rows = frames(descriptor, args.exposure_unit, left_out)  # the bag's frames, in its order
     assert written == len(rows), (written, len(rows), left_out)
-    stated_gain_copy(clean, wrong, GAIN_OFFSET_DB)
+    stated_gain_copy(clean, wrong, args.gain_offset_db)
     tables = {}
     for label, bag in (("clean", clean), ("wrong", wrong)):
         t = FrameTable()
@@ -134,10 +138,12 @@ def main() -> int:
         "saturation_dn8": sat_dn8,
         "clean_xi_rms": float(np.sqrt(np.mean(xi[window] ** 2))), "clean_xi_mean": float(np.mean(xi[window])),
         "clean_alarm_episodes": len(alarm_episodes(c)),
-        "need": len(need), "hits": int(sum(hits)), "detection": float(np.mean(hits)) if hits else float("nan"),
+        "gain_offset_db": args.gain_offset_db, "need": len(need), "hits": int(sum(hits)), "detection": float(np.mean(hits)) if hits else float("nan"),
         "true_xi_of_need": [round(float(true_xi[i]), 2) for i in need],
-        "true_xi_gain_high_range": [float(np.nanmin(true_xi[window & both])), float(np.nanmax(true_xi[window & both]))],
-        "gain_high_xi_error_rms": float(np.sqrt(np.mean((w.numbers("xi").astype(float) - true_xi)[window & both] ** 2))),
+        "missed": [{"index": int(i), "level": int(level[i]), "true_xi": round(float(true_xi[i]), 3),
+                    "xi": round(float(w.numbers("xi")[i]), 3)} for i, hit in zip(need, hits) if not hit],
+        "true_xi_wrong_gain_range": [float(np.nanmin(true_xi[window & both])), float(np.nanmax(true_xi[window & both]))],
+        "wrong_gain_xi_error_rms": float(np.sqrt(np.mean((w.numbers("xi").astype(float) - true_xi)[window & both] ** 2))),
         "profile_prnu_pct": load_profile(profile_path).effects.get("prnu", {}).get("sigma_pct"),
         "wrong_gain_alarm_episodes": len(alarm_episodes(w)),
         "temporal_truth_dn": noise[int(level.max())],
@@ -145,7 +151,8 @@ def main() -> int:
         "per_frame": [{"index": i, "level": int(level[i]), "signal_dn": round(float(signal[i]), 2),
                        "sigma_image": float(c.numbers("sigma_image")[i]), "sigma_model": float(c.numbers("sigma_model")[i]),
                        "xi": float(xi[i]), "processed": bool(ok[i]), "in_window": bool(window[i]),
-                       "true_xi_gain_low": float(true_xi[i]), "alarm_gain_low": bool(alarm[i]),
+                       "true_xi_wrong_gain": float(true_xi[i]), "xi_wrong_gain": float(w.numbers("xi")[i]),
+                       "alarm_wrong_gain": bool(alarm[i]),
                        "pair_noise_dn": noise[int(level[i])]} for i in range(len(rows))],
     }
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1))

@@ -64,7 +64,9 @@ class XiAlarm:
       threshold drains the sum (0 = off);
     - count: ``min_frames`` consecutive frames with |filtered xi| > threshold.
 
-    :meth:`restart` (a metadata step: a new view) restarts both, so a view is judged on its own frames.
+    :meth:`restart` (a metadata step: a new view) restarts the count (the filter restarts with it) and keeps the
+    evidence: it sums frames' own xi beyond the threshold, so it raises only on a frame whose own xi is beyond it,
+    and a camera whose exposure steps every few frames (a sweep, auto-exposure) is judged on all of them.
     Clears after ``clear_frames`` consecutive frames with |filtered xi| < threshold - hysteresis. The cause
     follows the sign of xi.
     """
@@ -79,9 +81,8 @@ class XiAlarm:
         self.state = AlarmState()
 
     def restart(self) -> None:
-        """A new view (metadata step): the evidence and the count towards raising start again."""
-        s = self.state
-        s.above, s.evidence_pos, s.evidence_neg = 0, 0.0, 0.0
+        """A new view (metadata step): the count towards raising starts again; the evidence carries on."""
+        self.state.above = 0
 
     def _raise(self, xi: float) -> None:
         s = self.state

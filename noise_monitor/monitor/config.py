@@ -39,7 +39,7 @@ DESCRIPTIONS: dict[str, str] = {
     "xi_hysteresis_dn": "alarm clears only below threshold - hysteresis (DN)",
     "alarm_min_frames": "consecutive processed frames with |filtered xi| beyond the threshold that raise the alarm",
     "alarm_evidence": "the alarm also rises when a CUSUM of (|xi| - threshold) / (xi's standard error) over the "
-                      "current view's frames reaches this (standard errors); 0 = off (count rule only)",
+                      "frames (across views) reaches this (standard errors); 0 = off (count rule only)",
     "clear_min_frames": "consecutive processed frames below the clear level before the alarm clears",
     "filter_alpha": "exponential filter weight of a new frame (0..1] for xi and the per-source sigmas",
     "image_timeout_s": "no image for this long -> STALE",
@@ -49,7 +49,8 @@ DESCRIPTIONS: dict[str, str] = {
     "temporal_frames": "frames of a static hold whose differences measure the temporal noise (sigma_temporal); "
                        "0 = off (single-image measurement only)",
     "temporal_min_frames": "frames a static hold needs before its temporal measurement enters xi",
-    "image_xi_error_dn": "typical error (DN) of the single-image xi, weighing it against the temporal one",
+    "image_xi_error_dn": "largest error (DN) of the single-image xi: a frame's own is its patches' predicted "
+                         "error, at most this (the alarm's evidence unit, the weight against the temporal xi)",
 }
 
 

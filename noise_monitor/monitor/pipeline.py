@@ -2,7 +2,8 @@
 
 patches -> estimator (batched) -> physics model for the same patches -> median per frame ->
 exponential filter -> xi alarm state machine -> StatusReport / numeric outputs. A metadata step (gain or
-exposure: a new view) restarts the filter and the alarm's evidence, so each view is judged on its own frames.
+exposure: a new view) restarts the filter (no lag of the previous view's xi) and the alarm's count; the alarm's
+evidence, a sum over frames of their own xi beyond the threshold, carries on.
 """
 from __future__ import annotations
 
@@ -55,6 +56,20 @@ def patch_weights(est: dict[str, np.ndarray], use: np.ndarray) -> np.ndarray | N
     err = np.asarray(est["sigma_image_error"], dtype=np.float64).reshape(-1)[use]
     weights = np.where(np.isfinite(err), 1.0 / np.maximum(err, XI_ERROR_FLOOR_DN) ** 2, 0.0)
     return weights if weights.any() else None
+
+
+def image_xi_error(est: dict[str, np.ndarray], use: np.ndarray, weights: np.ndarray | None, cap: float) -> float:
+    """The standard error (DN) of a frame's single-image xi: the weighted median of its used patches' predicted
+    errors (``sigma_image_error``; not divided by the root of their number: one scene's patches err alike),
+    between ``XI_ERROR_FLOOR_DN`` and ``cap`` (``image_xi_error_dn``); ``cap`` without finite predicted errors."""
+    if "sigma_image_error" not in est:
+        return cap
+    err = np.asarray(est["sigma_image_error"], dtype=np.float64).reshape(-1)[use]
+    finite = np.isfinite(err)
+    if not finite.any():
+        return cap
+    median = weighted_median(err[finite], None if weights is None else weights[finite])
+    return float(min(max(median, XI_ERROR_FLOOR_DN), cap))
 
 
 def weighted_median(values: np.ndarray, weights: np.ndarray | None) -> float:
@@ -316,7 +331,9 @@ class Monitor:
             # texture hides the noise in every patch: the image proves only xi >= xi_bound (content adds
             # pixel-scale energy, never removes noise), so "image noisier" is left to the static holds
             bounded, xi_image = True, max(xi_bound, 0.0)
-        xi, xi_t, weight, held, xi_err, motion, light = xi_image, None, 0.0, 0, cfg.image_xi_error_dn, None, None
+        # the bound is no measurement: its error stays the configured one
+        err_i = cfg.image_xi_error_dn if bounded else image_xi_error(est, use, weights, cfg.image_xi_error_dn)
+        xi, xi_t, weight, held, xi_err, motion, light = xi_image, None, 0.0, 0, err_i, None, None
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         changed = self.temporal.changes > self.counters["temporal_noise_changes"]
         self.counters["temporal_noise_changes"] = self.temporal.changes
@@ -326,7 +343,7 @@ class Monitor:
             if found is not None:
                 xi_t, err_t = found
                 motion, light = tm.motion_px, tm.light_pct
-                w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / cfg.image_xi_error_dn**2
+                w_t, w_i = 1.0 / max(err_t, 1e-3) ** 2, 1.0 / err_i**2
                 weight = w_t / (w_t + w_i)
                 xi = weight * xi_t + (1.0 - weight) * xi_image
                 xi_err = 1.0 / np.sqrt(w_t + w_i)

@@ -157,11 +157,19 @@ def test_alarm_evidence_raises_a_short_view_and_ignores_a_bias_inside_the_thresh
     for v in xi:
         xf += 0.3 * (v - xf)
         assert not biased.update(xf, xi=float(v), error=0.3).active
-    restarted = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
+    # a new view (restart) keeps the evidence: a sweep of 2-frame views just beyond the threshold raises ...
+    swept = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
     for _ in range(2):
-        restarted.update(1.2, xi=1.4, error=0.3)  # 2 x 1.33: pending
-    restarted.restart()  # a new view: its own frames decide
-    assert restarted.update(1.2, xi=1.4, error=0.3).name == "pending" and restarted.state.evidence < 3.0
+        swept.update(1.2, xi=1.4, error=0.3)  # 2 x 1.33: pending
+    swept.restart()
+    assert swept.update(1.2, xi=1.4, error=0.3).name == "alarm"
+    # ... and only on a frame whose own xi is beyond it: a view inside the threshold drains it
+    drained = XiAlarm(1.0, 0.3, 5, 10, evidence=3.0)
+    for _ in range(2):
+        drained.update(1.2, xi=1.4, error=0.3)
+    drained.restart()
+    assert [drained.update(0.95, xi=0.95, error=0.3).name for _ in range(3)] == ["pending"] * 3
+    assert drained.state.evidence == pytest.approx(2 * 0.4 / 0.3 - 3 * 0.05 / 0.3)
 
 
 def test_a_metadata_step_starts_a_new_view_judged_on_its_own_frames(rng):
@@ -366,6 +374,22 @@ def test_frame_medians_rest_on_the_precise_patches():
     for _ in range(200):
         v, ww = rng.normal(size=7), rng.uniform(0.1, 5.0, 7)
         assert weighted_median(v, ww) == weighted(v, ww)
+
+
+def test_a_frames_single_image_xi_error_is_its_patches_predicted_error():
+    """The frame's xi error (the alarm's evidence unit, the weight against the temporal xi) is the weighted median of
+    its used patches' predicted errors, not divided by their number (one scene's patches err alike), floored at
+    0.05 DN and capped at ``image_xi_error_dn``; without (finite) predicted errors, the cap."""
+    from noise_monitor.monitor.pipeline import XI_ERROR_FLOOR_DN, image_xi_error, patch_weights
+
+    use = np.ones(5, bool)
+    flat = {"sigma_image_error": np.array([0.08, 0.09, 0.1, 0.5, 0.6])}
+    assert image_xi_error(flat, use, None, 0.3) == 0.1
+    assert image_xi_error(flat, use, patch_weights(flat, use), 0.3) == 0.09  # the precise patches weigh more
+    assert image_xi_error(flat, np.array([0, 0, 0, 1, 1], bool), None, 0.3) == 0.3  # textured: capped
+    assert image_xi_error({"sigma_image_error": np.full(5, 0.01)}, use, None, 0.3) == XI_ERROR_FLOOR_DN
+    assert image_xi_error({"sigma_image_error": np.full(5, np.nan)}, use, None, 0.3) == 0.3
+    assert image_xi_error({}, use, None, 0.25) == 0.25
 
 
 def test_medians_over_the_patches_the_estimator_can_measure(rng):

@@ -60,22 +60,35 @@ def test_characterize_command_on_the_ccd_writes_report_and_profile(tmp_path, cap
     assert json.loads((out / "characterize.json").read_text())["points"]["linearity"]["photons"][0] == 120.0
 
 
-def test_the_monitor_reads_the_real_ccds_noise(tmp_path, capsys):
+def test_the_monitor_reads_the_real_ccds_noise_and_alarms_on_a_gain_stated_12_db_high(tmp_path, capsys):
     """The crop's flat fields as a bag (--flats-bag) replayed with the profile made from it: on a real sensor's noise
     the per-frame xi stays within issue 15's 0.15 DN (0.074 DN RMS, one 64 px patch a frame; the whole frame 0.032,
-    experiments/real_sensor_flats/), no alarm, every frame accounted for."""
-    out, bag = tmp_path / "char", tmp_path / "flats.mcap"
+    experiments/real_sensor_flats/), no alarm, every frame accounted for. The same bag stating 12 dB more gain (true
+    xi 0.7-2.1 DN over a sweep of one exposure per pair): the alarm on at every frame whose true xi is >= 1.05 DN and at
+    none below 0.95 DN. Before the alarm's evidence carried across views and took the frame's own error, a pair had to
+    read 1.45 DN to raise it (experiments/real_sensor_flats/: a gain stated 12 dB high)."""
+    from noise_monitor.bag.stream_eval import stated_gain_copy
+
+    out, bag, wrong = tmp_path / "char", tmp_path / "flats.mcap", tmp_path / "gain_high.mcap"
     assert main(["characterize", str(CCD), "--out", str(out), "--sensor-type", "ccd", "--pixel-size-um", "7.4",
                  "--temperature-c", "30", "--flats-bag", str(bag)]) == 0
     assert f"flat fields as a bag: {bag} (58 frames" in capsys.readouterr().out
-    assert main(["replay", str(bag), "--profile", str(out / "profile.yaml"), "--out", str(tmp_path / "replay"),
-                 "--json", str(tmp_path / "s.json")]) == 0
-    summary = json.loads((tmp_path / "s.json").read_text())
-    assert summary["frames_processed"] + summary["frames_skipped"] == 58 and summary["frames_processed"] >= 40
-    assert not summary["alarms"]
-    rows = list(csv.DictReader((tmp_path / "replay" / "replay.csv").open()))
-    xi = np.array([float(r["xi"]) for r in rows if r["processed"] == "1"])
+    stated_gain_copy(bag, wrong, 12.0)
+    rows, summary = {}, {}
+    for label, path in (("clean", bag), ("wrong", wrong)):
+        assert main(["replay", str(path), "--profile", str(out / "profile.yaml"), "--out", str(tmp_path / label),
+                     "--json", str(tmp_path / f"{label}.json")]) == 0
+        summary[label] = json.loads((tmp_path / f"{label}.json").read_text())
+        assert summary[label]["frames_processed"] + summary[label]["frames_skipped"] == 58
+        rows[label] = list(csv.DictReader((tmp_path / label / "replay.csv").open()))
+    assert summary["clean"]["frames_processed"] >= 40 and not summary["clean"]["alarms"]
+    xi = np.array([float(r["xi"]) for r in rows["clean"] if r["processed"] == "1"])
     assert np.sqrt(np.mean(xi**2)) <= 0.15
+    both = [(c, w) for c, w in zip(rows["clean"], rows["wrong"]) if c["processed"] == w["processed"] == "1"]
+    true_xi = np.array([float(w["sigma_model"]) - float(c["sigma_model"]) for c, w in both])
+    alarm = np.array([w["alarm"] == "1" for _, w in both])
+    assert (true_xi >= 1.05).sum() >= 30 and (true_xi < 0.95).sum() >= 2
+    assert alarm[true_xi >= 1.05].all() and not alarm[true_xi < 0.95].any()
 
 
 def test_a_set_the_model_cannot_state_is_left_out_of_the_flats_bag_with_the_reason(tmp_path, capsys):
