@@ -120,6 +120,7 @@ def main() -> int:
     both = ok & w.column("processed").astype(bool)
     xi = c.numbers("xi").astype(float)
     true_xi = w.numbers("sigma_model").astype(float) - c.numbers("sigma_model").astype(float)
+    xi_w = w.numbers("xi").astype(float)
     level = np.array([r[3] for r in rows])
     # the frame's signal above black (8-bit DN) from the image itself, for the 5-70 % window
     signal = np.array([cv2.imread(str(r[2]), cv2.IMREAD_UNCHANGED).mean() * scale for r in rows])
@@ -141,9 +142,9 @@ def main() -> int:
         "gain_offset_db": args.gain_offset_db, "need": len(need), "hits": int(sum(hits)), "detection": float(np.mean(hits)) if hits else float("nan"),
         "true_xi_of_need": [round(float(true_xi[i]), 2) for i in need],
         "missed": [{"index": int(i), "level": int(level[i]), "true_xi": round(float(true_xi[i]), 3),
-                    "xi": round(float(w.numbers("xi")[i]), 3)} for i, hit in zip(need, hits) if not hit],
+                    "xi": round(float(xi_w[i]), 3)} for i, hit in zip(need, hits) if not hit],
         "true_xi_wrong_gain_range": [float(np.nanmin(true_xi[window & both])), float(np.nanmax(true_xi[window & both]))],
-        "wrong_gain_xi_error_rms": float(np.sqrt(np.mean((w.numbers("xi").astype(float) - true_xi)[window & both] ** 2))),
+        "wrong_gain_xi_error_rms": float(np.sqrt(np.mean((xi_w - true_xi)[window & both] ** 2))),
         "profile_prnu_pct": load_profile(profile_path).effects.get("prnu", {}).get("sigma_pct"),
         "wrong_gain_alarm_episodes": len(alarm_episodes(w)),
         "temporal_truth_dn": noise[int(level.max())],
@@ -151,7 +152,7 @@ def main() -> int:
         "per_frame": [{"index": i, "level": int(level[i]), "signal_dn": round(float(signal[i]), 2),
                        "sigma_image": float(c.numbers("sigma_image")[i]), "sigma_model": float(c.numbers("sigma_model")[i]),
                        "xi": float(xi[i]), "processed": bool(ok[i]), "in_window": bool(window[i]),
-                       "true_xi_wrong_gain": float(true_xi[i]), "xi_wrong_gain": float(w.numbers("xi")[i]),
+                       "true_xi_wrong_gain": float(true_xi[i]), "xi_wrong_gain": float(xi_w[i]),
                        "alarm_wrong_gain": bool(alarm[i]),
                        "pair_noise_dn": noise[int(level[i])]} for i in range(len(rows))],
     }
