@@ -32,6 +32,17 @@ torch.set_num_threads(1)
 TS = jazzy_typestore()
 
 
+async def subscribed(view: LiveView, topics) -> None:
+    """Wait until every one of ``topics`` has the client's subscription: ``wait_for_subscriber`` returns at the first
+    channel's, and the server registers the others on its own (a message logged before was sometimes never sent)."""
+    assert await asyncio.to_thread(view.wait_for_subscriber, 5.0)
+    for _ in range(500):
+        if all(view.has_subscribers(t) for t in topics):
+            return
+        await asyncio.sleep(0.01)
+    raise AssertionError(f"not every topic subscribed within 5 s: {[t for t in topics if not view.has_subscribers(t)]}")
+
+
 def test_handshake_advertises_ros2_schemas_and_serves_decodable_messages():
     float32 = TS.types["std_msgs/msg/Float32"]
     image = np.arange(12, dtype=np.uint16).reshape(3, 4) * 1000
@@ -48,7 +59,7 @@ def test_handshake_advertises_ros2_schemas_and_serves_decodable_messages():
                                                                                "std_msgs/msg/Float32")
             assert xi["schema"] == "float32 data\n"
             await client.subscribe(list(topics))
-            assert await asyncio.to_thread(view.wait_for_subscriber, 5.0)
+            await subscribed(view, topics)
             view.log({"/noise_monitor/xi": float32(data=-1.25)}, 1_700_000_000_123_456_789)
             view.log_image("/cam/image", image, 1_700_000_000_223_456_789, frame_id="cam")
             return await client.receive()
@@ -113,7 +124,7 @@ def test_replay_serves_every_frame_with_the_replays_numbers(bag, estimator, tmp_
             await client.handshake(len(topics))
             assert set(client.channels) == set(topics)
             await client.subscribe(wanted)
-            assert await asyncio.to_thread(view.wait_for_subscriber, 5.0)
+            await subscribed(view, wanted)
             threading.Thread(target=run, args=(view,), daemon=True).start()
             return await client.receive(until=done)
 
