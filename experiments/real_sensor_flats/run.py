@@ -133,7 +133,7 @@ def main() -> int:
     spatial = level == level.max()
     sig_t = c.numbers("sigma_temporal").astype(float)
     frames_t = c.numbers("temporal_frames").astype(float)
-    after10 = np.flatnonzero(spatial & (frames_t >= 10) & np.isfinite(sig_t))
+    after10 = np.flatnonzero(spatial)[9:]  # from the spatial set's 10th frame on
     summary = {
         "frames": len(rows), "left_out": {f"line {k}": v for k, v in left_out.items()}, "processed": int(ok.sum()), "in_window": int(window.sum()),
         "saturation_dn8": sat_dn8,
@@ -149,9 +149,11 @@ def main() -> int:
         "wrong_gain_alarm_episodes": len(alarm_episodes(w)),
         "temporal_truth_dn": noise[int(level.max())],
         "sigma_temporal_after_10": [float(sig_t[i]) for i in after10[:5]],
+        "temporal_frames_after_10": [float(frames_t[i]) for i in after10[:5]],
         "per_frame": [{"index": i, "level": int(level[i]), "signal_dn": round(float(signal[i]), 2),
                        "sigma_image": float(c.numbers("sigma_image")[i]), "sigma_model": float(c.numbers("sigma_model")[i]),
                        "xi": float(xi[i]), "processed": bool(ok[i]), "in_window": bool(window[i]),
+                       "sigma_temporal": float(sig_t[i]), "temporal_frames": float(frames_t[i]),
                        "true_xi_wrong_gain": float(true_xi[i]), "xi_wrong_gain": float(xi_w[i]),
                        "alarm_wrong_gain": bool(alarm[i]),
                        "pair_noise_dn": noise[int(level[i])]} for i in range(len(rows))],

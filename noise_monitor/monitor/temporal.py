@@ -10,7 +10,7 @@ of the patch rejects it). Fixed-pattern noise (PRNU, DSNU, row/column offsets, h
 every frame and so absent from this measurement: it is compared with the model's temporal effects only.
 The measurement pools the hold's frames, so it is compared with the model at the frames' mean metadata
 (a temperature drifting inside the hold changes the dark-current noise from frame to frame); a change of the
-camera's noise inside the hold cuts the window at it (:mod:`.noise_change`).
+camera's noise inside the hold cuts the window at it, and so does a step of the light (:mod:`.noise_change`).
 
 A live driver's auto-exposure and auto-gain move a little from frame to frame even when the camera looks at a
 still scene. The frames of a still camera stay one scene seen through another gain: each frame is the hold's
@@ -36,7 +36,7 @@ from noise_monitor.measure import block_temporal, global_shift
 from noise_monitor.measure.temporal import HOLD_SHIFT_PX
 from noise_monitor.physics import CameraMetadata
 
-from .noise_change import Level, LevelReference, ModelAt, change_point
+from .noise_change import Level, LevelReference, ModelAt, change_point, light_step
 
 #: edge (px) of the downsampled frame the global motion is estimated on
 MOTION_SIZE_PX = 256
@@ -49,6 +49,8 @@ DRIFT_GAIN_DB, DRIFT_EXPOSURE_REL = 1.0, 0.25
 #: evidence restart, and so does the hold (frames of the previous view would lag the measurement behind the step)
 VIEW_STEP_GAIN_DB, VIEW_STEP_EXPOSURE_REL = 0.5, 0.05
 BLOCK = 8
+#: the patches' mean (DN above black) below which a frame's light is read as this (a dark frame's light is noise)
+MIN_LIGHT_DN = 1.0
 #: once the window holds ``max_frames`` frames (a long still hold), it is measured every this many frames and the
 #: last measurement stands between (adding one frame to 16 changes it little; on a still, textured 1280x1024 scene the
 #: measurement took half of each frame's time and the node fell below 30 frames/s)
@@ -146,6 +148,7 @@ class _Held:
     patches: np.ndarray  # (K, s, s)
     meta: CameraMetadata
     level: Level | None
+    light: float  # log of the patches' mean over the exposure and linear gain (what they leave to the light)
 
 
 class TemporalNoise:
@@ -165,6 +168,7 @@ class TemporalNoise:
         self._still = StillCamera(drift=True)
         self.holds = 0  # static holds started (resets)
         self.changes = 0  # changes of the noise that cut a hold's window
+        self.light_steps = 0  # steps of the light that cut a hold's window
         self._last: TemporalMeasurement | None = None  # the hold's latest measurement
         self._since = 0  # frames added since it
         self._reference: LevelReference | None = None  # what the frames' noise levels are read on
@@ -202,11 +206,19 @@ class TemporalNoise:
         if self._reference is not None and self._frames:
             previous = self._frames[-1]
             level = self._reference.level(latest, previous.patches, meta, previous.meta)
-        self._frames.append(_Held(latest, meta, level))
+        self._frames.append(_Held(latest, meta, level, _light(latest, meta)))
         self._reference_age += 1
         while not _within_drift([f.meta for f in self._frames]):  # auto-exposure drifted: the oldest frames leave
             self._frames.popleft()
-        if level is not None:
+        stepped = light_step(np.array([f.light for f in self._frames]))
+        if stepped:  # the light stepped: the frames before leave, and the levels are read again at the new light
+            for _ in range(stepped):
+                self._frames.popleft()
+            for i, f in enumerate(self._frames):
+                self._frames[i] = dataclasses.replace(f, level=None)
+            self._last = self._reference = None
+            self.light_steps += 1
+        elif level is not None:
             cut = change_point([f.level for f in self._frames], self.change_dn)
             if cut:  # the noise changed: the frames before the change leave the window
                 for _ in range(cut):
@@ -260,6 +272,11 @@ class TemporalNoise:
         return TemporalMeasurement(list(self._corners), size, sigma, sigma_err, frames.mean(axis=0), k,
                                    float(stats.accepted.mean()), acc, stats.motion_px, mean_metadata(f.meta for f in self._frames),
                                    stats.light_pct, frames[-1], light_rows=stats.light_rows)
+
+
+def _light(patches: np.ndarray, meta: CameraMetadata) -> float:
+    """Log of the patches' mean (DN above black) over the exposure and linear gain: the light, up to a constant."""
+    return math.log(max(float(patches.mean()), MIN_LIGHT_DN) / (meta.exposure_time_s * meta.gain))
 
 
 def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:
