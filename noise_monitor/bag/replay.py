@@ -332,6 +332,8 @@ def run_replay(
         "frames_lost": int(monitor.counters["frames_lost"]),
         # changes of the camera's noise that cut a still hold's window (the temporal measurement restarted)
         "temporal_noise_changes": int(monitor.counters["temporal_noise_changes"]),
+        # steps of the light that cut a still hold's window (the same restart, not a fault)
+        "temporal_light_steps": int(monitor.counters["temporal_light_steps"]),
         "skip_reasons": skip_reasons(table),
         "skipped": skipped_frames(table)[:MAX_LISTED_SKIPS],  # all of them are in the CSV
         "alarms": episodes,

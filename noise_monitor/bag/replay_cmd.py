@@ -60,6 +60,9 @@ def print_summary(s: dict[str, Any]) -> None:
     if s.get("temporal_noise_changes"):
         print(f"  noise changed {s['temporal_noise_changes']} time(s) inside a still hold (its temporal measurement "
               "restarted there)")
+    if s.get("temporal_light_steps"):
+        print(f"  light stepped {s['temporal_light_steps']} time(s) inside a still hold (its temporal measurement "
+              "restarted there)")
     if s.get("metadata_overrides"):
         print("  note: the bag's metadata set camera constants, which win over the profile's: " + ", ".join(
             f"{k} {v['bag']} (profile {v['profile']})" for k, v in s["metadata_overrides"].items()))

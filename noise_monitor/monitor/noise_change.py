@@ -16,7 +16,7 @@ levels change most, when the change is significant (``CHANGE_SIGMAS`` standard e
 matter to the alarm (``change_dn`` in sigma).
 
 The light can step too (a lamp switched, a cloud, a door opened): the shot noise follows it, and a window pooling
-both lights measures neither, lagging by up to a window (EMVA set 003's irradiance series: 0.995 DN read on a
+both lights measures neither, lagging by up to a window (EMVA set 003's irradiance series: 1.056 DN read on a
 0.902 DN hold 10 frames after the step). :func:`light_step` finds a step of the frames' brightness beyond what their
 exposure and gain explain, set against the light's own scatter from frame to frame (flicker, rolling bands).
 """
@@ -180,8 +180,8 @@ def light_step(light: np.ndarray) -> int:
     """Index of the first frame after the largest step of the frames' ``light`` (log of each frame's brightness over
     what its exposure and gain give) when it is a step (:func:`_step_beats_line`), significant (``CHANGE_SIGMAS`` of
     the frame-to-frame scatter, robust: the step's own difference is one of many), at least ``LIGHT_STEP_REL`` and
-    has ``LIGHT_STEP_SIDE`` frames on either side; 0 without one. A light flickering from frame to frame or ramping
-    slowly has no such step."""
+    has ``LIGHT_STEP_SIDE`` frames on either side; 0 without one or with a frame of unknown light (NaN: a dark
+    frame). A light flickering from frame to frame or ramping slowly has no such step."""
     z = np.asarray(light, dtype=np.float64)
     n = z.size
     if n < 2 * LIGHT_STEP_SIDE or not np.isfinite(z).all():

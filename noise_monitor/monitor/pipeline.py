@@ -221,7 +221,8 @@ class Monitor:
         self._view_meta: CameraMetadata | None = None  # the previous processed frame's metadata
         self.view_frames = 0
         self.counters = {"frames_received": 0, "frames_processed": 0, "frames_skipped": 0, "frames_dropped": 0,
-                         "frames_lost": 0, "stamp_intervals_implausible": 0, "temporal_noise_changes": 0}
+                         "frames_lost": 0, "stamp_intervals_implausible": 0, "temporal_noise_changes": 0,
+                         "temporal_light_steps": 0}
         self.last_received_ns: int | None = None
         self.last_result: FrameResult | None = None
 
@@ -336,7 +337,9 @@ class Monitor:
         xi, xi_t, weight, held, xi_err, motion, light = xi_image, None, 0.0, 0, err_i, None, None
         tm = self.temporal.update(frame.image_dn, meta, selection.corners, self.patch_size)
         changed = self.temporal.changes > self.counters["temporal_noise_changes"]
+        light_stepped = self.temporal.light_steps > self.counters["temporal_light_steps"]
         self.counters["temporal_noise_changes"] = self.temporal.changes
+        self.counters["temporal_light_steps"] = self.temporal.light_steps
         if tm is not None:
             held = tm.frames
             found = self._xi_temporal(tm, sigma, meta)
@@ -366,6 +369,8 @@ class Monitor:
             message += f"; no patch measurable (texture hides the noise): the image proves only xi >= {xi_bound:+.2f} DN"
         if changed:
             message += "; the noise changed inside the still view: its frame-difference measurement restarts here"
+        if light_stepped:
+            message += "; the light stepped inside the still view: its frame-difference measurement restarts here"
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_bounded=bounded, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,

@@ -49,7 +49,8 @@ DRIFT_GAIN_DB, DRIFT_EXPOSURE_REL = 1.0, 0.25
 #: evidence restart, and so does the hold (frames of the previous view would lag the measurement behind the step)
 VIEW_STEP_GAIN_DB, VIEW_STEP_EXPOSURE_REL = 0.5, 0.05
 BLOCK = 8
-#: the patches' mean (DN above black) below which a frame's light is read as this (a dark frame's light is noise)
+#: the patches' mean (DN above black) below which a frame's light is not read (its shot noise is negligible and
+#: its mean is noise): a window holding such a frame is not cut at a step of the light
 MIN_LIGHT_DN = 1.0
 #: once the window holds ``max_frames`` frames (a long still hold), it is measured every this many frames and the
 #: last measurement stands between (adding one frame to 16 changes it little; on a still, textured 1280x1024 scene the
@@ -148,7 +149,7 @@ class _Held:
     patches: np.ndarray  # (K, s, s)
     meta: CameraMetadata
     level: Level | None
-    light: float  # log of the patches' mean over the exposure and linear gain (what they leave to the light)
+    light: float  # log of the patches' mean over the exposure and linear gain (the light; NaN in the dark)
 
 
 class TemporalNoise:
@@ -275,8 +276,10 @@ class TemporalNoise:
 
 
 def _light(patches: np.ndarray, meta: CameraMetadata) -> float:
-    """Log of the patches' mean (DN above black) over the exposure and linear gain: the light, up to a constant."""
-    return math.log(max(float(patches.mean()), MIN_LIGHT_DN) / (meta.exposure_time_s * meta.gain))
+    """Log of the patches' mean (DN above black) over the exposure and linear gain: the light, up to a constant;
+    NaN below ``MIN_LIGHT_DN``."""
+    mean = float(patches.mean())
+    return math.log(mean / (meta.exposure_time_s * meta.gain)) if mean >= MIN_LIGHT_DN else math.nan
 
 
 def mean_metadata(metas: Iterable[CameraMetadata]) -> CameraMetadata:

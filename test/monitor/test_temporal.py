@@ -14,6 +14,7 @@ from noise_monitor.bag import campaign
 from noise_monitor.bag.lights import pwm_gain, rolling_shutter_gain
 from noise_monitor.estimator import load
 from noise_monitor.monitor import Frame, Monitor, MonitorConfig
+from noise_monitor.monitor.noise_change import light_step
 from noise_monitor.monitor.temporal import FULL_WINDOW_STRIDE
 from noise_monitor.physics import NoiseModel, load_profile
 
@@ -209,12 +210,29 @@ def test_a_step_of_the_light_in_a_still_hold_cuts_the_window_at_it(estimator):
     cleans = [clean * (1.3 if i >= 20 else 1.0) for i in range(32)]
     mon, results, noise = run(estimator, cleans, NoiseModel(), seed=14)
     assert mon.temporal.light_steps == 1 and mon.temporal.changes == 0 and mon.temporal.holds == 1
+    assert results[-1].counters["temporal_light_steps"] == 1
     frames = [r.temporal_frames for r in results]
     assert frames[19] == 16 and frames[20] == 16 and frames[21:24] == [0, 0, 4] and frames[29] == 10
+    assert [i for i, r in enumerate(results) if "the light stepped inside the still view" in r.message] == [21]
     after = results[29]
     assert abs(after.sigma["temporal"] - hold_truth(mon, noise[20:30])) <= 0.05
     assert after.sigma["temporal"] - results[19].sigma["temporal"] > 0.2  # the new light's noise
     assert all(abs(r.xi_temporal) <= 0.1 for r in results[23:])  # the model is exact for this camera
+
+
+def test_what_is_a_step_of_the_light():
+    """:func:`light_step` on frames' log light: a lamp switched under flicker is cut where it stepped, once two frames
+    of the new light are in; flicker alone (5 % rms, 16 frames, 300 draws), a ramp of 4 % per frame, one odd frame and
+    a step below 10 % are not."""
+    rng = np.random.default_rng(21)
+    flicker = 0.02 * rng.standard_normal(16)
+    lamp = np.log(np.r_[np.ones(11), np.full(5, 1.3)]) + flicker
+    assert light_step(lamp) == 11 and light_step(lamp[:12]) == 0 and light_step(lamp[:13]) == 11
+    assert not any(light_step(0.05 * rng.standard_normal(16)) for _ in range(300))
+    assert light_step(np.log(1.04) * np.arange(16)) == 0
+    assert light_step(np.log(np.r_[np.ones(8), 1.3, np.ones(7)])) == 0
+    assert light_step(np.log(np.r_[np.ones(8), np.full(8, 1.08)])) == 0
+    assert light_step(np.r_[np.nan, lamp[1:]]) == 0  # a dark frame's light is unknown
 
 
 def test_a_still_hold_under_vibration_flicker_and_warming_keeps_its_window(estimator):
