@@ -16,7 +16,7 @@ errors sit per image.
 
 Usage: .venv/bin/python bench/bench_stream_detection.py [--seeds 1 2 3] [--heldout-seeds 21 22 23]
        [--frames 100] [--width 320 --height 256] [--params config/node.yaml] [--threads 1] [--single-photo]
-       [--vibration PX] [--flicker PCT] [--banding PCT [--mains-hz HZ] [--line-us US]]
+       [--vibration PX] [--flicker PCT] [--banding PCT [--mains-hz HZ] [--line-us US]] [--lamp PCT]
        [--json out/stream_detection.json]
 Prints figures; asserts nothing.
 """

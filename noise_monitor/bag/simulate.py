@@ -84,6 +84,8 @@ MAX_VIBRATION_HZ = 1000.0
 MAX_PWM_HZ, PWM_DUTY = 100_000.0, 0.5
 #: largest rms light flicker (%) of a simulated recording
 MAX_FLICKER_PCT = 20.0
+#: largest share (%) of the scene's light a switched lamp adds, and the mean frames between its switches
+MAX_LAMP_PCT, LAMP_MEAN_FRAMES = 100.0, 25
 #: largest rms auto-exposure wander (%) of a simulated recording, and its correlation from frame to frame
 MAX_AUTO_EXPOSURE_PCT, AUTO_EXPOSURE_CORRELATION = 30.0, 0.8
 #: a rolling shutter's line time (s) and the mains frequency (Hz) of lamps seen through it, by default
@@ -103,6 +105,7 @@ class FieldConditions(TypedDict, total=False):
     pwm_duty: float
     auto_exposure_pct: float
     wobble: bool
+    lamp_pct: float
 
 
 def simulate_bag(
@@ -135,6 +138,7 @@ def simulate_bag(
     pwm_duty: float = PWM_DUTY,
     auto_exposure_pct: float = 0.0,
     wobble: bool = False,
+    lamp_pct: float = 0.0,
 ) -> Path:
     """Write a simulated bag (see module doc) and its truth sidecar; returns the bag path.
 
@@ -171,7 +175,9 @@ def simulate_bag(
     (:func:`.lights.pwm_gain`: trapezoidal bands, sharp-edged at exposures short of a period). ``auto_exposure_pct``:
     a live driver's auto-exposure hunting under steady light, every frame's exposure (and with it the image's
     brightness) off the plan's by a smooth wander of this rms (%) (:func:`auto_exposure_wander`, own generator; the
-    metadata report it; truth ``exposure_factor``).
+    metadata report it; truth ``exposure_factor``). ``lamp_pct``: a lamp adding this share (%) to the scene's light,
+    switched on and off at random frames (:func:`lamp_switching`, own generator; truth ``lamp_gain``): the light steps
+    while the camera may hold still.
     """
     out = Path(out)
     prof = profile if isinstance(profile, CameraProfile) else load_profile(profile)
@@ -221,11 +227,14 @@ def simulate_bag(
         raise ValueError("pwm_hz dims the lamps whose bands banding_pct sets: give banding_pct too")
     if not 0 <= auto_exposure_pct <= MAX_AUTO_EXPOSURE_PCT:
         raise ValueError(f"auto_exposure_pct must be 0-{MAX_AUTO_EXPOSURE_PCT:g} %, got {auto_exposure_pct}")
+    if not 0 <= lamp_pct <= MAX_LAMP_PCT:
+        raise ValueError(f"lamp_pct must be 0-{MAX_LAMP_PCT:g} %, got {lamp_pct}")
     if scen.name == "ptc":
         from noise_monitor.profiles.ptc_sim import simulate_ptc
 
         refused = [name for name, value in (("flicker", flicker_pct), ("banding", banding_pct),
-                                            ("auto-exposure", auto_exposure_pct), ("a frame hook", frame_hook))
+                                            ("auto-exposure", auto_exposure_pct), ("a lamp", lamp_pct),
+                                            ("a frame hook", frame_hook))
                    if value]
         if refused:  # a photon-transfer recording is flat fields under a constant light source, by its definition
             raise ValueError(f"the ptc scenario is a photon-transfer recording (a constant light source, its own "
@@ -241,6 +250,7 @@ def simulate_bag(
     flicker = 1.0 + flicker_pct / 100.0 * np.random.default_rng([seed, 3]).standard_normal(frames)
     band_phase = np.random.default_rng([seed, 4]).uniform(0.0, 2.0 * np.pi, frames)
     hunt = auto_exposure_wander(np.random.default_rng([seed, 5]), frames, auto_exposure_pct)
+    lamp = lamp_switching(np.random.default_rng([seed, 7]), frames, lamp_pct)
     us = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
     if scen.campaign:
         world = campaign.make_world(rng, height, width, scen.campaign, None if images is None else images.images,
@@ -291,8 +301,8 @@ def simulate_bag(
             else:
                 window, offset = view(world, positions[i], height, width)
                 clean = np.clip(window * np.float32(step.brightness), 0.0, 255.0).astype(np.float32)
-            if flicker_pct or auto_exposure_pct:  # the light's flicker, the exposure's wander: both scale the scene
-                clean = np.clip(clean * np.float32(flicker[i] * hunt[i]), 0.0, 255.0).astype(np.float32)
+            if flicker_pct or auto_exposure_pct or lamp_pct:  # the light's flicker and lamp, the exposure's wander
+                clean = np.clip(clean * np.float32(flicker[i] * hunt[i] * lamp[i]), 0.0, 255.0).astype(np.float32)
             if banding_pct:
                 bands = lamps(height, true_meta.exposure_time_s, float(band_phase[i]))
                 clean = np.clip(clean * bands[:, None].astype(np.float32), 0.0, 255.0).astype(np.float32)
@@ -328,6 +338,7 @@ def simulate_bag(
                 **({"wobble_px": round(campaign.wobble_px(paths[i]), 4)} if wobble else {}),
                 **({"flicker_gain": round(float(flicker[i]), 6)} if flicker_pct else {}),
                 **({"exposure_factor": round(float(hunt[i]), 6)} if auto_exposure_pct else {}),
+                **({"lamp_gain": round(float(lamp[i]), 6)} if lamp_pct else {}),
                 **({"banding_phase": round(float(band_phase[i]), 6),
                     "banding_depth": round(lamps_depth(true_meta.exposure_time_s), 6)}
                    if banding_pct else {}),
@@ -347,6 +358,7 @@ def simulate_bag(
         **({"wobble": True, "line_time_s": line_time_s} if wobble else {}),
         **({"flicker_pct": flicker_pct} if flicker_pct else {}),
         **({"auto_exposure_pct": auto_exposure_pct} if auto_exposure_pct else {}),
+        **({"lamp_pct": lamp_pct} if lamp_pct else {}),
         **({"banding_pct": banding_pct, "line_time_s": line_time_s,
             **({"pwm_hz": pwm_hz, "pwm_duty": pwm_duty} if pwm_hz else {"mains_hz": mains_hz})} if banding_pct else {}),
         "seed": seed, "fps": fps, "width": width, "height": height,
@@ -371,6 +383,16 @@ def auto_exposure_wander(rng: np.random.Generator, frames: int, rms_pct: float) 
     c = math.sqrt(1.0 - rho**2)
     z[0] /= c  # a[0] = z[0]: the series starts stationary
     return np.exp(rms_pct / 100.0 * lfilter([c], [1.0, -rho], z))
+
+
+def lamp_switching(rng: np.random.Generator, frames: int, pct: float) -> np.ndarray:
+    """(frames,) light factors of a lamp adding ``pct`` % to the scene's light, off at the start and switched at each
+    frame with probability 1 / ``LAMP_MEAN_FRAMES``; ones for 0."""
+    if not pct:
+        return np.ones(frames)
+    switched = rng.random(frames) < 1.0 / LAMP_MEAN_FRAMES
+    switched[0] = False
+    return np.where(np.cumsum(switched) % 2 == 1, 1.0 + pct / 100.0, 1.0)
 
 
 def _held(us: np.ndarray, frames: int, fps: float, hold_s: float) -> np.ndarray:

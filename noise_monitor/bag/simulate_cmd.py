@@ -11,7 +11,17 @@ from noise_monitor.physics import load_plugin_file
 
 from .campaign import MIN_PHOTO_SIDE, PHOTO_SHARE
 from .scenarios import SCENARIOS
-from .simulate import LINE_TIME_S, MAINS_HZ, PWM_DUTY, START_NS, FieldConditions, load_truth, simulate_bag, truth_path
+from .simulate import (
+    LAMP_MEAN_FRAMES,
+    LINE_TIME_S,
+    MAINS_HZ,
+    PWM_DUTY,
+    START_NS,
+    FieldConditions,
+    load_truth,
+    simulate_bag,
+    truth_path,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,6 +103,10 @@ def add_field_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a live driver's auto-exposure hunting under steady light: every frame's exposure, and "
                              "the image's brightness with it, wanders about the scenario's by PCT %% rms (correlated "
                              "from frame to frame; reported in the metadata; default 0)")
+    parser.add_argument("--lamp", type=float, default=0.0, metavar="PCT",
+                        help="a lamp adding PCT %% to the scene's light, switched on and off at random frames (every "
+                             f"{LAMP_MEAN_FRAMES} frames on average): the light steps while the camera may hold still "
+                             "(default 0)")
 
 
 def field_keywords(args: argparse.Namespace) -> FieldConditions:
@@ -115,7 +129,7 @@ def field_keywords(args: argparse.Namespace) -> FieldConditions:
     return {"vibration_px": args.vibration, "vibration_hz": args.vibration_hz, "flicker_pct": args.flicker,
             "banding_pct": args.banding, "mains_hz": mains_hz, "line_time_s": line_time_s,
             "pwm_hz": args.pwm_hz or 0.0, "pwm_duty": PWM_DUTY if args.pwm_duty is None else args.pwm_duty,
-            "auto_exposure_pct": args.auto_exposure, "wobble": args.wobble}
+            "auto_exposure_pct": args.auto_exposure, "wobble": args.wobble, "lamp_pct": args.lamp}
 
 
 def _start_ns(text: str | None) -> int:

@@ -246,6 +246,25 @@ def test_flickering_lights_scale_each_frame(tmp_path) -> None:
         simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, flicker_pct=30.0)
 
 
+def test_a_switched_lamp_steps_the_light_between_two_levels(tmp_path) -> None:
+    """``--lamp``: a lamp adds its share to the scene's light, switched at random frames (recorded as ``lamp_gain``:
+    1 or 1 + share, off at the start, about one switch per 25 frames), the scene and its holds those of the bag
+    without it; refused beyond its range and by the photon-transfer recording."""
+    kw = {"frames": 60, "seed": 2}
+    truth = load_truth(simulate_bag(tmp_path / "l.mcap", "ev76c661", "campaign_heldout", lamp_pct=30.0, **kw))
+    plain = load_truth(simulate_bag(tmp_path / "p.mcap", "ev76c661", "campaign_heldout", **kw))
+    gains = np.array([f["lamp_gain"] for f in truth["frames"]])
+    assert truth["lamp_pct"] == 30.0 and set(gains) == {1.0, 1.3} and gains[0] == 1.0
+    assert 1 <= np.count_nonzero(np.diff(gains)) <= 8
+    assert [f["offset_px"] for f in truth["frames"]] == [f["offset_px"] for f in plain["frames"]]
+    mean = np.array([f["mean_dn"] for f in truth["frames"]]) / np.array([f["mean_dn"] for f in plain["frames"]])
+    assert np.allclose(mean[gains == 1.0], 1.0) and np.all(np.abs(mean[gains > 1.0] - 1.3) < 0.03)  # up to clipping
+    with pytest.raises(ValueError, match="lamp_pct"):
+        simulate_bag(tmp_path / "s.mcap", "ev76c661", "static", frames=4, lamp_pct=150.0)
+    with pytest.raises(ValueError, match="photon-transfer recording"):
+        simulate_bag(tmp_path / "x.mcap", "generic", "ptc", frames=60, width=32, height=32, lamp_pct=30.0)
+
+
 def test_auto_exposure_hunts_every_frame_and_the_metadata_report_it(tmp_path) -> None:
     """``--auto-exposure``: a live driver's exposure wanders about the plan's every frame (rms as asked, correlated
     from frame to frame), the scene's brightness following it under steady light, the metadata reporting the true
