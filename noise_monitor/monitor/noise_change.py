@@ -179,9 +179,10 @@ def change_point(levels: Sequence[Level | None], change_dn: float, min_side: int
 def light_step(light: np.ndarray) -> int:
     """Index of the first frame after the largest step of the frames' ``light`` (log of each frame's brightness over
     what its exposure and gain give) when it is a step (:func:`_step_beats_line`), significant (``CHANGE_SIGMAS`` of
-    the frame-to-frame scatter, robust: the step's own difference is one of many), at least ``LIGHT_STEP_REL`` and
-    has ``LIGHT_STEP_SIDE`` frames on either side; 0 without one or with a frame of unknown light (NaN: a dark
-    frame). A light flickering from frame to frame or ramping slowly has no such step."""
+    the frame-to-frame scatter, robust: the step's own difference is one of many), sharp (at least ``LIGHT_STEP_REL``
+    between the two frames either side of it, and as much between the means before and after) and has
+    ``LIGHT_STEP_SIDE`` frames on either side; 0 without one or with a frame of unknown light (NaN: a dark frame). A
+    light flickering from frame to frame or changing smoothly (a ramp, a slow swell) has no such step."""
     z = np.asarray(light, dtype=np.float64)
     n = z.size
     if n < 2 * LIGHT_STEP_SIDE or not np.isfinite(z).all():
@@ -190,5 +191,6 @@ def light_step(light: np.ndarray) -> int:
     j, step, score = _steps(z, sd)
     best = int(np.argmax(score))  # where the light steps, wherever that is; then whether it is a step to cut at
     at = int(j[best])
-    return at if (min(at, n - at) >= LIGHT_STEP_SIDE and abs(step[best]) >= math.log1p(LIGHT_STEP_REL)
+    least = math.log1p(LIGHT_STEP_REL)
+    return at if (min(at, n - at) >= LIGHT_STEP_SIDE and abs(step[best]) >= least and abs(z[at] - z[at - 1]) >= least
                   and score[best] > CHANGE_SIGMAS and _step_beats_line(z, sd, at)) else 0

@@ -222,14 +222,18 @@ def test_a_step_of_the_light_in_a_still_hold_cuts_the_window_at_it(estimator):
 
 def test_what_is_a_step_of_the_light():
     """:func:`light_step` on frames' log light: a lamp switched under flicker is cut where it stepped, once two frames
-    of the new light are in; flicker alone (5 % rms, 16 frames, 300 draws), a ramp of 4 % per frame, one odd frame and
-    a step below 10 % are not."""
+    of the new light are in; flicker alone (5 % rms, 16 frames, 300 draws), a ramp of 4 % per frame, a smooth swell
+    (+-20 % over 30 frames: a driver's auto-exposure keeping the image while the light changes, the `live_drift`
+    scenario, was cut twice in 150 frames before the step had to be sharp), one odd frame and a step below 10 % are
+    not."""
     rng = np.random.default_rng(21)
     flicker = 0.02 * rng.standard_normal(16)
     lamp = np.log(np.r_[np.ones(11), np.full(5, 1.3)]) + flicker
     assert light_step(lamp) == 11 and light_step(lamp[:12]) == 0 and light_step(lamp[:13]) == 11
     assert not any(light_step(0.05 * rng.standard_normal(16)) for _ in range(300))
     assert light_step(np.log(1.04) * np.arange(16)) == 0
+    swell = np.log(1.0 + 0.2 * np.sin(2.0 * np.pi * np.arange(60) / 30.0))
+    assert not any(light_step(swell[i:i + 16]) for i in range(45))
     assert light_step(np.log(np.r_[np.ones(8), 1.3, np.ones(7)])) == 0
     assert light_step(np.log(np.r_[np.ones(8), np.full(8, 1.08)])) == 0
     assert light_step(np.r_[np.nan, lamp[1:]]) == 0  # a dark frame's light is unknown
