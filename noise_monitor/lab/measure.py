@@ -987,7 +987,7 @@ def field_conditions_text(conditions: dict[str, Any]) -> str:
     if not conditions["holds"]:
         return "no hold measured from frame differences"
     light = (f"the light changed from frame to frame in {conditions['light_changing']} of {conditions['holds']} holds measured "
-             f"(flicker or a rolling shutter's bands; up to {conditions['light_pct_max']:.2g} % rms)"
+             f"(flicker, a lamp switched or a rolling shutter's bands; up to {conditions['light_pct_max']:.2g} % rms)"
              if conditions["light_changing"] else f"steady light in all {conditions['holds']} holds measured")
     shake = (f"the camera vibrated in {conditions['vibrating']} (up to {conditions['motion_px_max']:.2f} px rms)"
              if conditions["vibrating"] else "no vibration")
