@@ -212,14 +212,16 @@ class TemporalNoise:
         while not _within_drift([f.meta for f in self._frames]):  # auto-exposure drifted: the oldest frames leave
             self._frames.popleft()
         stepped = light_step(np.array([f.light for f in self._frames]))
-        if stepped:  # the light stepped: the frames before leave, and the levels are read again at the new light
+        if stepped and len(self._frames) - stepped >= max(2, self.min_frames):
+            # the light stepped and its new window can be measured (until then the pooled one serves): the frames
+            # before leave, and the levels are read again at the new light
             for _ in range(stepped):
                 self._frames.popleft()
             for i, f in enumerate(self._frames):
                 self._frames[i] = dataclasses.replace(f, level=None)
             self._last = self._reference = None
             self.light_steps += 1
-        elif level is not None:
+        elif level is not None and not stepped:  # (levels read across a step of the light are not the noise's)
             cut = change_point([f.level for f in self._frames], self.change_dn)
             if cut:  # the noise changed: the frames before the change leave the window
                 for _ in range(cut):

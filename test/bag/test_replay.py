@@ -90,8 +90,8 @@ def test_a_noise_step_while_the_camera_holds_still_restarts_its_temporal_measure
 
 def test_a_step_of_the_light_while_the_camera_holds_still_is_counted_and_restarts_the_measurement(tmp_path, estimator):
     """A photograph held still at 10 Hz whose light steps up by 30 % at frame 12 (a lamp switched on): the replay
-    counts one light step (summary and /diagnostics ``temporal_light_steps``), no change of the noise, and the
-    frames after it read the new light's noise alone."""
+    counts one light step (summary and /diagnostics ``temporal_light_steps``), no change of the noise; once the new
+    light has ``temporal_min_frames`` frames, the window holds its frames alone."""
     prof = load_profile("ev76c661")
     meta = prof.metadata(gain_db=12.0, exposure_time_s=0.02, sensor_temperature_c=35.0)
     h, w = 2 * estimator.patch_size, 3 * estimator.patch_size
@@ -111,7 +111,7 @@ def test_a_step_of_the_light_while_the_camera_holds_still_is_counted_and_restart
     assert diag[-1].values["temporal_light_steps"] == "1"
     with open(out / "replay.csv") as f:
         held = [int(float(r["temporal_frames"] or 0)) for r in csv.DictReader(f)]
-    assert held[11] >= 8 and held[13:16] == [0, 0, 4] and held[-1] == 12  # the new light's frames alone
+    assert min(held[11:15]) >= 8 and held[15] == 4 and held[-1] == 12  # then the new light's frames alone
 
 
 def test_doubled_thermal_noise_metadata_is_a_positive_xi_alarm(tmp_path, estimator):

@@ -204,16 +204,18 @@ def test_a_noise_step_right_after_a_holds_first_measurement_is_cut_too(estimator
 def test_a_step_of_the_light_in_a_still_hold_cuts_the_window_at_it(estimator):
     """A lamp switched on while the robot is parked: the scene's light steps up by 30 % at frame 20 of a still hold,
     and the shot noise with it (+0.3 DN in sigma, below the noise change's cut). Pooling both lights, sigma_temporal
-    read 0.17 DN low 10 frames after the step; now the window is cut at the step (seen once its second frame is in)
-    and the new light's noise is read alone."""
+    read 0.17 DN low 10 frames after the step; now the window is cut at the step once the new light has
+    ``temporal_min_frames`` frames (the pooled window serves until then, so xi keeps its temporal measurement) and the
+    new light's noise is read alone."""
     clean = 0.6 * photo()
     cleans = [clean * (1.3 if i >= 20 else 1.0) for i in range(32)]
     mon, results, noise = run(estimator, cleans, NoiseModel(), seed=14)
     assert mon.temporal.light_steps == 1 and mon.temporal.changes == 0 and mon.temporal.holds == 1
     assert results[-1].counters["temporal_light_steps"] == 1
     frames = [r.temporal_frames for r in results]
-    assert frames[19] == 16 and frames[20] == 16 and frames[21:24] == [0, 0, 4] and frames[29] == 10
-    assert [i for i, r in enumerate(results) if "the light stepped inside the still view" in r.message] == [21]
+    assert frames[19:23] == [16] * 4 and frames[23] == 4 and frames[29] == 10
+    assert [i for i, r in enumerate(results) if "the light stepped inside the still view" in r.message] == [23]
+    assert all(r.xi_measurement == "temporal" for r in results[3:])
     after = results[29]
     assert abs(after.sigma["temporal"] - hold_truth(mon, noise[20:30])) <= 0.05
     assert after.sigma["temporal"] - results[19].sigma["temporal"] > 0.2  # the new light's noise
