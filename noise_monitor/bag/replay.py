@@ -120,7 +120,7 @@ def _record(table: FrameTable, bf: Frame, res: FrameResult) -> None:
                  alarm_active=res.alarm_active, alarm_state=res.alarm_state, cause=res.cause,
                  skip_reason=res.skip_reason, numbers=res.numeric(),
                  conditions={k: getattr(meta, k) for k in CONDITION_KEYS} if meta else {},
-                 xi_measurement=res.xi_measurement if res.processed else None)
+                 xi_measurement=res.xi_measurement if res.processed else None, hold_event=res.hold_event)
 
 
 def _black_level_summary(contradicted: list[BlackLevelCheck]) -> dict[str, Any] | None:

@@ -16,7 +16,7 @@ SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigm
                 "xi_filtered")
 #: Leading CSV columns; the numeric columns of processed frames follow in a fixed order.
 BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_state", "alarm", "skip_reason",
-                "xi_measurement")
+                "xi_measurement", "hold_event")
 #: Stated operating conditions per frame (from the frame's metadata), CSV columns after the base ones.
 CONDITION_KEYS = ("gain_db", "exposure_time_s", "sensor_temperature_c")
 #: Numbers a processed frame has or not depending on the scene (a still camera, a patch the estimator can bound):
@@ -55,14 +55,15 @@ class FrameTable:
     """What a replay keeps of every frame, as columns: ~150 bytes per frame, whatever the length.
 
     Numbers (estimator, model, conditions) are float32 columns, NaN where a frame has none (skipped
-    frames); texts (alarm state, cause, skip reason, which measurement drove xi) are codes into a shared
-    vocabulary.
+    frames); texts (alarm state, cause, skip reason, which measurement drove xi, what restarted a still hold's
+    measurement) are codes into a shared vocabulary.
     """
 
     _FIXED = (("index", np.int64, -1), ("stamp_ns", np.int64, 0), ("processed", np.bool_, False),
               ("level", np.int8, 0), ("alarm", np.bool_, False))
-    #: The text columns (alarm state, cause, skip reason, which measurement drove xi).
-    TEXTS = ("alarm_state", "cause", "skip_reason", "xi_measurement")
+    #: The text columns (alarm state, cause, skip reason, which measurement drove xi, what restarted a hold's
+    #: frame-difference measurement).
+    TEXTS = ("alarm_state", "cause", "skip_reason", "xi_measurement", "hold_event")
 
     def __init__(self) -> None:
         self._n = 0
@@ -78,13 +79,14 @@ class FrameTable:
 
     def append(self, index: int, stamp_ns: int, processed: bool, level: int, alarm_active: bool, alarm_state: str,
                cause: str | None, skip_reason: str | None, numbers: Mapping[str, float],
-               conditions: Mapping[str, float], xi_measurement: str | None = None) -> None:
+               conditions: Mapping[str, float], xi_measurement: str | None = None,
+               hold_event: str | None = None) -> None:
         i = self._n
         for name, value in (("index", index), ("stamp_ns", stamp_ns), ("processed", processed), ("level", level),
                             ("alarm", alarm_active)):
             self._fixed[name].set(i, value)
         for name, text in (("alarm_state", alarm_state), ("cause", cause), ("skip_reason", skip_reason),
-                           ("xi_measurement", xi_measurement)):
+                           ("xi_measurement", xi_measurement), ("hold_event", hold_event)):
             if text is not None:
                 text = clip(text)  # reasons may echo bag contents (a 1 MB encoding string)
                 self._texts[name].set(i, self._codes.setdefault(text, len(self._codes)))
@@ -108,7 +110,7 @@ class FrameTable:
         return self._fixed[name].values(self._n)
 
     def texts(self, name: str) -> list[str | None]:
-        """alarm_state, cause, skip_reason or xi_measurement of every frame (None where absent)."""
+        """One of :attr:`TEXTS` for every frame (None where absent)."""
         return [self._vocab[c] if c >= 0 else None for c in self._texts[name].values(self._n)]
 
     def numbers(self, key: str) -> np.ndarray:
@@ -133,7 +135,7 @@ def write_csv(table: FrameTable, path: Path) -> None:
     numeric = [k for k in table.number_keys if k not in BASE_COLUMNS and k not in SCENE_DEPENDENT_KEYS]
     numeric += SCENE_DEPENDENT_KEYS
     base = {name: table.column(name) for name in ("index", "stamp_ns", "time_s", "processed", "level", "alarm")}
-    texts = {name: table.texts(name) for name in ("alarm_state", "skip_reason", "xi_measurement")}
+    texts = {name: table.texts(name) for name in ("alarm_state", "skip_reason", "xi_measurement", "hold_event")}
     values = {k: table.numbers(k) for k in (*CONDITION_KEYS, *numeric)}
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
@@ -142,6 +144,7 @@ def write_csv(table: FrameTable, path: Path) -> None:
             writer.writerow([int(base["index"][i]), int(base["stamp_ns"][i]), f"{base['time_s'][i]:.6f}",
                              int(base["processed"][i]), int(base["level"][i]), texts["alarm_state"][i],
                              int(base["alarm"][i]), texts["skip_reason"][i] or "", texts["xi_measurement"][i] or "",
+                             texts["hold_event"][i] or "",
                              *("" if np.isnan(v[i]) else f"{v[i]:.6g}" for v in values.values())])
 
 

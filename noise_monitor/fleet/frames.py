@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 #: Leading columns of every per-frame table; the conditions and the monitor's numbers (float32) follow.
 BASE_COLUMNS = ("hardware_id", "bag", "sha256", "index", "stamp_ns", "time", "processed", "level", "alarm",
-                "alarm_state", "cause", "skip_reason", "xi_measurement")
+                "alarm_state", "cause", "skip_reason", "xi_measurement", "hold_event")
 
 
 def require_pyarrow() -> None:

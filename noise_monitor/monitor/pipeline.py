@@ -44,6 +44,8 @@ RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "
 XI_ERROR_FLOOR_DN = 0.05
 
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
+#: What restarts a still hold's frame-difference measurement inside the hold (a frame's ``hold_event``).
+HOLD_EVENTS = ("noise changed", "light stepped")
 
 
 def patch_weights(est: dict[str, np.ndarray], use: np.ndarray) -> np.ndarray | None:
@@ -116,6 +118,7 @@ class FrameResult:
     temporal_frames: int = 0  # frames of the current static hold measured
     temporal_motion_px: float | None = None  # the camera's vibration in that hold: rms displacement (px)
     temporal_light_pct: float | None = None  # the light's change in that hold (flicker, rolling-shutter bands), %
+    hold_event: str | None = None  # why the hold's frame-difference measurement restarted here (HOLD_EVENTS)
     xi_error: float | None = None  # standard error of this frame's xi (DN): image, or fused with the temporal one
     alarm_evidence: float = 0.0  # the alarm's accumulated evidence (standard errors beyond the threshold)
     view_frames: int = 0  # processed frames of the current view (since the last gain / exposure step)
@@ -367,14 +370,13 @@ class Monitor:
             level, message = max(level, WARN), f"{message}; {black.message()}"
         if bounded and weight < 0.5:
             message += f"; no patch measurable (texture hides the noise): the image proves only xi >= {xi_bound:+.2f} DN"
-        if changed:
-            message += "; the noise changed inside the still view: its frame-difference measurement restarts here"
-        if light_stepped:
-            message += "; the light stepped inside the still view: its frame-difference measurement restarts here"
+        events = [e for e, happened in zip(HOLD_EVENTS, (changed, light_stepped)) if happened]
+        for event in events:
+            message += f"; the {event} inside the still view: its frame-difference measurement restarts here"
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_bounded=bounded, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
-            temporal_motion_px=motion, temporal_light_pct=light,
+            temporal_motion_px=motion, temporal_light_pct=light, hold_event=", ".join(events) or None,
             xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],

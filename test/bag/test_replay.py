@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import cv2
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import torch
@@ -110,8 +111,10 @@ def test_a_step_of_the_light_while_the_camera_holds_still_is_counted_and_restart
     diag = [reports_from_msg(m)[0] for _, _, m in decoded(out / "replay.mcap", [DIAGNOSTICS_TOPIC])]
     assert diag[-1].values["temporal_light_steps"] == "1"
     with open(out / "replay.csv") as f:
-        held = [int(float(r["temporal_frames"] or 0)) for r in csv.DictReader(f)]
+        rows = list(csv.DictReader(f))
+    held = [int(float(r["temporal_frames"] or 0)) for r in rows]
     assert min(held[11:15]) >= 8 and held[15] == 4 and held[-1] == 12  # then the new light's frames alone
+    assert [i for i, r in enumerate(rows) if r["hold_event"]] == [15] and rows[15]["hold_event"] == "light stepped"
 
 
 def test_doubled_thermal_noise_metadata_is_a_positive_xi_alarm(tmp_path, estimator):
@@ -330,6 +333,39 @@ def test_frame_table_columns_episodes_and_csv(tmp_path):
     assert rows[3]["skip_reason"] == "metadata missing" and rows[3]["xi"] == "" and rows[3]["gain_db"] == "6"
     assert rows[3]["xi_measurement"] == "" and (rows[4]["xi_measurement"], rows[5]["xi_measurement"]) == ("image", "temporal")
     assert rows[-1]["alarm"] == "1" and float(rows[-1]["xi"]) == -2.0 and rows[4100]["sigma_model_prnu"] == "0.5"
+
+
+def test_the_plot_shows_the_still_views_measurement_what_drove_xi_and_where_it_restarted():
+    """The frame differences' noise and the model on their blocks (sigma_temporal + xi_temporal) with gaps outside
+    the holds, each frame's xi coloured by the measurement that drove it, a line where a hold's measurement
+    restarted."""
+    from noise_monitor.bag.plot import HOLD_EVENT_STYLES, TEMPORAL_LABELS, XI_MEASUREMENTS, replay_figure
+    from noise_monitor.bag.results import FrameTable
+
+    table, n = FrameTable(), 30
+    held = np.arange(n) >= 10
+    events = {20: "light stepped", 25: "noise changed, light stepped"}
+    for i in range(n):
+        numbers = {"xi": 0.01 * i, "xi_filtered": 0.0, "sigma_total": 5.0, "sigma_model": 5.0, "sigma_image": 5.1}
+        if held[i]:
+            numbers.update(sigma_temporal=4.0 + 0.01 * i, xi_temporal=0.1)
+        table.append(index=i, stamp_ns=10**9 + i * 10**8, processed=True, level=0, alarm_active=False,
+                     alarm_state="ok", cause=None, skip_reason=None, numbers=numbers, conditions={},
+                     xi_measurement="temporal" if i >= 12 else "image", hold_event=events.get(i))
+    fig = replay_figure(table, [], "t", 1.0)
+    ax_s, ax_x = fig.axes[:2]
+    lines = {ln.get_label(): ln for ln in ax_s.lines + ax_x.lines}
+    measured, model = (np.asarray(lines[k].get_ydata(), float) for k in TEMPORAL_LABELS)
+    assert np.isnan(measured[:10]).all() and np.allclose(measured[10:], 4.0 + 0.01 * np.arange(10, n))
+    assert np.allclose(model[10:] - measured[10:], 0.1) and np.isnan(model[:10]).all()
+    t = table.column("time_s")
+    assert np.allclose(lines[XI_MEASUREMENTS["temporal"][0]].get_xdata(), t[12:])
+    assert np.allclose(lines[XI_MEASUREMENTS["image"][0]].get_ydata(), 0.01 * np.arange(12))
+    assert XI_MEASUREMENTS["bound"][0] not in lines
+    for event, style in HOLD_EVENT_STYLES.items():
+        at = [ln.get_xdata()[0] for ln in ax_x.lines if ln.get_linestyle() == style and ln.get_color() == "darkcyan"]
+        assert np.allclose(at, [t[i] for i, e in events.items() if event in e])
+    plt.close(fig)
 
 
 def test_a_failed_replay_leaves_no_empty_output_folder(tmp_path, capsys):
