@@ -8,7 +8,8 @@ Per frame, stamped with the image's header (stamp and frame_id), under the monit
 - ``<ns>/<key>`` for each of :data:`NUMERIC_KEYS` (geometry_msgs/Vector3Stamped, the value in
   ``vector.x``, y and z 0): stamped numbers Foxglove's Plot panel plots without plug-ins (there is no
   stamped scalar in common_interfaces; Vector3Stamped is the smallest stamped all-numeric one that does
-  not claim a physical quantity). Only evaluated frames have numbers.
+  not claim a physical quantity). Only evaluated frames have numbers, and only a still hold's frames have the
+  frame differences' (:data:`HOLD_KEYS`).
 
 Periodic: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray), the period summary
 (``noise_monitor.monitor.period``) or an idle status, stamped with the clock at the report.
@@ -37,7 +38,9 @@ FRAME = "frame"
 DEFAULT_NAMESPACE = "/noise_monitor"
 #: FrameResult.numeric() keys published as their own stamped number (<namespace>/<key>, ``vector.x``).
 NUMERIC_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_total", "sigma_model", "sigma_image", "xi",
-                "xi_filtered", "xi_model", "alarm", "xi_threshold")
+                "xi_filtered", "xi_model", "alarm", "xi_threshold", "sigma_temporal", "xi_temporal")
+#: Of those, the numbers only a still hold's frames have (the frame differences' measurement).
+HOLD_KEYS = ("sigma_temporal", "xi_temporal")
 
 
 def namespace_prefix(namespace: str) -> str:

@@ -1,6 +1,7 @@
 """Dashboard layouts for the monitor's topics: Foxglove (layout JSON) and PlotJuggler (layout XML).
 
-Both show the per-source sigma (PN, DCSN, RN, total, model) in DN, xi and its filtered value with the
+Both show the per-source sigma (PN, DCSN, RN, total, model) and the measured noise (in the image; from frame
+differences where the camera holds still) in DN, xi and its filtered value with the
 alarm threshold band (+-``xi_threshold``, the threshold in force, published per frame), the alarm state
 and, in Foxglove, ``~/debug_image`` and the camera's /diagnostics level. They read the node's topics (live,
 through foxglove_bridge, ``--foxglove PORT`` or PlotJuggler's ROS 2 subscriber) and the replay's MCAP,
@@ -24,7 +25,8 @@ PLOTJUGGLER_FILE = "plotjuggler_layout.xml"
 #: Per-source sigma series (key, label, colour); all in DN.
 SIGMA_SERIES = (("sigma_pn", "PN (photon shot)", "#1f77b4"), ("sigma_dcsn", "DCSN (dark current shot)", "#ff7f0e"),
                 ("sigma_rn", "RN (readout)", "#2ca02c"), ("sigma_total", "total (estimator)", "#7f7f7f"),
-                ("sigma_model", "model (metadata)", "#9467bd"))
+                ("sigma_model", "model (metadata)", "#9467bd"), ("sigma_image", "measured in the image", "#e377c2"),
+                ("sigma_temporal", "measured from frame differences (still view)", "#17becf"))
 XI_SERIES = (("xi", "xi", "#d62728"), ("xi_filtered", "xi filtered (alarm input)", "#8c564b"))
 BAND_COLOUR = "#bcbd22"
 #: Foxglove user-script output: the band's edges from the published threshold.
@@ -77,7 +79,7 @@ def foxglove_layout(namespace: str = DEFAULT_NAMESPACE, camera_name: str = "came
         y_axis_label="sigma [DN]", x_axis_label="time [s]", show_legend=True, legend_display="top", is_synced=True))
     band = [fl.PlotSeries(value=f"{BAND_TOPIC}.{edge}", label=f"{sign}xi_threshold", color=BAND_COLOUR,
                           line_style="dashed", timestamp_method="receiveTime") for edge, sign in (("upper", "+"), ("lower", "-"))]
-    xi = fl.PlotPanel(title="xi = sigma_model - sigma_image [DN] and the alarm threshold", config=fl.PlotConfig(
+    xi = fl.PlotPanel(title="xi = model - measured noise [DN] and the alarm threshold", config=fl.PlotConfig(
         paths=[fl.PlotSeries(value=f"{ns}/{k}{field}", label=label, color=c, timestamp_method=when)
                for k, label, c in XI_SERIES] + band,
         y_axis_label="xi [DN]", x_axis_label="time [s]", show_legend=True, legend_display="top", is_synced=True))

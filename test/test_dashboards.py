@@ -84,7 +84,8 @@ def test_foxglove_layout_references_published_topics_and_fields(foxglove):
     paths = _paths(foxglove)
     plotted = {_foxglove_path(p)[0] for p in paths}
     assert {"/noise_monitor/sigma_pn", "/noise_monitor/sigma_dcsn", "/noise_monitor/sigma_rn", "/noise_monitor/xi",
-            "/noise_monitor/alarm", DIAGNOSTICS_TOPIC, output} <= plotted
+            "/noise_monitor/sigma_image", "/noise_monitor/sigma_temporal", "/noise_monitor/alarm", DIAGNOSTICS_TOPIC,
+            output} <= plotted
     for path in paths:
         topic, fields, filters = _foxglove_path(path)
         if topic == output:
@@ -105,7 +106,7 @@ def test_plotjuggler_layout_references_published_topics_and_fields():
     root = ET.parse(CONFIG / dashboards.PLOTJUGGLER_FILE).getroot()
     snippets = {s.get("name"): s.findtext("linked_source") for s in root.iter("snippet")}
     curves = [c.get("name") for c in root.iter("curve")]
-    assert len(curves) == 10 and set(snippets) == {dashboards.LOWER_EDGE}
+    assert len(curves) == 12 and set(snippets) == {dashboards.LOWER_EDGE}
     field = "/" + "/".join(dashboards.number_field())
     series = [c for c in curves if c not in snippets] + list(snippets.values())
     for name in series:
@@ -122,8 +123,8 @@ def replay_mcap(tmp_path_factory) -> Path:
 
     est = load("full_meta", device="cpu")
     ps = est.patch_size
-    bag = simulate_bag(tmp_path_factory.mktemp("dash") / "b.mcap", "ev76c661", "image_noise", frames=10,
-                       width=3 * ps, height=2 * ps, seed=2, hold_s=0)
+    bag = simulate_bag(tmp_path_factory.mktemp("dash") / "b.mcap", "ev76c661", "static", frames=10,
+                       width=3 * ps, height=2 * ps, seed=2)  # a camera at rest: sigma_temporal too
     out = tmp_path_factory.mktemp("out")
     replay(bag, "ev76c661", out, estimator=est, config=MonitorConfig(patches_per_frame=4), progress=False,
            plot=False)  # the default camera name

@@ -246,6 +246,8 @@ def run_replay(
         debug_topic, last_debug = debug_image_topic(namespace), None
         input_topic = "/" + namespace.strip("/") + "/" + INPUT_IMAGE
         bag_writer = stack.enter_context(BagWriter(mcap_path)) if mcap_path else None
+        if bag_writer is not None:  # the node's publishers, also those a bag may give nothing (a still hold's)
+            bag_writer.declare(output_topics(namespace))
         # everything written to the MCAP is also served to a live view, as it is produced
         writer = _Tee(bag_writer, live) if live is not None else bag_writer
         t_wall = time.perf_counter()

@@ -24,7 +24,8 @@ STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 
 
 class BagWriter:
-    """Context manager writing rosbags messages; connections are added on first use of a topic."""
+    """Context manager writing rosbags messages; connections are added on first use of a topic, or up front
+    (:meth:`declare`) for a node's publishers that may send nothing (as ``ros2 bag record`` keeps them)."""
 
     def __init__(self, path: str | Path, storage: str = "mcap", compress: bool = True,
                  store: Typestore | None = None) -> None:
@@ -56,16 +57,24 @@ class BagWriter:
         self._writer.open()
         return self
 
+    def declare(self, topics: dict[str, str]) -> None:
+        """Add the connections of ``topics`` ({topic: message type}) before any message."""
+        for topic, msgtype in topics.items():
+            self._connection(topic, msgtype)
+
+    def _connection(self, topic: str, msgtype: str) -> Any:
+        assert self._writer is not None, "use BagWriter as a context manager"
+        key = (topic, msgtype)
+        conn = self._connections.get(key)
+        if conn is None:
+            conn = self._connections[key] = self._writer.add_connection(topic, msgtype, typestore=self.store)
+        return conn
+
     def write(self, topic: str, msg: Any, stamp_ns: int) -> None:
         """Serialise ``msg`` (a rosbags message of ``self.store``) on ``topic`` with log time ``stamp_ns``."""
         assert self._writer is not None, "use BagWriter as a context manager"
         msgtype = msg.__msgtype__
-        key = (topic, msgtype)
-        conn = self._connections.get(key)
-        if conn is None:
-            conn = self._writer.add_connection(topic, msgtype, typestore=self.store)
-            self._connections[key] = conn
-        self._writer.write(conn, int(stamp_ns), self.store.serialize_cdr(msg, msgtype))
+        self._writer.write(self._connection(topic, msgtype), int(stamp_ns), self.store.serialize_cdr(msg, msgtype))
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

@@ -15,7 +15,7 @@ from skimage import data
 
 from msg_adapters import ERROR, STALE, WARN, reports_from_msg
 from msg_adapters.diagnostics import jazzy_typestore
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC, IMAGE_TYPE, OUTPUT_TOPICS, debug_image_topic
+from msg_adapters.outputs import DIAGNOSTICS_TOPIC, HOLD_KEYS, IMAGE_TYPE, OUTPUT_TOPICS, debug_image_topic
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import SCENE_DEPENDENT_KEYS, truth_check
@@ -148,9 +148,17 @@ def test_mcap_has_exactly_the_node_topics_and_is_readable_by_the_mcap_library(re
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             schemas[channel.topic] = schema.name
         assert reader.get_header().profile == "ros2"
-    assert schemas == {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}
+        summary = reader.get_summary()
+    assert summary is not None  # every topic's channel, also of topics no frame had (a still hold's)
+    assert {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()} == \
+        {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}
+    assert schemas.items() <= {**OUTPUT_TOPICS, debug_image_topic(): IMAGE_TYPE}.items()
     assert counts[debug_image_topic()] == 4  # debug_image_rate_hz 1 in bag time: 20 frames at 5 Hz span 3.8 s
-    assert all(counts[t] == 20 for t in OUTPUT_TOPICS if t != DIAGNOSTICS_TOPIC)  # every frame evaluated
+    hold = {f"/noise_monitor/{k}" for k in HOLD_KEYS}  # a still hold's frames only
+    assert all(counts[t] == 20 for t in OUTPUT_TOPICS if t != DIAGNOSTICS_TOPIC and t not in hold)  # every frame
+    with open(out / "replay.csv") as f:
+        held = sum(r["sigma_temporal"] != "" for r in csv.DictReader(f))
+    assert all(counts.get(t, 0) == held for t in hold)
     assert counts[DIAGNOSTICS_TOPIC] == 4  # 3.8 s at 1 Hz: 3 full periods and the last partial one
 
 

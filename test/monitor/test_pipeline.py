@@ -7,12 +7,14 @@ the real ``noise_monitor.estimator.load``).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
 
 from msg_adapters import ERROR, OK, STALE, WARN, reports_from_msg
-from msg_adapters.outputs import OUTPUT_TOPICS, number_of, output_topics, rclpy_messages, rosbags_messages
+from msg_adapters.outputs import HOLD_KEYS, OUTPUT_TOPICS, number_of, output_topics, rclpy_messages, rosbags_messages
 from noise_monitor.monitor import (
     CAUSE_IMAGE_NOISIER,
     CAUSE_MODEL_NOISIER,
@@ -260,10 +262,14 @@ def test_idle_report_goes_stale(rng):
 # --- outputs -------------------------------------------------------------------------------
 def test_outputs_same_topics_and_values_for_rclpy_and_rosbags(rng):
     mon = make_monitor()
-    res = mon.process(next(frames(rng, 1, start=31))[0])
+    first = mon.process(next(frames(rng, 1, start=31))[0])
+    res = replace(first, xi_temporal=-0.03, sigma={**first.sigma, "temporal": 2.5})  # as a still hold's frame
     a, b = rclpy_messages(res, frame_id="cam_optical"), rosbags_messages(res, frame_id="cam_optical")
     per_frame = set(OUTPUT_TOPICS) - {"/diagnostics"}  # /diagnostics is the period summary, not per frame
     assert set(a) == set(b) == per_frame
+    hold = {f"/noise_monitor/{k}" for k in HOLD_KEYS}  # the frame differences' numbers: a still hold's frames only
+    assert set(rclpy_messages(first)) == set(rosbags_messages(first)) == per_frame - hold
+    assert number_of(a["/noise_monitor/sigma_temporal"]) == 2.5 and number_of(b["/noise_monitor/xi_temporal"]) == -0.03
     for topic in per_frame:
         for msg in (a[topic], b[topic]):  # stamped with the image's header
             assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == divmod(res.stamp_ns, 10**9)
