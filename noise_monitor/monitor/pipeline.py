@@ -181,6 +181,8 @@ class FrameResult:
         vals = {k: _fmt(v) for k, v in self.numeric().items()}
         if self.processed:
             vals["xi_measurement"] = self.xi_measurement
+        if self.hold_event:
+            vals["hold_event"] = self.hold_event
         vals.update({k: str(v) for k, v in self.counters.items()})
         return vals
 

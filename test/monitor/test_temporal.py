@@ -177,7 +177,7 @@ def test_a_noise_step_in_a_still_hold_cuts_the_window_at_it(estimator, extra_dn)
         return
     assert mon.temporal.changes == 2 and results[-1].counters["temporal_noise_changes"] == 2
     said = [i for i, r in enumerate(results) if "the noise changed inside the still view" in r.message]
-    assert said == [20, 32]
+    assert said == [20, 32] and [i for i, r in enumerate(results) if r.hold_event == "noise changed"] == said
     assert frames[19] == 16 and frames[20:24] == [0, 0, 0, 4] and frames[32:36] == [0, 0, 0, 4]
     assert frames[31] == 12 and frames[39] == 8
     assert abs(results[31].sigma["temporal"] - hold_truth(mon, noise[20:32])) <= 0.05
@@ -215,6 +215,7 @@ def test_a_step_of_the_light_in_a_still_hold_cuts_the_window_at_it(estimator):
     frames = [r.temporal_frames for r in results]
     assert frames[19:23] == [16] * 4 and frames[23] == 4 and frames[29] == 10
     assert [i for i, r in enumerate(results) if "the light stepped inside the still view" in r.message] == [23]
+    assert [(i, r.values()["hold_event"]) for i, r in enumerate(results) if r.hold_event] == [(23, "light stepped")]
     assert all(r.xi_measurement == "temporal" for r in results[3:])
     after = results[29]
     assert abs(after.sigma["temporal"] - hold_truth(mon, noise[20:30])) <= 0.05
