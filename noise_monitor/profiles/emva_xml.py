@@ -1,0 +1,113 @@
+"""The EMVA 1288 reference implementation's results XML (``emva1288``: ``Emva1288(descriptor).xml()``) as a datasheet.
+
+The XML holds the figures in electrons, DN and percent, one element per figure with its section, unit and value
+(``<results><sensitivity><K><unit>$DN/e^-$</unit><value>0.288</value>...``); tag names are matched without regard
+to case, as emva1288's own reader does. It does not hold what the measurement's conditions were: the sensor type,
+the ADC's bits, the pixel size and the sensor temperature are asked for, and the exposure of the dark spatial set
+(DSNU1288's) when the DSNU is to enter the profile.
+
+Mapping: K, ``sigma_d``, ``u_e_sat``, ``u_I_mean`` (the dark current from the dark signal's mean), ``DSNU1288``,
+``PRNU1288`` and ``QE`` as the datasheet's figures. emva1288 takes ``sigma_d`` at zero exposure (the dark variance's
+fit over the exposure series) and converts the descriptor's exposure times from ns, the format's unit; with the
+DSNU's exposure t given, the datasheet's temporal dark noise at t is sqrt(sigma_d^2 + u_I_mean t), the dark signal's
+shot noise added, so that one measurement exposure serves both figures.
+"""
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+from .datasheet import Datasheet, DatasheetError, datasheet_from_mapping
+from .emva_images import EXPOSURE_UNITS
+
+#: Largest results file read (emva1288's, histograms included, is ~50 kB).
+MAX_BYTES = 10 * 2**20
+#: The figures read: datasheet key -> (the XML's tag, its unit as emva1288 writes it, LaTeX marks removed).
+FIGURES = {"system_gain_dn_per_e": ("K", "DN/e-"), "temporal_dark_noise_e": ("sigma_d", "e-"),
+           "saturation_capacity_e": ("u_e_sat", "e-"), "dark_current_e_per_s": ("u_I_mean", "e-/s"),
+           "dsnu_e": ("DSNU1288", "e-"), "prnu_pct": ("PRNU1288", "%"), "quantum_efficiency_pct": ("QE", "%")}
+REQUIRED = ("system_gain_dn_per_e", "temporal_dark_noise_e", "saturation_capacity_e", "dark_current_e_per_s")
+
+
+def _unit(text: str | None) -> str:
+    """``$e^-/s$`` -> ``e-/s``, ``\\%`` -> ``%``."""
+    return re.sub(r"[$\\^{}\s]", "", text or "")
+
+
+def read_results(path: str | Path) -> dict[str, float]:
+    """The figures of :data:`FIGURES` found in the XML (NaN where emva1288 could not compute one)."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"results XML {p} does not exist")
+    if p.stat().st_size > MAX_BYTES:
+        raise DatasheetError(f"{p}: {p.stat().st_size} bytes is no EMVA 1288 results XML (at most {MAX_BYTES})")
+    data = p.read_bytes()
+    if b"<!DOCTYPE" in data or b"<!ENTITY" in data:
+        raise DatasheetError(f"{p}: declares a DOCTYPE or entities, which emva1288's results never do: not read")
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise DatasheetError(f"{p}: not well-formed XML ({exc})") from None
+    elements = {e.tag.lower(): e for section in root for e in section if e.find("value") is not None}
+    found: dict[str, float] = {}
+    for key, (tag, unit) in FIGURES.items():
+        e = elements.get(tag.lower())
+        if e is None:
+            continue
+        got = _unit(e.findtext("unit"))
+        if got != unit:
+            raise DatasheetError(f"{p}: {tag} is in {got or 'no unit'}, expected {unit}: not emva1288's results format")
+        text = (e.findtext("value") or "").strip()
+        try:
+            found[key] = float(text)
+        except ValueError:
+            raise DatasheetError(f"{p}: {tag} = {text!r} is not a number") from None
+    missing = [FIGURES[k][0] for k in REQUIRED if not math.isfinite(found.get(k, math.nan))]
+    if missing:
+        raise DatasheetError(f"{p}: no {', '.join(missing)} (an EMVA 1288 results XML written by emva1288 has "
+                             f"<results><sensitivity><K>... with a <value>)")
+    return found
+
+
+def datasheet_from_results(path: str | Path, sensor_type: str, bit_depth: int, pixel_size_um: float,
+                           temperature_c: float, dsnu_exposure_s: float | None = None,
+                           doubling_temperature_k: float | None = None, dark_offset_dn: float | None = None,
+                           exposure_unit: str = "ns", name: str | None = None) -> tuple[Datasheet, list[str]]:
+    """The results XML and the conditions it does not hold as a validated :class:`Datasheet`, with notes.
+
+    ``exposure_unit``: the unit the measurement's descriptor gave its exposure times in (emva1288 takes ns: its dark
+    current is rescaled from per ns to per ``exposure_unit``)."""
+    if exposure_unit not in EXPOSURE_UNITS:
+        raise DatasheetError(f"exposure unit {exposure_unit!r}: one of {', '.join(EXPOSURE_UNITS)}")
+    f = read_results(path)
+    notes = []
+    rate = f["dark_current_e_per_s"] * 1e-9 / EXPOSURE_UNITS[exposure_unit]
+    if rate < 0:
+        raise DatasheetError(f"{path}: the dark current u_I_mean is negative ({rate:.3g} e-/s): check the dark frames")
+    sigma_d = f["temporal_dark_noise_e"]
+    doc: dict[str, Any] = {
+        "name": name or Path(path).stem, "sensor_type": sensor_type, "bit_depth": bit_depth,
+        "pixel_size_um": pixel_size_um, "system_gain_dn_per_e": f["system_gain_dn_per_e"],
+        "saturation_capacity_e": f["saturation_capacity_e"],
+        "dark_current": {"e_per_s": rate, "temperature_c": temperature_c,
+                         "doubling_temperature_k": doubling_temperature_k},
+        "measurement": {"temperature_c": temperature_c},
+        "dark_offset_dn": dark_offset_dn,
+    }
+    for key in ("dsnu_e", "prnu_pct"):
+        if math.isfinite(f.get(key, math.nan)):
+            doc[key] = f[key]
+    if math.isfinite(f.get("quantum_efficiency_pct", math.nan)):
+        doc["quantum_efficiency"] = {"percent": f["quantum_efficiency_pct"]}
+    if dsnu_exposure_s:
+        doc["temporal_dark_noise_e"] = math.sqrt(sigma_d**2 + rate * dsnu_exposure_s)
+        doc["measurement"]["exposure_time_s"] = dsnu_exposure_s
+        notes.append(f"sigma_d {sigma_d:.4g} e- at zero exposure taken to the DSNU's {dsnu_exposure_s:g} s with the "
+                     f"dark signal's shot noise: {doc['temporal_dark_noise_e']:.4g} e-")
+    else:
+        doc["temporal_dark_noise_e"] = sigma_d
+        doc["measurement"]["exposure_time_s"] = 0.0
+    return datasheet_from_mapping(doc, source=str(path)), notes
