@@ -43,7 +43,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "effects": ("noise_monitor.physics.effects_cmd",
                 "List the noise effects (built-in and plug-ins) with their parameters."),
     "profile": ("noise_monitor.profiles.profile_cmd",
-                "Make camera profiles: from-emva turns an EMVA 1288 datasheet (YAML) into a profile for the node."),
+                "Make camera profiles: from-emva turns an EMVA 1288 datasheet (YAML) or the EMVA reference "
+                "implementation's results XML into a profile for the node."),
     "characterize": ("noise_monitor.profiles.characterize_cmd",
                      "Characterize a camera from a photon-transfer recording (EMVA 1288): K, dark noise, saturation, "
                      "dark current, DSNU, PRNU, linearity; HTML report, JSON and a profile for the node."),
