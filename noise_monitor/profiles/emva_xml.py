@@ -82,6 +82,8 @@ def datasheet_from_results(path: str | Path, sensor_type: str, bit_depth: int, p
     current is rescaled from per ns to per ``exposure_unit``)."""
     if exposure_unit not in EXPOSURE_UNITS:
         raise DatasheetError(f"exposure unit {exposure_unit!r}: one of {', '.join(EXPOSURE_UNITS)}")
+    if dsnu_exposure_s is not None and not 0.0 < dsnu_exposure_s <= 600.0:
+        raise DatasheetError(f"the DSNU's exposure must be in (0, 600] s, got {dsnu_exposure_s!r}")
     f = read_results(path)
     notes = []
     rate = f["dark_current_e_per_s"] * 1e-9 / EXPOSURE_UNITS[exposure_unit]

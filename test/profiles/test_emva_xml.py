@@ -110,3 +110,6 @@ def test_case_and_the_descriptors_exposure_unit(tmp_path):
     assert datasheet_from_results(lower, **CONDITIONS)[0].system_gain_dn_per_e == REFERENCE["K"]
     us, _ = datasheet_from_results(XML, **CONDITIONS, exposure_unit="us")
     assert us.dark_current_e_per_s == pytest.approx(REFERENCE["u_I_mean"] * 1e-3, rel=1e-12)
+    for bad in (-1.0, 0.0, math.nan, 1e4):
+        with pytest.raises(DatasheetError, match="the DSNU's exposure must be in"):
+            datasheet_from_results(XML, **CONDITIONS, dsnu_exposure_s=bad)
