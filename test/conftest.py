@@ -45,3 +45,27 @@ def rig_factory(request: pytest.FixtureRequest, estimator):
     yield make
     for rig in rigs:
         rig.close()
+
+
+@pytest.fixture
+def lamp_bag(tmp_path):
+    """A photograph held still at 10 Hz, 192 x 128 px, whose light steps up by 30 % at frame 12 of 24 (a lamp switched
+    on): an MCAP bag of image and metadata (ev76c661, 12 dB)."""
+    import cv2
+    from skimage import data
+
+    from noise_monitor.bag.messages import image_msg, metadata_msg
+    from noise_monitor.bag.writer import BagWriter
+    from noise_monitor.physics import NoiseModel, load_profile
+
+    meta = load_profile("ev76c661").metadata(gain_db=12.0, exposure_time_s=0.02, sensor_temperature_c=35.0)
+    clean = 20.0 + 0.6 * cv2.resize(data.camera(), (192, 128), interpolation=cv2.INTER_AREA).astype(np.float32)
+    generator, model = np.random.default_rng(2), NoiseModel()
+    bag = tmp_path / "lamp.mcap"
+    with BagWriter(bag) as wr:
+        for i in range(24):
+            t = 1_000_000_000 + i * 100_000_000
+            noisy, _ = model.simulate(clean * (1.3 if i >= 12 else 1.0), meta, generator, per_source=False)
+            wr.write("/camera/metadata", metadata_msg(meta, t, "test"), t)
+            wr.write("/camera/image_raw", image_msg(np.clip(np.rint(noisy), 0, 255).astype(np.uint8), t), t)
+    return bag

@@ -77,6 +77,7 @@ def _bag_row(e: dict[str, Any]) -> dict[str, Any]:
                alarms=[{**a, "start_utc": utc(a["start_ns"]), "end_utc": utc(a["end_ns"])} for a in r["alarms"]],
                wall_s=e.get("wall_s"), peak_rss_mb=e.get("peak_rss_mb"),
                temporal_noise_changes=r.get("temporal_noise_changes", 0),  # absent from records of older versions
+               temporal_light_steps=r.get("temporal_light_steps", 0),
                frames_lost=r.get("frames_lost", 0))
     return row
 
@@ -146,6 +147,10 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     if changes:
         findings.append(f"the noise changed suddenly {changes} time(s) while the camera held still (each restarted its "
                         "frame-difference measurement)")
+    light_steps = sum(r["temporal_light_steps"] for r in rows)
+    if light_steps:
+        findings.append(f"the light stepped {light_steps} time(s) while the camera held still (a lamp switched; each "
+                        "restarted its frame-difference measurement)")
     worst = max(symptoms, key=lambda k: symptoms[k])
     return {
         "hardware_id": hw, "profiles": sorted({str(r["profile"]) for r in rows}), "bags": len(rows),
@@ -154,6 +159,7 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "frames_total": total, "frames_processed": processed, "frames_skipped": total - processed,
         "skip_reasons": _reasons(rows), "frames_lost": sum(r["frames_lost"] for r in rows),
         "frames_in_alarm": in_alarm, "alarm_episodes": len(episodes), "temporal_noise_changes": changes,
+        "temporal_light_steps": light_steps,
         "alarm_time_s": round(sum(a["duration_s"] for a in episodes), 3),
         "mean": means, "trends": trends, "xi_threshold_dn": thr,
         "health": round(1.0 - symptoms[worst], 4), "health_limited_by": worst if symptoms[worst] > 0 else None,
@@ -202,6 +208,7 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
             "frames_lost": sum(b["frames_lost"] for b in bags),
             "alarm_episodes": len(episodes),
             "temporal_noise_changes": sum(b["temporal_noise_changes"] for b in bags),
+            "temporal_light_steps": sum(b["temporal_light_steps"] for b in bags),
         },
         "run": run,
         "cameras": cameras,

@@ -161,6 +161,7 @@ def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
         "frames_in_alarm": int(table.column("alarm")[processed].sum()),
         "alarm_episodes": len(summary["alarms"]),
         "temporal_noise_changes": int(summary.get("temporal_noise_changes", 0)),
+        "temporal_light_steps": int(summary.get("temporal_light_steps", 0)),
         "alarms": [{k: e[k] for k in keep} for e in summary["alarms"][:MAX_EPISODES]],
         "stats": {k: summary[k] for k in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model", "sigma_image", "xi")},
         "conditions": conditions,

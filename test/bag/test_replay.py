@@ -5,13 +5,11 @@ import csv
 import json
 from pathlib import Path
 
-import cv2
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import torch
 from mcap.reader import make_reader
-from skimage import data
 
 from msg_adapters import ERROR, STALE, WARN, reports_from_msg
 from msg_adapters.diagnostics import jazzy_typestore
@@ -24,7 +22,7 @@ from noise_monitor.bag.staging import write_text_atomic
 from noise_monitor.bag.writer import BagWriter
 from noise_monitor.cli import main
 from noise_monitor.monitor import MonitorConfig
-from noise_monitor.physics import NoiseModel, load_profile
+from noise_monitor.physics import load_profile
 
 torch.set_num_threads(1)
 CONFIG = MonitorConfig(patches_per_frame=4, alarm_min_frames=3, clear_min_frames=3)
@@ -89,22 +87,12 @@ def test_a_noise_step_while_the_camera_holds_still_restarts_its_temporal_measure
     assert s["truth_check"]["detected"] == 1 and s["truth_check"]["episodes"][0]["delay_s"] <= 0.1 + 1e-9
 
 
-def test_a_step_of_the_light_while_the_camera_holds_still_is_counted_and_restarts_the_measurement(tmp_path, estimator):
+def test_a_step_of_the_light_while_the_camera_holds_still_is_counted_and_restarts_the_measurement(tmp_path, estimator,
+                                                                                              lamp_bag):
     """A photograph held still at 10 Hz whose light steps up by 30 % at frame 12 (a lamp switched on): the replay
     counts one light step (summary and /diagnostics ``temporal_light_steps``), no change of the noise; once the new
     light has ``temporal_min_frames`` frames, the window holds its frames alone."""
-    prof = load_profile("ev76c661")
-    meta = prof.metadata(gain_db=12.0, exposure_time_s=0.02, sensor_temperature_c=35.0)
-    h, w = 2 * estimator.patch_size, 3 * estimator.patch_size
-    clean = 20.0 + 0.6 * cv2.resize(data.camera(), (w, h), interpolation=cv2.INTER_AREA).astype(np.float32)
-    rng, model = np.random.default_rng(2), NoiseModel()
-    bag = tmp_path / "lamp.mcap"
-    with BagWriter(bag) as wr:
-        for i in range(24):
-            t = 1_000_000_000 + i * 100_000_000
-            noisy, _ = model.simulate(clean * (1.3 if i >= 12 else 1.0), meta, rng, per_source=False)
-            wr.write("/camera/metadata", metadata_msg(meta, t, "test"), t)
-            wr.write("/camera/image_raw", image_msg(np.clip(np.rint(noisy), 0, 255).astype(np.uint8), t), t)
+    bag = lamp_bag
     out = tmp_path / "o"
     s = replay(bag, "ev76c661", out, estimator=estimator, config=CONFIG, progress=False, plot=False)
     assert s["frames_processed"] == 24 and s["temporal_light_steps"] == 1 and s["temporal_noise_changes"] == 0

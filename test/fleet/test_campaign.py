@@ -170,6 +170,14 @@ def test_report_outputs_and_alarm_times(pool_run: tuple[dict, Path]) -> None:
     assert ep["start_utc"].startswith("2023-11-17T") and ep["start_utc"].endswith("Z")  # START_NS + 3 days, UTC
 
 
+def test_steps_of_the_light_are_counted_per_bag_camera_and_campaign(lamp_bag: Path, tmp_path: Path) -> None:
+    c = run_campaign([lamp_bag], tmp_path / "out", profile="ev76c661", backend="pool", workers=1, progress=False)
+    (cam,) = c["cameras"]
+    assert c["bags"][0]["temporal_light_steps"] == cam["temporal_light_steps"] == c["totals"]["temporal_light_steps"] == 1
+    assert cam["temporal_noise_changes"] == 0
+    assert any("the light stepped 1 time(s) while the camera held still" in f for f in cam["findings"])
+
+
 def test_resume_skips_finished_bags_and_survives_a_torn_manifest(pool_run: tuple[dict, Path],
                                                                   fleet: dict[str, Path]) -> None:
     c, out = pool_run
