@@ -59,8 +59,7 @@ def replay_figure(table: FrameTable, episodes: list[dict[str, Any]], title: str,
     time_s, temporal = table.column("time_s"), table.numbers("sigma_temporal")
     if np.any(~np.isnan(temporal)):  # NaN between holds breaks the lines
         ax_s.plot(time_s, temporal, "-", color="darkcyan", lw=1.6, marker=".", ms=3, label=TEMPORAL_LABELS[0])
-        ax_s.plot(time_s, temporal + table.numbers("xi_temporal"), "--", color="darkcyan", lw=1.2,
-                  label=TEMPORAL_LABELS[1])
+        ax_s.plot(time_s, table.temporal_model(), "--", color="darkcyan", lw=1.2, label=TEMPORAL_LABELS[1])
     xi, measurement = table.numbers("xi"), np.array(table.texts("xi_measurement"), dtype=object)
     for key, (label, color) in XI_MEASUREMENTS.items():
         drove = (measurement == key) & ~np.isnan(xi)

@@ -55,6 +55,7 @@ from .results import (
     source_summaries,
     truth_check,
     write_csv,
+    xi_measurements,
 )
 from .simulate import truth_path
 from .staging import StagedOutputs
@@ -338,6 +339,7 @@ def run_replay(
         "temporal_light_steps": int(monitor.counters["temporal_light_steps"]),
         "skip_reasons": skip_reasons(table),
         "skipped": skipped_frames(table)[:MAX_LISTED_SKIPS],  # all of them are in the CSV
+        "xi_measurement": xi_measurements(table),  # processed frames by the measurement that drove their xi
         "alarms": episodes,
         **source_summaries(table),
         "levels": {name: int(np.sum(levels == lvl)) for lvl, name in LEVEL_NAMES.items()},

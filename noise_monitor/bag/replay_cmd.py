@@ -77,9 +77,13 @@ def print_summary(s: dict[str, Any]) -> None:
               "parameter black_level_dn; a driver's value: its conversion, profile driver_black_level_dn)")
     print(f"\n  {'source':12s} {'mean':>6s} {'p5':>6s} {'p95':>6s}   [DN]")
     for key, label in (("sigma_pn", "PN"), ("sigma_dcsn", "DCSN"), ("sigma_rn", "RN"), ("sigma_total", "total"),
-                       ("sigma_model", "model"), ("sigma_image", "image"), ("xi", "xi")):
+                       ("sigma_model", "model"), ("sigma_image", "image"), ("sigma_temporal", "frame diffs"),
+                       ("sigma_temporal_model", "  its model"), ("xi", "xi")):
         st = s[key]
         print(f"  {label:12s} {_fmt(st['mean'])} {_fmt(st['p5'])} {_fmt(st['p95'])}")
+    drove = s["xi_measurement"]
+    print(f"  xi measured from the single image on {drove['image']} frame(s), from a still view's frame differences "
+          f"on {drove['temporal']}" + (f", as the image's bound on {drove['bound']}" if drove["bound"] else ""))
     print(f"\n  alarm episodes: {len(s['alarms'])}")
     for ep in s["alarms"]:
         tail = " (still active at the end)" if ep["active_at_end"] else ""

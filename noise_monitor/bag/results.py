@@ -13,7 +13,9 @@ from noise_monitor.text import clip
 
 #: Per-source summaries of the JSON contract (and a few more), from the per-frame numbers.
 SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigma_model", "sigma_image",
-                "xi_filtered")
+                "xi_filtered", "sigma_temporal", "sigma_temporal_model")
+#: Which measurement drove a frame's xi (``FrameResult.xi_measurement``), as the summary counts them.
+XI_MEASUREMENTS = ("image", "temporal", "bound")
 #: Leading CSV columns; the numeric columns of processed frames follow in a fixed order.
 BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_state", "alarm", "skip_reason",
                 "xi_measurement", "hold_event")
@@ -123,6 +125,11 @@ class FrameTable:
         """Numeric keys other than the conditions, in first-seen order."""
         return [k for k in self._numbers if k not in self._conditions]
 
+    def temporal_model(self) -> np.ndarray:
+        """The model's temporal noise on a still hold's measured blocks, ``sigma_temporal + xi_temporal`` (DN, NaN
+        outside holds): the frame differences' measurement and this are what xi_temporal compares."""
+        return self.numbers("sigma_temporal") + self.numbers("xi_temporal")
+
     def series(self, key: str) -> tuple[np.ndarray, np.ndarray]:
         """(time_s, value) of the frames that have ``key``."""
         v = self.numbers(key)
@@ -180,7 +187,7 @@ def source_summaries(table: FrameTable) -> dict[str, dict[str, float | int | Non
     out: dict[str, dict[str, float | int | None]] = {}
     processed = table.column("processed")
     for key in SUMMARY_KEYS:
-        v = table.numbers(key)
+        v = table.temporal_model() if key == "sigma_temporal_model" else table.numbers(key)
         v = v[processed & ~np.isnan(v)]
         if v.size:
             out[key] = {"mean": round(float(v.mean()), 4), "p5": round(float(np.percentile(v, 5)), 4),
@@ -188,6 +195,12 @@ def source_summaries(table: FrameTable) -> dict[str, dict[str, float | int | Non
         else:
             out[key] = {"mean": None, "p5": None, "p95": None, "n": 0}
     return out
+
+
+def xi_measurements(table: FrameTable) -> dict[str, int]:
+    """Processed frames by the measurement that drove their xi."""
+    counts = Counter(table.texts("xi_measurement"))
+    return {kind: counts[kind] for kind in XI_MEASUREMENTS}
 
 
 def skipped_frames(table: FrameTable) -> list[dict[str, Any]]:

@@ -103,6 +103,14 @@ def test_a_step_of_the_light_while_the_camera_holds_still_is_counted_and_restart
     held = [int(float(r["temporal_frames"] or 0)) for r in rows]
     assert min(held[11:15]) >= 8 and held[15] == 4 and held[-1] == 12  # then the new light's frames alone
     assert [i for i, r in enumerate(rows) if r["hold_event"]] == [15] and rows[15]["hold_event"] == "light stepped"
+    drove = [r["xi_measurement"] for r in rows]
+    assert s["xi_measurement"] == {k: drove.count(k) for k in ("image", "temporal", "bound")}
+    assert s["xi_measurement"]["temporal"] >= 20  # from the 4th frame of the still camera
+    temporal = [float(r["sigma_temporal"]) for r in rows if r["sigma_temporal"]]
+    model = [float(r["sigma_temporal"]) + float(r["xi_temporal"]) for r in rows if r["sigma_temporal"]]
+    assert s["sigma_temporal"]["n"] == s["sigma_temporal_model"]["n"] == len(temporal)
+    assert s["sigma_temporal"]["mean"] == pytest.approx(np.mean(temporal), abs=1e-4)
+    assert s["sigma_temporal_model"]["mean"] == pytest.approx(np.mean(model), abs=1e-3)
 
 
 def test_doubled_thermal_noise_metadata_is_a_positive_xi_alarm(tmp_path, estimator):
@@ -282,6 +290,7 @@ def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):
                  "--params", str(params), "--no-plot"]) == 0
     text = capsys.readouterr().out
     assert "alarm episodes: 1" in text and "PN" in text and "image noisier" in text
+    assert "xi measured from the single image on 20 frame(s), from a still view's frame differences on 0" in text
     assert json.loads(js.read_text())["frames_processed"] == 20 and not (out / "replay.png").exists()
     assert main(["replay", str(tmp_path / "missing.mcap")]) == 2
     assert "does not exist" in capsys.readouterr().err
