@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
 
-from noise_monitor.monitor.pipeline import HOLD_EVENTS  # noqa: E402
+from noise_monitor.monitor.status import HOLD_EVENTS, XI_MEASUREMENTS  # noqa: E402
 
 from .results import FrameTable  # noqa: E402
 
@@ -26,9 +26,10 @@ SERIES = (("sigma_pn", "PN (photon shot)", "tab:blue"), ("sigma_dcsn", "DCSN (da
 #: (sigma_temporal + xi_temporal), drawn with gaps between holds.
 TEMPORAL_LABELS = ("noise from frame differences (still view)", "model of the frame differences (same blocks)")
 #: Per-frame xi by the measurement that drove it (``FrameResult.xi_measurement``): label, colour.
-XI_MEASUREMENTS = {"image": ("xi per frame: single image", "tab:purple"),
-                   "temporal": ("xi per frame: frame differences (still view)", "darkcyan"),
-                   "bound": ("xi per frame: image bound (texture hides the noise)", "tab:olive")}
+XI_MEASUREMENT_STYLES = dict(zip(XI_MEASUREMENTS, (("xi per frame: single image", "tab:purple"),
+                                                   ("xi per frame: frame differences (still view)", "darkcyan"),
+                                                   ("xi per frame: image bound (texture hides the noise)", "tab:olive")),
+                                 strict=True))
 #: Where a still hold's frame-difference measurement restarted (``FrameResult.hold_event``): line style.
 HOLD_EVENT_STYLES = dict(zip(HOLD_EVENTS, (":", "--")))
 
@@ -61,7 +62,7 @@ def replay_figure(table: FrameTable, episodes: list[dict[str, Any]], title: str,
         ax_s.plot(time_s, temporal, "-", color="darkcyan", lw=1.6, marker=".", ms=3, label=TEMPORAL_LABELS[0])
         ax_s.plot(time_s, table.temporal_model(), "--", color="darkcyan", lw=1.2, label=TEMPORAL_LABELS[1])
     xi, measurement = table.numbers("xi"), np.array(table.texts("xi_measurement"), dtype=object)
-    for key, (label, color) in XI_MEASUREMENTS.items():
+    for key, (label, color) in XI_MEASUREMENT_STYLES.items():
         drove = (measurement == key) & ~np.isnan(xi)
         if drove.any():
             ax_x.plot(time_s[drove], xi[drove], ".", color=color, ms=4, alpha=0.7, label=label)

@@ -14,8 +14,6 @@ from noise_monitor.text import clip
 #: Per-source summaries of the JSON contract (and a few more), from the per-frame numbers.
 SUMMARY_KEYS = ("sigma_pn", "sigma_dcsn", "sigma_rn", "xi", "sigma_total", "sigma_model", "sigma_image",
                 "xi_filtered", "sigma_temporal", "sigma_temporal_model")
-#: Which measurement drove a frame's xi (``FrameResult.xi_measurement``), as the summary counts them.
-XI_MEASUREMENTS = ("image", "temporal", "bound")
 #: Leading CSV columns; the numeric columns of processed frames follow in a fixed order.
 BASE_COLUMNS = ("index", "stamp_ns", "time_s", "processed", "level", "alarm_state", "alarm", "skip_reason",
                 "xi_measurement", "hold_event")
@@ -199,6 +197,8 @@ def source_summaries(table: FrameTable) -> dict[str, dict[str, float | int | Non
 
 def xi_measurements(table: FrameTable) -> dict[str, int]:
     """Processed frames by the measurement that drove their xi."""
+    from noise_monitor.monitor.status import XI_MEASUREMENTS  # the monitor package: heavy, replays have it loaded
+
     counts = Counter(table.texts("xi_measurement"))
     return {kind: counts[kind] for kind in XI_MEASUREMENTS}
 

@@ -32,7 +32,7 @@ from .frame import skip_reason as frame_skip_reason
 from .model_patches import histogram_weights, level_positions, predict_levels, predict_patches, predict_total
 from .noise_change import ModelAt
 from .patches import PatchSelection, select_patches
-from .status import ERROR, OK, STALE, WARN, StatusReport
+from .status import ERROR, HOLD_EVENTS, OK, STALE, WARN, XI_MEASUREMENTS, StatusReport
 from .temporal import BLOCK as TEMPORAL_BLOCK
 from .temporal import VIEW_STEP_EXPOSURE_REL, VIEW_STEP_GAIN_DB, TemporalMeasurement, TemporalNoise
 
@@ -44,8 +44,6 @@ RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "
 XI_ERROR_FLOOR_DN = 0.05
 
 ESTIMATOR_KEYS = SOURCES + ("total", "xi")
-#: What restarts a still hold's frame-difference measurement inside the hold (a frame's ``hold_event``).
-HOLD_EVENTS = ("noise changed", "light stepped")
 
 
 def patch_weights(est: dict[str, np.ndarray], use: np.ndarray) -> np.ndarray | None:
@@ -191,9 +189,10 @@ class FrameResult:
         """Which measurement drove xi: the frame differences of a static hold (``temporal``), the single
         image's reading (``image``) or, where texture hides the noise in every patch, what the image proves
         (``bound``)."""
+        image, temporal, bound = XI_MEASUREMENTS
         if self.temporal_weight >= 0.5:
-            return "temporal"
-        return "bound" if self.xi_bounded else "image"
+            return temporal
+        return bound if self.xi_bounded else image
 
     def report(self) -> StatusReport:
         return StatusReport(self.level, self.name, self.message, self.hardware_id, self.values())

@@ -7,6 +7,11 @@ from ..text import clip
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES: dict[int, str] = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
+#: The texts a frame's status carries: which measurement drove its xi (``xi_measurement``: the single image's reading,
+#: a still hold's frame differences, what the image proves where texture hides the noise) and what restarted a still
+#: hold's frame-difference measurement on it (``hold_event``; several joined by ", ").
+XI_MEASUREMENTS = ("image", "temporal", "bound")
+HOLD_EVENTS = ("noise changed", "light stepped")
 
 
 @dataclass(frozen=True)

@@ -344,7 +344,7 @@ def test_the_plot_shows_the_still_views_measurement_what_drove_xi_and_where_it_r
     """The frame differences' noise and the model on their blocks (sigma_temporal + xi_temporal) with gaps outside
     the holds, each frame's xi coloured by the measurement that drove it, a line where a hold's measurement
     restarted."""
-    from noise_monitor.bag.plot import HOLD_EVENT_STYLES, TEMPORAL_LABELS, XI_MEASUREMENTS, replay_figure
+    from noise_monitor.bag.plot import HOLD_EVENT_STYLES, TEMPORAL_LABELS, XI_MEASUREMENT_STYLES, replay_figure
     from noise_monitor.bag.results import FrameTable
 
     table, n = FrameTable(), 30
@@ -364,9 +364,9 @@ def test_the_plot_shows_the_still_views_measurement_what_drove_xi_and_where_it_r
     assert np.isnan(measured[:10]).all() and np.allclose(measured[10:], 4.0 + 0.01 * np.arange(10, n))
     assert np.allclose(model[10:] - measured[10:], 0.1) and np.isnan(model[:10]).all()
     t = table.column("time_s")
-    assert np.allclose(lines[XI_MEASUREMENTS["temporal"][0]].get_xdata(), t[12:])
-    assert np.allclose(lines[XI_MEASUREMENTS["image"][0]].get_ydata(), 0.01 * np.arange(12))
-    assert XI_MEASUREMENTS["bound"][0] not in lines
+    assert np.allclose(lines[XI_MEASUREMENT_STYLES["temporal"][0]].get_xdata(), t[12:])
+    assert np.allclose(lines[XI_MEASUREMENT_STYLES["image"][0]].get_ydata(), 0.01 * np.arange(12))
+    assert XI_MEASUREMENT_STYLES["bound"][0] not in lines
     for event, style in HOLD_EVENT_STYLES.items():
         at = [ln.get_xdata()[0] for ln in ax_x.lines if ln.get_linestyle() == style and ln.get_color() == "darkcyan"]
         assert np.allclose(at, [t[i] for i, e in events.items() if event in e])
