@@ -18,7 +18,7 @@ XML_OPTIONS = (("--sensor-type", "sensor_type", True), ("--bit-depth", "bit_dept
                ("--dsnu-exposure-s", "dsnu_exposure_s", False),
                ("--doubling-temperature-k", "doubling_temperature_k", False),
                ("--dark-offset-dn", "dark_offset_dn", False), ("--exposure-unit", "exposure_unit", False),
-               ("--name", "name", False))
+               ("--dark-current-e-per-s", "dark_current_e_per_s", False), ("--name", "name", False))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     x.add_argument("--dark-offset-dn", type=float, help="mu_y.dark at zero exposure, the black level (native DN)")
     x.add_argument("--exposure-unit", choices=tuple(EXPOSURE_UNITS),
                    help="the unit of the descriptor's exposure times (the format's own and default: ns)")
+    x.add_argument("--dark-current-e-per-s", type=float,
+                   help="instead of the XML's u_I_mean where that is negative or missing (0: immeasurably small)")
     x.add_argument("--name", help="the profile's name (default: the XML's file name)")
 
 
