@@ -10,9 +10,11 @@ Mapping: K, ``sigma_d``, ``u_e_sat``, ``u_I_mean`` (the dark current from the da
 datasheet's figures; the non-uniformities are the pixel components, ``PRNU1288_pixel`` and ``DSNU1288_pixel`` (the
 row and column parts removed: what an image patch shows as noise, as ``characterize`` takes its pixel-scale figures;
 the totals where emva1288 gives no pixel component, a pixel DSNU of 0 where its variance came out negative). emva1288
-takes ``sigma_d`` at zero exposure (the dark variance's fit over the exposure series) and converts the descriptor's
-exposure times from ns, the format's unit; with the DSNU's exposure t given, the datasheet's temporal dark noise at t
-is sqrt(sigma_d^2 + u_I_mean t), the dark signal's shot noise added, so that one measurement exposure serves both.
+takes ``sigma_d`` at zero exposure (the dark variance's fit over an exposure series of more than two exposures; with
+fewer, at the first, whose dark shot noise is then counted twice: a short exposure's is negligible) and converts the
+descriptor's exposure times from ns, the format's unit; with the DSNU's exposure t given, the datasheet's temporal
+dark noise at t is sqrt(sigma_d^2 + u_I_mean t), the dark signal's shot noise added, so that one measurement exposure
+serves both.
 """
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .datasheet import DatasheetError, load_datasheet
+from .datasheet import Datasheet, DatasheetError, load_datasheet
 from .emva import TOLERANCE, profile_from_datasheet, round_trip
 from .emva_images import EXPOSURE_UNITS
 from .emva_xml import datasheet_from_results
@@ -57,7 +57,7 @@ def print_round_trip(rows: list[dict[str, Any]], given: str = "datasheet") -> No
         print(f"  {r['field']:36s} {r['datasheet']:12.5g} {got:>12s} {err:>8s}{flag}")
 
 
-def _datasheet(args: argparse.Namespace) -> tuple[Any, list[str]]:
+def _datasheet(args: argparse.Namespace) -> tuple[Datasheet, list[str]]:
     """The datasheet of a YAML or a results XML, and the XML's notes."""
     given = {key: getattr(args, flag[2:].replace("-", "_")) for flag, key, _ in XML_OPTIONS}
     if Path(args.datasheet).suffix.lower() != ".xml":
