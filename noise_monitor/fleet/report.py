@@ -231,6 +231,12 @@ def _png(fig: Any) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
+def _mean(row: dict[str, Any], key: str) -> float:
+    """A bag's mean of ``key`` over its frames (NaN where it has none)."""
+    mean = row["stats"].get(key, {}).get("mean")
+    return np.nan if mean is None else float(mean)
+
+
 def _times(rows: list[dict[str, Any]]) -> list[datetime]:
     return [datetime.fromtimestamp((r["start_ns"] + r["end_ns"]) / 2e9, tz=UTC) for r in rows]
 
@@ -265,11 +271,15 @@ def _camera_figure(campaign: dict[str, Any]) -> str | None:
         ax.set_title(f"#{cam['rank']} {cam['hardware_id']}: health {cam['health']:.2f}", fontsize=10)
         ax.legend(fontsize=7, loc="best")
         ax = row[1]
-        for key, color, label in (("sigma_pn", "tab:blue", "PN"), ("sigma_dcsn", "tab:orange", "DCSN"),
-                                  ("sigma_rn", "tab:green", "RN"), ("sigma_model", "tab:red", "model total"),
-                                  ("sigma_image", "k", "image (measured)")):
-            y = [r["stats"][key]["mean"] if r["stats"][key]["mean"] is not None else np.nan for r in rows]
-            ax.plot(t, y, "o-" if key != "sigma_image" else "s--", ms=3, lw=1, color=color, label=label)
+        for key, color, style, label in (
+                ("sigma_pn", "tab:blue", "o-", "PN"), ("sigma_dcsn", "tab:orange", "o-", "DCSN"),
+                ("sigma_rn", "tab:green", "o-", "RN"), ("sigma_model", "tab:red", "o-", "model total"),
+                ("sigma_image", "k", "s--", "image (measured)"),
+                ("sigma_temporal", "darkcyan", "D", "frame differences (still views)"),
+                ("sigma_temporal_model", "darkcyan", "x", "their model (same blocks)")):
+            y = np.array([_mean(r, key) for r in rows])
+            if np.isfinite(y).any():  # a campaign without still views (or older records) has no frame differences
+                ax.plot(t, y, style, ms=3 if style != "x" else 6, lw=1, color=color, label=label)
         td = cam["trends"]["sigma_dcsn"]
         if td and td["significant"]:
             ax.text(0.01, 0.02, f"DCSN trend {td['slope_dn_per_week']:+.3f} DN/week", transform=ax.transAxes,

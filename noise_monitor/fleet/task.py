@@ -163,7 +163,8 @@ def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
         "temporal_noise_changes": int(summary.get("temporal_noise_changes", 0)),
         "temporal_light_steps": int(summary.get("temporal_light_steps", 0)),
         "alarms": [{k: e[k] for k in keep} for e in summary["alarms"][:MAX_EPISODES]],
-        "stats": {k: summary[k] for k in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model", "sigma_image", "xi")},
+        "stats": {k: summary[k] for k in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model", "sigma_image", "xi",
+                                          "sigma_temporal", "sigma_temporal_model")},
         "conditions": conditions,
         "xi_threshold_dn": summary["config"]["xi_threshold_dn"],
     }

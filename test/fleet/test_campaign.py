@@ -176,6 +176,9 @@ def test_steps_of_the_light_are_counted_per_bag_camera_and_campaign(lamp_bag: Pa
     assert c["bags"][0]["temporal_light_steps"] == cam["temporal_light_steps"] == c["totals"]["temporal_light_steps"] == 1
     assert cam["temporal_noise_changes"] == 0
     assert any("the light stepped 1 time(s) while the camera held still" in f for f in cam["findings"])
+    stats = c["bags"][0]["stats"]  # the still views' frame differences beside their model, per bag
+    assert stats["sigma_temporal"]["n"] == stats["sigma_temporal_model"]["n"] >= 20
+    assert abs(stats["sigma_temporal"]["mean"] - stats["sigma_temporal_model"]["mean"]) < 0.1
 
 
 def test_resume_skips_finished_bags_and_survives_a_torn_manifest(pool_run: tuple[dict, Path],
