@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
 
-from noise_monitor.monitor.status import HOLD_EVENTS, XI_MEASUREMENTS  # noqa: E402
+from noise_monitor.monitor.status import HOLD_EVENT_SEPARATOR, HOLD_EVENTS, XI_MEASUREMENTS  # noqa: E402
 
 from .results import FrameTable  # noqa: E402
 
@@ -105,7 +105,7 @@ def _mark_hold_events(ax_s: plt.Axes, ax_x: plt.Axes, table: FrameTable) -> None
     """A vertical line at each frame where a still hold's frame-difference measurement restarted."""
     time_s, events = table.column("time_s"), table.texts("hold_event")
     for event, style in HOLD_EVENT_STYLES.items():
-        at = [t for t, e in zip(time_s, events) if e is not None and event in e.split(", ")]
+        at = [t for t, e in zip(time_s, events) if e is not None and event in e.split(HOLD_EVENT_SEPARATOR)]
         for i, t in enumerate(at):
             for ax in (ax_s, ax_x):
                 ax.axvline(t, color="darkcyan", ls=style, lw=1.0,

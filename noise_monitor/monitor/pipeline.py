@@ -32,7 +32,7 @@ from .frame import skip_reason as frame_skip_reason
 from .model_patches import histogram_weights, level_positions, predict_levels, predict_patches, predict_total
 from .noise_change import ModelAt
 from .patches import PatchSelection, select_patches
-from .status import ERROR, HOLD_EVENTS, OK, STALE, WARN, XI_MEASUREMENTS, StatusReport
+from .status import ERROR, HOLD_EVENT_SEPARATOR, HOLD_EVENTS, OK, STALE, WARN, XI_MEASUREMENTS, StatusReport
 from .temporal import BLOCK as TEMPORAL_BLOCK
 from .temporal import VIEW_STEP_EXPOSURE_REL, VIEW_STEP_GAIN_DB, TemporalMeasurement, TemporalNoise
 
@@ -377,7 +377,7 @@ class Monitor:
         return self._result(
             frame, level, message, processed=True, sigma=sigma, model=model, xi=xi, xi_filtered=xi_f,
             xi_model=xi_model, xi_image=xi_image, xi_bound=xi_bound, xi_bounded=bounded, xi_temporal=xi_t, temporal_weight=weight, temporal_frames=held,
-            temporal_motion_px=motion, temporal_light_pct=light, hold_event=", ".join(events) or None,
+            temporal_motion_px=motion, temporal_light_pct=light, hold_event=HOLD_EVENT_SEPARATOR.join(events) or None,
             xi_error=xi_err, alarm_evidence=state.evidence, view_frames=self.view_frames,
             filtered=filtered, alarm_active=state.active, alarm_state=state.name,
             cause=state.cause, patches=selection, patch_xi=[float(v) for v in patch_xi],

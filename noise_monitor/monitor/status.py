@@ -12,6 +12,7 @@ LEVEL_NAMES: dict[int, str] = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "S
 #: hold's frame-difference measurement on it (``hold_event``; several joined by ", ").
 XI_MEASUREMENTS = ("image", "temporal", "bound")
 HOLD_EVENTS = ("noise changed", "light stepped")
+HOLD_EVENT_SEPARATOR = ", "
 
 
 @dataclass(frozen=True)

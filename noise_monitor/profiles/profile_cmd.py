@@ -12,13 +12,10 @@ from .emva import TOLERANCE, profile_from_datasheet, round_trip
 from .emva_images import EXPOSURE_UNITS
 from .emva_xml import datasheet_from_results
 
-#: Options of a results XML: (flag, keyword of datasheet_from_results, required).
-XML_OPTIONS = (("--sensor-type", "sensor_type", True), ("--bit-depth", "bit_depth", True),
-               ("--pixel-size-um", "pixel_size_um", True), ("--temperature-c", "temperature_c", True),
-               ("--dsnu-exposure-s", "dsnu_exposure_s", False),
-               ("--doubling-temperature-k", "doubling_temperature_k", False),
-               ("--dark-offset-dn", "dark_offset_dn", False), ("--exposure-unit", "exposure_unit", False),
-               ("--dark-current-e-per-s", "dark_current_e_per_s", False), ("--name", "name", False))
+#: Options of a results XML (each the keyword of datasheet_from_results of its name) and whether it is required.
+XML_OPTIONS = {"--sensor-type": True, "--bit-depth": True, "--pixel-size-um": True, "--temperature-c": True,
+               "--dsnu-exposure-s": False, "--doubling-temperature-k": False, "--dark-offset-dn": False,
+               "--exposure-unit": False, "--dark-current-e-per-s": False, "--name": False}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,17 +56,18 @@ def print_round_trip(rows: list[dict[str, Any]], given: str = "datasheet") -> No
 
 def _datasheet(args: argparse.Namespace) -> tuple[Datasheet, list[str]]:
     """The datasheet of a YAML or a results XML, and the XML's notes."""
-    given = {key: getattr(args, flag[2:].replace("-", "_")) for flag, key, _ in XML_OPTIONS}
+    given = {flag: getattr(args, flag[2:].replace("-", "_")) for flag in XML_OPTIONS}
     if Path(args.datasheet).suffix.lower() != ".xml":
-        named = [flag for flag, key, _ in XML_OPTIONS if given[key] is not None]
+        named = [flag for flag, value in given.items() if value is not None]
         if named:
             raise DatasheetError(f"{', '.join(named)}: for a results XML only (a datasheet YAML states its figures)")
         return load_datasheet(args.datasheet), []
-    missing = [flag for flag, key, required in XML_OPTIONS if required and given[key] is None]
+    missing = [flag for flag, required in XML_OPTIONS.items() if required and given[flag] is None]
     if missing:
         raise DatasheetError(f"{args.datasheet}: a results XML does not hold the measurement's conditions: give "
                              f"{', '.join(missing)}")
-    return datasheet_from_results(args.datasheet, **{k: v for k, v in given.items() if v is not None})
+    return datasheet_from_results(args.datasheet, **{flag[2:].replace("-", "_"): value
+                                                     for flag, value in given.items() if value is not None})
 
 
 def run(args: argparse.Namespace) -> int:
