@@ -1,4 +1,4 @@
-"""How well `characterize` recovers a simulated camera: the README's truth-recovery table.
+"""How well `characterize` recovers a simulated camera: the truth-recovery table of docs/profiles.md.
 
 For each datasheet: `profile from-emva`, `simulate-bag --scenario ptc` per seed, `characterize`; prints the
 largest |relative error| over the seeds per EMVA figure (the truth is the bag's sidecar ``emva``).

@@ -40,11 +40,11 @@ NAMES = ("full_meta", "min_meta", "wo_meta", "drne", "full_meta_paper")
 #: A patch is measurable when the predicted error of its sigma_image is at most this (DN) and at most
 #: ``MEASURABLE_RELATIVE_ERROR`` of it (a reading of almost no noise under texture has a small error in DN
 #: but is no measurement). Chosen on crops of the training photographs and procedural images at 64 px
-#: (README, "Declining what one image cannot measure").
+#: (docs/estimator.md, "Declining what one image cannot measure").
 MEASURABLE_ERROR_DN = 0.3
 MEASURABLE_RELATIVE_ERROR = 0.3
 #: Predicted errors by which |xi| must clear an alarm threshold for a declined patch's decision to be clear
-#: (chosen on the tuning sets, README).
+#: (chosen on the tuning sets, docs/estimator.md).
 CLEAR_DECISION_K = 2.0
 #: Pixels per chunk of a Full-Meta batch on the CPU: the features' per-pixel passes stay in the cache (256
 #: patches in one pass ran 20-30 % slower per patch than in chunks of 16-32 at 64 px, 8-32 at 128 px).

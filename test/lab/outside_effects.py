@@ -1,5 +1,5 @@
 """Four camera effects the library does not have, simulated directly in numpy (not through the plug-in
-API), and the plug-ins a user would write for them from the README.
+API), and the plug-ins a user would write for them from docs/physics.md.
 
 The camera is the paper's model (``NoiseModel().simulate``) on the lab's tiled chart over a gain /
 exposure / temperature sweep, moved between conditions; each effect is added to its frames here:
@@ -121,7 +121,7 @@ def campaign_bag(path: str | Path, effect: str | None, scenario: str = "campaign
                         seed=seed, frame_hook=hook)
 
 
-#: the plug-ins, as a user writes them for these effects with the README's API
+#: the plug-ins, as a user writes them for these effects with the API of docs/physics.md
 PLUGINS = {
     "amp_glow": textwrap.dedent('''
         import numpy as np

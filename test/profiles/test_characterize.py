@@ -19,7 +19,7 @@ from noise_monitor.physics import NoiseModel, load_profile
 from noise_monitor.profiles.ptc_sim import MIN_FRAMES, plan
 
 EXAMPLE = share_dir() / "config" / "datasheets" / "example_cmos_emva.yaml"
-# a camera whose noise is well above one ADC step (below it, see README: quantization of the model's
+# a camera whose noise is well above one ADC step (below it, see docs/profiles.md: quantization of the model's
 # whole-electron read noise), with a DSNU that a few frames can resolve
 CAMERA = {"temporal_dark_noise_e": 6.0, "dsnu_e": 3.0, "name": "ptc-test-cam"}
 
