@@ -497,6 +497,8 @@ _CLI_OVERRIDES = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = ("Every ROS parameter with its default and description, and the topics published: "
+                     "noise_monitor_node --help. Set any parameter with --ros-args -p NAME:=VALUE.")
     parser.add_argument("--params-file", help="ROS params YAML (default: the package's config/node.yaml)")
     table = parameter_table()
     for name, kind in _CLI_OVERRIDES.items():

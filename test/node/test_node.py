@@ -398,6 +398,13 @@ def test_node_help_lists_every_parameter_and_output_without_starting(capsys):
     for name, (default, _) in parameter_table().items():
         assert f"  {name} ({type(default).__name__}, default {default!r}): " in out
     assert all(f"  {topic} [{kind}]" in out for topic, kind in output_topics().items())
+    # `noise-monitor node --help` lists its own options and points to the full list
+    from noise_monitor.cli import main as cli_main
+
+    with pytest.raises(SystemExit) as stop:
+        cli_main(["node", "--help"])
+    assert stop.value.code == 0
+    assert "noise_monitor_node --help" in " ".join(capsys.readouterr().out.split())
 
 
 def test_a_robots_params_file_with_sections_for_other_nodes_and_use_sim_time(tmp_path, capfd):
