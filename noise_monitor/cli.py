@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pickle
 import signal
+import stat
 import sys
 import threading
 from types import ModuleType
@@ -107,6 +109,15 @@ def error_line(exc: BaseException) -> str:
     return clip(text)
 
 
+def _stdout_is_pipe() -> bool:
+    """Whether standard output is a pipe or socket (where a BrokenPipeError means its reader has gone)."""
+    try:
+        mode = os.fstat(sys.stdout.fileno()).st_mode
+    except (OSError, ValueError):  # no file descriptor (captured output)
+        return False
+    return stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
@@ -121,6 +132,13 @@ def main(argv: list[str] | None = None) -> int:
     except Terminated:
         print("noise-monitor: terminated", file=sys.stderr)
         return 128 + signal.SIGTERM
+    except BrokenPipeError as exc:
+        if not _stdout_is_pipe():
+            print(f"noise-monitor {args.command}: error: {error_line(exc)}", file=sys.stderr)
+            return 2
+        # the reader of our output left (`noise-monitor effects | head`): stop quietly, as a shell's tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
     except USER_ERRORS as exc:
         # user-facing errors (bad input, missing files): one line, non-zero exit
         print(f"noise-monitor {args.command}: error: {error_line(exc)}", file=sys.stderr)

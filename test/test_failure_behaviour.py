@@ -188,6 +188,19 @@ def test_sigterm_during_replay_leaves_no_temporary_files(tmp_path):
     assert not out.exists()  # no partial MCAP folder, no staging folder, no outputs: not even the folder it made
 
 
+def test_output_into_a_closed_pipe_stops_quietly():
+    """`noise-monitor effects | head -1`: the reader gone, the command stops without a traceback or an error line,
+    with the shell's status of a SIGPIPE (until 2026-12-04: 'error: [Errno 32] Broken pipe', exit 2)."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # no reader: the first write fails
+    try:
+        proc = subprocess.run([sys.executable, "-m", "noise_monitor.cli", "effects"], cwd=REPO, stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 128 + signal.SIGPIPE and proc.stderr == "", proc.stderr
+
+
 # --- 8. frames_lost from stamp gaps ------------------------------------------------------------------
 def test_stamps_1ns_apart_are_implausible_not_two_billion_lost_frames():
     gaps = GapCounter()
