@@ -173,6 +173,7 @@ class NoiseMonitorNode(Node):
         wait = p["sync_wait_s"] if paired else 0.0
         self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
         self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
+        self._last_image_ns = 0
         self._temperature_c: float | None = None
         self._geometry: CameraGeometry | None = None
         self._last_accept_ns: int | None = None
@@ -268,6 +269,7 @@ class NoiseMonitorNode(Node):
         implausible = self.gaps.implausible
         lost = self.gaps.observe(stamp)
         self.monitor.count_lost(lost, self.gaps.implausible - implausible)
+        self._last_image_ns = self._now()
         for matched in self.sync.add_image(stamp, msg, self._now()):
             self._enqueue(matched)
 
@@ -354,6 +356,8 @@ class NoiseMonitorNode(Node):
     def _on_diagnostics_timer(self) -> None:
         """``/diagnostics`` at diagnostics_rate_hz: the summary of the period since the previous one."""
         now = self._now()
+        if self.gaps.pending and now - self._last_image_ns > self.gaps.pause_ns:  # the stream stopped: judge its end
+            self.monitor.count_lost(self.gaps.flush())
         self._publish(rclpy_messages(self.period.report(self.monitor, now), stamp_ns=now))
 
     # --- worker thread -------------------------------------------------------------------
@@ -410,7 +414,8 @@ class NoiseMonitorNode(Node):
         return self._temperature_c
 
     def summary(self) -> dict[str, Any]:
-        """Counters, alarm episodes and the last status (for --json)."""
+        """Counters, alarm episodes and the last status (for --json); the stamp intervals still waiting are judged."""
+        self.monitor.count_lost(self.gaps.flush())
         last = self.monitor.last_result
         return {
             **self.monitor.counters,

@@ -313,6 +313,7 @@ def run_replay(
                     live.log_image(input_topic, _gray_image(bf.image_dn, opts.bit_depth), res.stamp_ns)
                 live.broadcast_time(res.stamp_ns)
             last_stamp, last_log = res.stamp_ns, bf.log_time_ns
+        monitor.count_lost(gaps.flush())  # the last intervals, judged at the recording's end
         if periods is not None and periods.frames:  # the last, partial period ends with the last image
             report(last_stamp)
     wall = time.perf_counter() - t_wall

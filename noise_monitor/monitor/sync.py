@@ -124,49 +124,107 @@ class StampSynchronizer(Generic[T, M]):
         self.pending.clear()
 
 
-#: Stamp intervals seen before the frame period is inferred (their gaps are counted once it is).
+#: Stamp intervals needed before the frame period is inferred from them.
 WARMUP_INTERVALS = 8
+#: A stream has a frame rate when this share of its recent intervals lies within this fraction of a period
+#: of a whole number of periods (a camera with its jitter and losses does; a loop publishing as fast as it can
+#: does not, and its gaps are not counted).
+REGULAR_SHARE, REGULAR_TOLERANCE = 0.75, 0.25
 #: Shortest frame period believed from header stamps (10 kHz): closer stamps are a bogus clock, not losses.
 MIN_PERIOD_NS = 100_000
 
 
 class GapCounter:
     """Counts images that never arrived (lost in transport or by a full subscriber queue), inferred from
-    header-stamp gaps: the frame period is the lower quartile of the recent stamp intervals (robust to
-    a few bursts), and an interval of about k periods means k - 1 missing frames. Gaps longer than
-    ``pause_s`` are a paused stream, not losses. Inferred, it undercounts regular losses (every other
-    frame lost looks like half the rate); ``expected_rate_hz`` (the camera's configured rate) makes the
-    period known and the count exact. An inferred period below :data:`MIN_PERIOD_NS` (stamps 1 ns apart)
-    is implausible: such intervals are counted in ``implausible``, never as losses."""
+    header-stamp gaps: an interval of about k frame periods means k - 1 missing frames, unless the frames came
+    late rather than never: intervals shorter than half a period right before or after a gap (a frame stamped
+    early, a driver's buffer delivered in a burst and stamped on arrival) fill it, one frame each. Each interval
+    is judged ``delay`` intervals after it arrived, with the period of the stamps around it: the lower quartile of
+    the recent intervals at least half their median (bursts are not the period; a few losses do not lengthen it),
+    so a burst at start-up does not make every later interval a gap. Gaps longer than ``pause_s`` are a paused
+    stream, not losses. Inferred, it undercounts regular losses (every other frame lost looks like half the
+    rate), and counts nothing while the recent intervals are no whole numbers of a period (no frame rate to
+    speak of: :data:`REGULAR_SHARE`); ``expected_rate_hz`` (the camera's configured
+    rate) makes the period known and the count exact. After a pause or a stamp jumping back the period is learnt
+    again. Intervals shorter than :data:`MIN_PERIOD_NS` (a repeated stamp, stamps 1 ns apart) are a bogus
+    clock: counted in ``implausible``, never as losses. :meth:`flush` judges the intervals still waiting (the
+    stream's end)."""
 
-    def __init__(self, window: int = 64, pause_s: float = 1.0, expected_rate_hz: float = 0.0) -> None:
+    def __init__(self, window: int = 64, pause_s: float = 1.0, expected_rate_hz: float = 0.0,
+                 delay: int = 16) -> None:
         if not 0 <= expected_rate_hz <= 1e9 / MIN_PERIOD_NS:
             raise ValueError(f"expected_rate_hz must be in [0, {1e9 / MIN_PERIOD_NS:g}] Hz, got {expected_rate_hz}")
         self.implausible = 0
-        self.intervals: deque[int] = deque(maxlen=window)
-        self._warm = False  # the period has been inferred once (the warm-up gaps counted)
+        self.intervals: deque[int] = deque(maxlen=window)  # the recent ones, for the period
+        self.pending: deque[int] = deque()  # not judged yet
+        self.delay = delay
         self.last_ns: int | None = None
         self.pause_ns = int(pause_s * 1e9)
         self.period_ns = 1e9 / expected_rate_hz if expected_rate_hz > 0 else None
         if self.period_ns is not None:
             self.pause_ns = max(self.pause_ns, int(4 * self.period_ns))
+        self._credit = 0  # short intervals just before the next one judged, not yet filling a gap
+        self._used_ahead = 0  # the first pending intervals, short, already filling a gap judged before them
 
     def observe(self, stamp_ns: int) -> int:
-        """Record an image stamp; returns the number of frames missing just before it."""
+        """Record an image stamp; returns the number of missing frames judged now (in the gap ``delay``
+        intervals back; at a pause or a stamp jumping back, in all the intervals still waiting)."""
         last, self.last_ns = self.last_ns, stamp_ns
-        if last is None or stamp_ns <= last or stamp_ns - last > self.pause_ns:
+        if last is None:
             return 0
         dt = stamp_ns - last
-        if self.period_ns is not None:
-            return max(int(round(dt / self.period_ns)) - 1, 0)
-        self.intervals.append(dt)
-        if len(self.intervals) < WARMUP_INTERVALS:
-            return 0
-        period = float(np.percentile(self.intervals, 25))
-        if period < MIN_PERIOD_NS:
+        if 0 <= dt < MIN_PERIOD_NS:
             self.implausible += 1
+            self.last_ns = last  # the frame period runs from the first of such stamps
             return 0
-        # the first time the period is known, the gaps seen while learning it count too
-        gaps = self.intervals if len(self.intervals) == WARMUP_INTERVALS and not self._warm else (dt,)
-        self._warm = True
-        return sum(max(int(round(g / period)) - 1, 0) for g in gaps)
+        if dt < 0 or dt > self.pause_ns:  # a reset clock or a paused stream: what waits is judged, no gap here,
+            lost = self.flush()  # and the period is learnt again (a driver restarted at another rate)
+            self.intervals.clear()
+            return lost
+        self.intervals.append(dt)
+        self.pending.append(dt)
+        return self._judge(len(self.pending) - self.delay)
+
+    def flush(self) -> int:
+        """Judge every interval still waiting (the end of the stream or of a run of it)."""
+        lost = self._judge(len(self.pending))
+        self._credit = 0
+        return lost
+
+    def _period(self) -> float | None:
+        """The frame period (ns); None while too few intervals are known, 0.0 where the stamps have no rate."""
+        if self.period_ns is not None:
+            return self.period_ns
+        if len(self.intervals) < WARMUP_INTERVALS:
+            return None
+        recent = np.asarray(self.intervals, dtype=float)
+        period = float(np.percentile(recent[recent >= 0.5 * np.median(recent)], 25))
+        multiple = recent / period
+        on_grid = (multiple >= 0.5) & (np.abs(multiple - np.round(multiple)) <= REGULAR_TOLERANCE)
+        return period if np.mean(on_grid) >= REGULAR_SHARE else 0.0  # 0: no frame rate, no count
+
+    def _judge(self, n: int) -> int:
+        period = self._period() if n > 0 else None
+        if period is None:  # too few intervals yet: they wait
+            return 0
+        if period == 0.0:  # no frame rate to judge them by: they count nothing
+            for _ in range(n):
+                self.pending.popleft()
+            self._used_ahead, self._credit = max(self._used_ahead - n, 0), 0
+            return 0
+        lost = 0
+        for _ in range(n):
+            k = int(round(self.pending.popleft() / period))
+            if k == 0:  # a frame early or delivered in a burst
+                if self._used_ahead:
+                    self._used_ahead -= 1
+                else:
+                    self._credit += 1
+                continue
+            missing, self._credit = max(k - 1 - self._credit, 0), 0
+            for dt in list(self.pending)[self._used_ahead:]:  # the burst right after the gap
+                if missing == 0 or round(dt / period) != 0:
+                    break
+                missing, self._used_ahead = missing - 1, self._used_ahead + 1
+            lost += missing
+        return lost
