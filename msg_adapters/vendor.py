@@ -181,14 +181,17 @@ def _basler(msg: Any, profile: Any) -> dict[str, float | str]:
         raise AdapterError(f"driver metadata success = false ({str(getattr(msg, 'message', '')) or 'no message'})")
     out: dict[str, float | str] = {}
     for field in ("exposure", "gain", "temperature"):
-        value = _num(field, getattr(msg, field), "driver units")
+        value = _num(field, getattr(msg, field, 0.0), "driver units")
         if value in _BASLER_UNAVAILABLE:
             raise AdapterError(f"driver metadata {field} = {value:g} ("
                                f"{'not available' if value == -10000.0 else 'error'} in the driver)")
     out["exposure_time_s"] = _exposure_us("exposure", msg.exposure)
     out["gain_db"] = map_gain("gain", msg.gain, _gain_range(profile))
-    if float(msg.temperature) != 0.0:  # 0.0: the camera does not report it
-        out["sensor_temperature_c"] = _num("temperature", msg.temperature, "degC")
+    temperature = getattr(msg, "temperature", 0.0)  # absent from older definitions of the message
+    if float(temperature) != 0.0:  # 0.0: the camera does not report it
+        out["sensor_temperature_c"] = _num("temperature", temperature, "degC")
+    if not hasattr(msg, "black_level"):  # pylon_ros2_camera before its black level was reported
+        return out
     value = _num("black_level", msg.black_level, "driver units")
     black = None if value in _BASLER_UNAVAILABLE else _driver_black_level("black_level", value, profile)
     if black is not None:
@@ -302,7 +305,14 @@ def metadata_from_vendor(msg: Any, profile: Any = None) -> dict[str, float | str
         raise AdapterError(
             f"no metadata adapter for {name}; supported vendor types: {', '.join(sorted(_CONVERTERS))}"
         ) from None
-    return convert(msg, profile)
+    try:
+        return convert(msg, profile)
+    except AttributeError as exc:  # a bag keeps the definition it was recorded with: an older driver's
+        fields = ", ".join(name for name in (getattr(msg, "__dataclass_fields__", None)  # rosbags; rclpy below
+                                             or getattr(msg, "get_fields_and_field_types", dict)())
+                           if not name.startswith("_"))
+        raise AdapterError(f"driver metadata {name} has no field '{exc.name}' (recorded with another version of "
+                           f"the message; its fields: {fields or 'unknown'})") from None
 
 
 def message_class(source: str) -> Any:

@@ -1,6 +1,8 @@
 """msg_adapters on real rclpy messages and real rosbags-deserialised messages."""
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -189,6 +191,36 @@ def test_flir_vendor_metadata_through_registered_definition():
         from sensor_msgs.msg import Temperature
 
         metadata_from_vendor(Temperature())
+
+
+def test_driver_metadata_recorded_with_an_older_definition():
+    """A bag keeps the message definition it was recorded with: an older FLIR ImageMetaData (``gain_db``, not
+    ``gain``) is a clear AdapterError naming the field, an older Basler CurrentParams without temperature and
+    black level converts without them (until 2026-12-04 both stopped replay and analyze with an AttributeError
+    traceback)."""
+    from rosbags.typesys import get_types_from_msg
+
+    from msg_adapters.vendor import BASLER_CURRENT_PARAMS
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    old_basler = "".join(line + "\n" for line in BASLER_CURRENT_PARAMS.splitlines()
+                         if line.split()[-1] not in ("temperature", "black_level"))
+    ts.register({**get_types_from_msg("std_msgs/Header header\nuint32 exposure_time\nfloat32 gain_db\n",
+                                      "flir_camera_msgs/msg/ImageMetaData"),
+                 **get_types_from_msg(old_basler, "pylon_ros2_camera_interfaces/msg/CurrentParams")})
+    t = ts.types
+    header = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="cam")
+    flir = t["flir_camera_msgs/msg/ImageMetaData"](header=header, exposure_time=12500, gain_db=9.5)
+    with pytest.raises(AdapterError, match="has no field 'gain' .*another version.*fields: header, exposure_time, "
+                                           "gain_db\\)"):
+        metadata_from_vendor(flir)
+    cls = t["pylon_ros2_camera_interfaces/msg/CurrentParams"]
+    values = {f.name: ([] if f.name == "available_image_encoding" else "" if "str" in str(f.type) else 0)
+              for f in dataclasses.fields(cls) if f.name != "__msgtype__"}
+    values["roi"] = t["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    basler = cls(**{**values, "exposure": 5000.0, "gain": 0.5, "success": True})
+    profile = type("Profile", (), {"gain_range_db": (0.0, 24.0), "black_level_dn": None})()
+    assert metadata_from_vendor(basler, profile) == {"exposure_time_s": pytest.approx(0.005), "gain_db": 12.0}
 
 
 def test_diagnostic_levels_converted_per_middleware():
