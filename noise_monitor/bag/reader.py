@@ -29,7 +29,7 @@ from msg_adapters.metadata import (
     metadata_from_mapping,
     metadata_from_temperature,
 )
-from msg_adapters.outputs import DIAGNOSTICS_TOPIC, FRAME
+from msg_adapters.outputs import DEBUG_IMAGE, DIAGNOSTICS_TOPIC, FRAME
 from msg_adapters.vendor import HELD_TYPES, KEYMAP_TYPES, VENDOR_TYPES, metadata_from_vendor, register_vendor_types
 from noise_monitor import safe_yaml
 from noise_monitor.monitor.frame import Frame
@@ -132,10 +132,16 @@ class BagReader:
 
     # --- topic detection ----------------------------------------------------------------------
     def _typed(self, msgtype: str) -> list[str]:
-        return sorted(t for t, m in self.topics.items() if m == msgtype)
+        """The topics of this type that hold messages (all of them where none does): a topic recorded without
+        messages (``ros2 bag record -a`` keeps every advertised one) is no candidate."""
+        topics = sorted(t for t, m in self.topics.items() if m == msgtype)
+        return [t for t in topics if self.count([t])] or topics
 
     def _image_candidates(self) -> list[str]:
-        imgs = self._typed(IMAGE_TYPE) or self._typed(COMPRESSED_TYPE)
+        plain, compressed = self._typed(IMAGE_TYPE), self._typed(COMPRESSED_TYPE)
+        imgs = plain if plain and (self.count(plain) or not self.count(compressed)) else compressed
+        camera = [t for t in imgs if not t.endswith(f"/{DEBUG_IMAGE}")]  # not a recorded monitor's debug view
+        imgs = camera or imgs
         raw = [t for t in imgs if t.endswith("image_raw") or t.endswith("image_raw/compressed")]
         return raw if len(raw) == 1 else imgs
 

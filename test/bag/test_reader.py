@@ -4,6 +4,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -129,6 +130,36 @@ def test_topic_overrides_and_ambiguity(tmp_path):
         assert float(next(reader.frames()).image_dn.mean()) == 200.0
     with pytest.raises(BagError, match="'/nope' is not in bag"):
         open_bag(path, image_topic="/nope")
+
+
+def test_topics_recorded_without_messages_and_a_recorded_monitors_debug_view_are_no_candidates(tmp_path):
+    """``ros2 bag record -a`` keeps every advertised topic, also those that carried nothing (until 2026-12-04 an
+    empty /camera/image_raw beside the frames' topic was chosen: "0 frames", exit 0), and a bag recorded with the
+    monitor running holds its ~/debug_image too."""
+    t = typestore().types
+    frame = np.full((8, 8), 90, np.uint8)
+    png = np.frombuffer(cv2.imencode(".png", frame)[1].tobytes(), np.uint8)
+    cases = {
+        "compressed": ({"/camera/image_raw": "sensor_msgs/msg/Image"},
+                       [("/camera/image_raw/compressed", t["sensor_msgs/msg/CompressedImage"](
+                           header=header(k), format="mono8; png compressed", data=png)) for k in range(1, 4)],
+                       "/camera/image_raw/compressed"),
+        "image": ({"/camera/image_raw": "sensor_msgs/msg/Image", "/camera/metadata_extra":
+                   "diagnostic_msgs/msg/DiagnosticArray"},
+                  [("/camera/image", image_msg(frame, k)) for k in range(1, 4)], "/camera/image"),
+        "debug": ({}, [(topic, image_msg(frame, k)) for k in range(1, 4)
+                       for topic in ("/camera/image", "/noise_monitor/debug_image")], "/camera/image"),
+    }
+    for name, (empty, messages, chosen) in cases.items():
+        path = tmp_path / f"{name}.mcap"
+        with BagWriter(path) as w:
+            w.declare(empty)
+            for topic, msg in messages:
+                w.write(topic, msg, msg.header.stamp.nanosec)
+        with open_bag(path) as reader:
+            assert reader.image_topic == chosen, name
+            frames = list(reader.frames("icx285"))
+        assert len(frames) == 3 and all(f.image_dn is not None and f.image_dn.mean() == 90 for f in frames), name
 
 
 def test_bad_image_is_skipped_with_reason(tmp_path):
