@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import re
 from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
@@ -210,9 +211,28 @@ def skipped_frames(table: FrameTable) -> list[dict[str, Any]]:
     return [{"index": int(index[i]), "stamp_ns": int(stamps[i]), "reason": reasons[i] or "unknown"} for i in skipped]
 
 
+_NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+
+
 def skip_reasons(table: FrameTable) -> dict[str, int]:
-    """Count of skipped frames per reason."""
-    return dict(Counter(s["reason"] for s in skipped_frames(table)).most_common())
+    """Count of skipped frames per reason; reasons that differ only in their numbers (``metadata stale: 3.1 s``,
+    ``3.2 s``, ...) are one, with N for the numbers that differ (the CSV keeps each frame's own)."""
+    groups: dict[str, Counter[str]] = {}
+    for s in skipped_frames(table):
+        groups.setdefault(_NUMBER.sub("N", s["reason"]), Counter())[s["reason"]] += 1
+    counts = Counter({_common(list(texts)): texts.total() for texts in groups.values()})
+    return dict(counts.most_common())
+
+
+def _common(texts: list[str]) -> str:
+    """Texts alike but for their numbers, as one: the numbers they share kept, the others N."""
+    numbers = [_NUMBER.findall(text) for text in texts]
+    parts = _NUMBER.split(texts[0])
+    out = [parts[0]]
+    for i, part in enumerate(parts[1:]):
+        values = {n[i] for n in numbers}
+        out += [values.pop() if len(values) == 1 else "N", part]
+    return "".join(out)
 
 
 def truth_check(alarms: list[dict[str, Any]], truth_episodes: list[dict[str, Any]]) -> dict[str, Any]:

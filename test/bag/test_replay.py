@@ -319,11 +319,13 @@ def test_frame_table_columns_episodes_and_csv(tmp_path):
                                       **({"sigma_model_prnu": 0.5} if i > 2000 else {})}
         table.append(index=i, stamp_ns=10**9 + i * 10**8, processed=not skipped, level=2 if alarm else 0,
                      alarm_active=alarm, alarm_state="active" if alarm else "ok", cause="xi < 0" if alarm else None,
-                     skip_reason="metadata missing" if skipped else None, numbers=numbers,
+                     skip_reason=(("metadata missing" if i < 3000 else f"metadata stale: {i / 7:.2f} s (timeout 2 s)")
+                                  if skipped else None), numbers=numbers,
                      conditions={"gain_db": 6.0, "exposure_time_s": 0.01, "sensor_temperature_c": 30.0},
                      xi_measurement=None if skipped else ("temporal" if i % 2 else "image"))
     assert len(table) == n and table.column("time_s")[-1] == pytest.approx((n - 1) * 0.1)
-    assert skip_reasons(table) == {"metadata missing": 5}
+    # reasons alike but for their numbers are one (until 2026-12-04 one key per frame on a bag's other clock)
+    assert skip_reasons(table) == {"metadata missing": 3, "metadata stale: N s (timeout 2 s)": 2}
     prnu = table.numbers("sigma_model_prnu")
     assert np.isnan(prnu[:2001]).all() and np.all(prnu[2001:][table.column("processed")[2001:]] == 0.5)
     (ep,) = alarm_episodes(table)
