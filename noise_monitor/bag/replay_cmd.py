@@ -8,6 +8,7 @@ from typing import Any
 
 from noise_monitor.monitor.black_level import STATED_BY
 
+from .input_options import add_input_arguments, topic_overrides
 from .replay import live_topics, replay
 from .staging import input_files, refuse_overwriting_inputs, write_text_atomic
 
@@ -25,11 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--params", metavar="YAML", help="node parameter file with the monitor settings "
                                                          "(default config/node.yaml)")
     parser.add_argument("--camera-name", help="diagnostic status name 'noise_monitor: <name>' (default: params file)")
-    parser.add_argument("--image-topic", help="override the auto-detected image topic")
-    parser.add_argument("--metadata-topic", help="override the auto-detected metadata topic")
-    parser.add_argument("--camera-info-topic", help="override the auto-detected CameraInfo topic")
-    parser.add_argument("--temperature-topic", help="override the auto-detected Temperature topic")
-    parser.add_argument("--bit-depth", type=int, help="bits per pixel of 16-bit images (default: profile)")
+    add_input_arguments(parser)
     parser.add_argument("--threads", type=int, help="CPU threads for inference (default: the params file's; "
                                                     "0 = all cores but one)")
     parser.add_argument("--no-plot", action="store_true", help="skip the PNG plot")
@@ -129,9 +126,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights,
                          device=args.device, config=args.params, camera_name=args.camera_name,
-                         image_topic=args.image_topic, metadata_topic=args.metadata_topic,
-                         camera_info_topic=args.camera_info_topic, temperature_topic=args.temperature_topic,
-                         bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot, live=live,
+                         **topic_overrides(args), bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot, live=live,
                          rate=args.rate)
     finally:
         if live is not None:

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from tqdm import tqdm
@@ -69,17 +70,18 @@ def _number(effect: str, param: str, text: str) -> float:
         raise ValueError(f"{effect}.{param}: expected a number or 'fit', got {text!r}") from None
 
 
-def _frames(source: Any, profile: CameraProfile | None) -> tuple[Callable[[], Iterable[Any]], int | None, str]:
+def _frames(source: Any, profile: CameraProfile | None, topics: Mapping[str, str | None],
+            bit_depth: int | None) -> tuple[Callable[[], Iterable[Any]], int | None, str]:
     """(a function giving a fresh pass over the frames, their number, a name for the report)."""
     if isinstance(source, (str, Path)):
         from ..bag.reader import open_bag
 
-        with open_bag(source) as reader:  # unusable bags fail here, before any work
+        with open_bag(source, **topics) as reader:  # unusable bags fail here, before any work
             n = len(reader)
 
         def passes() -> Iterator[Any]:
-            with open_bag(source) as r:
-                yield from r.frames(profile)
+            with open_bag(source, **topics) as r:
+                yield from r.frames(profile, bit_depth=bit_depth)
 
         return passes, n, str(source)
     frames = list(source)
@@ -101,8 +103,12 @@ def analyze(
     estimator: str | None = "full_meta",
     weights: str | Path | None = None,
     device: str = "cpu",
+    topics: Mapping[str, str | None] = MappingProxyType({}),
+    bit_depth: int | None = None,
 ) -> dict[str, Any]:
-    """Measure, compare, diagnose and (with ``add_effects``) refit; returns the JSON summary.
+    """Measure, compare, diagnose and (with ``add_effects``) refit; returns the JSON summary. A bag's topics are
+    detected as replay detects them, ``topics`` overriding (``image_topic``, ``metadata_topic``, ...: the keywords
+    of :func:`noise_monitor.bag.reader.open_bag`); ``bit_depth``: of 16-bit images, default the profile's.
 
     Keys: ``rms_error_dn`` (the profile's model vs the measured total sigma per cell, net of the
     measurement's own scatter: :func:`.compare.rms_error`), ``rms_error_raw_dn`` (the plain rms of the
@@ -128,7 +134,7 @@ def analyze(
     plugin_names = [n for f in plugins for n in load_plugin_file(f, override=replace_builtins)]
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
     specs = [parse_add_effect(a) for a in add_effects]
-    frames, n, source = _frames(bag_or_frames, prof)
+    frames, n, source = _frames(bag_or_frames, prof, topics, bit_depth)
     with tqdm(total=n, desc="measure", unit="frame", disable=not progress) as bar:
         meas = measure_frames(frames(), tolerance=tolerance, progress=bar)
     integer_output = meas.output_step_dn == 1.0

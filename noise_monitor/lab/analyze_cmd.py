@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..bag.input_options import add_input_arguments, topic_overrides
 from .analyze import analyze, component_change_text, write_json
 from .left import left_text
 from .measure import field_conditions_text, scene_in_single_views_text, scene_in_views_text
@@ -14,6 +15,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="rosbag2 directory (MCAP or sqlite3) or .mcap file")
     parser.add_argument("--profile", help="camera profile: bundled name (icx285, ev76c661, generic) or YAML path; "
                                           "optional if the bag's metadata carries every field")
+    add_input_arguments(parser)
     parser.add_argument("--add-effect", action="append", default=[], metavar="NAME[=VALUE|fit]",
                         help="add an effect to the model and refit: NAME or NAME=fit fits its parameters, "
                              "NAME=VALUE fixes the first one, NAME:p=v,q=fit mixes (repeatable)")
@@ -50,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         estimator=None if args.no_estimator else "full_meta",
         weights=args.weights,
         device=args.device,
+        topics=topic_overrides(args),
+        bit_depth=args.bit_depth,
     )
     apart = sum(ev["frames"] for ev in summary["set_apart"])
     print(f"rms error (model vs measured total sigma, net of the measurement's scatter): {summary['rms_error_dn']:.4f} DN "

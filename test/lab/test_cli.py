@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -63,6 +64,32 @@ def test_analyze_fixed_value_needs_no_fit(prnu_bag: Path, tmp_path: Path) -> Non
     summary = json.loads(js.read_text())
     added = summary["added_effects"][0]
     assert added["params"]["sigma_pct"] == 3.0 and added["fitted"] == {} and "estimator" not in summary
+
+
+def test_analyze_one_camera_of_a_bag_with_two(prnu_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A bag of two cameras: analyze asks which (until 2026-12-04 it named --image-topic but had no such option)
+    and measures the one chosen: the PRNU camera's frames, not the other's flat ones."""
+    from rosbags.highlevel import AnyReader
+
+    from noise_monitor.bag.writer import BagWriter, typestore
+
+    two = tmp_path / "two.mcap"
+    with AnyReader([prnu_bag], default_typestore=typestore()) as reader, BagWriter(two) as w:
+        for conn, stamp, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            w.write(f"/left{conn.topic}", msg, stamp)
+            if conn.msgtype == "sensor_msgs/msg/Image":
+                msg.data = np.full_like(msg.data, 255)  # the right camera saturated: no usable patch
+            w.write(f"/right{conn.topic}", msg, stamp)
+    assert main(["analyze", str(two), "--profile", "icx285", "--quiet", "--no-estimator"]) == 2
+    assert "several image topics" in capsys.readouterr().err
+    js = tmp_path / "left.json"
+    assert main(["analyze", str(two), "--profile", "icx285", "--quiet", "--no-estimator", "--json", str(js),
+                 "--image-topic", "/left/camera/image_raw", "--metadata-topic", "/left/camera/metadata"]) == 0
+    assert json.loads(js.read_text())["candidates"][0]["effect"] == "prnu"
+    assert main(["analyze", str(two), "--profile", "icx285", "--quiet", "--no-estimator",
+                 "--image-topic", "/right/camera/image_raw", "--metadata-topic", "/right/camera/metadata"]) == 2
+    assert "no flat, unclipped image regions" in capsys.readouterr().err
 
 
 def test_analyze_bad_input_exits_2(tmp_path: Path, prnu_bag: Path, capsys: pytest.CaptureFixture) -> None:
