@@ -369,7 +369,7 @@ def _without_column_offsets(means: np.ndarray, views: int) -> np.ndarray:
     read as a rolling shutter's bands (in 9 of 12 holds of a campaign with 1 DN of it, before 2026-11-29)."""
     k, g, c = means.shape
     r = g // views
-    m = means.reshape(k, views, r, c)
+    m = means.astype(np.float64).reshape(k, views, r, c)  # float32's floor is 1e-45: a black row's 0 / 0
     level = m.mean(axis=0)  # (V, R, C)
     y = m - level
     norm = np.maximum(np.sum(level * level, axis=2), 1e-300)  # (V, R)
@@ -391,12 +391,19 @@ def _block_means(x: np.ndarray, b: int, view_rows: int) -> np.ndarray:
     return xs.reshape(k, views, r, b, c, b).mean(axis=(3, 5)).reshape(k, views * r, c)
 
 
+#: A group of blocks darker than this (rms level, DN) shows no gain of the light (its change is within the noise).
+MIN_GAIN_LEVEL_DN = 2.0
+
+
 def _gain_fits(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each frame's change against the run mean of block means ``means`` (k, G, n): one offset and a gain per
     group (deviation from 1) by least squares, refitted once without the blocks beyond 4 robust standard deviations
     of the first fit (a moving object); closed form (the offset from the groups' Schur complement, 0 when every
     group is flat). Returns (k,) offsets, (k, G) gains - 1, (k,) the robust residual scale and (k, G) the gains'
-    inverse variance per unit residual variance with the offset free (exact for one group)."""
+    inverse variance per unit residual variance with the offset free (exact for one group). A group too dark to
+    show a gain (its blocks' rms level below :data:`MIN_GAIN_LEVEL_DN`: a lens hood, a night sky) takes the
+    median gain of the others (until 2026-12-04 a black row of blocks read a gain of 0 / 0)."""
+    means = means.astype(np.float64)
     level = means.mean(axis=0)
     y = means - level
     wts = np.ones_like(y)
@@ -413,6 +420,10 @@ def _gain_fits(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
         scale = 1.4826 * np.median(resid.reshape(y.shape[0], -1), axis=1) + 1e-12
         wts = (resid <= 4.0 * scale[:, None, None]).astype(float)
     spread = s2 - s1**2 / np.maximum(n, 1.0)[:, None]  # the last fit's: the gain's information, the offset free
+    dark = np.sqrt(np.mean(level**2, axis=1)) < MIN_GAIN_LEVEL_DN
+    if dark.any():
+        slope[:, dark] = np.median(slope[:, ~dark], axis=1, keepdims=True) if not dark.all() else 0.0
+        spread[:, dark] = 0.0
     return offset, slope, scale, np.maximum(spread, 1e-300)
 
 

@@ -173,3 +173,26 @@ def test_analyze_on_a_bag_without_measurable_regions(capsys, tmp_path):
             w.write("/camera/image_raw", image_msg(np.full((64, 64), 255, np.uint8), stamp), stamp)
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285")
     assert code == 2 and "no flat, unclipped image regions to measure noise in" in one_line(err)
+
+
+def test_analyze_a_still_camera_whose_top_rows_are_black(tmp_path):
+    """A lens hood or a night sky: the top rows of every frame at 0 DN. The rest is measured as without them (until
+    2026-12-04 the black rows' light gains were 0 / 0 and analyze stopped: "no flat, unclipped image regions")."""
+    from rosbags.highlevel import AnyReader
+
+    from noise_monitor.bag.writer import typestore
+
+    src = simulate_bag(tmp_path / "still.mcap", "ev76c661", "static", frames=12, width=96, height=64, seed=4)
+    hooded = tmp_path / "hooded.mcap"
+    with AnyReader([src], default_typestore=typestore()) as reader, BagWriter(hooded) as w:
+        for conn, stamp, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.msgtype == "sensor_msgs/msg/Image":
+                pixels = msg.data.reshape(msg.height, msg.step).copy()
+                pixels[:16] = 0
+                msg.data = pixels.reshape(-1)
+            w.write(conn.topic, msg, stamp)
+    plain = analyze(src, profile="ev76c661", estimator=None)
+    summary = analyze(hooded, profile="ev76c661", estimator=None)
+    assert summary["measurement"]["cells"] > 0 and not any(c["significant"] for c in summary["candidates"])
+    assert summary["rms_error_dn"] <= max(plain["rms_error_dn"], 0.05)
