@@ -36,6 +36,10 @@ from .status import ERROR, HOLD_EVENT_SEPARATOR, HOLD_EVENTS, OK, STALE, WARN, X
 from .temporal import BLOCK as TEMPORAL_BLOCK
 from .temporal import VIEW_STEP_EXPOSURE_REL, VIEW_STEP_GAIN_DB, TemporalMeasurement, TemporalNoise
 
+#: The skip reason of an image whose header stamp equals the previous image's: it would enter a still hold's frame
+#: differences as a second frame with the same noise (duplicates read sigma_temporal 5 % low in a bag audit).
+DUPLICATE_STAMP = ("duplicate image: the same header stamp as the previous image (a frame published or recorded "
+                   "twice, or a driver that does not stamp its images)")
 #: MonitorConfig fields that may change while the monitor runs (thresholds, alarm and filter settings).
 RUNTIME_SETTABLE = ("xi_threshold_dn", "xi_hysteresis_dn", "alarm_min_frames", "alarm_evidence", "clear_min_frames",
                     "filter_alpha", "alarm_level")
@@ -228,6 +232,7 @@ class Monitor:
                          "frames_lost": 0, "stamp_intervals_implausible": 0, "temporal_noise_changes": 0,
                          "temporal_light_steps": 0}
         self.last_received_ns: int | None = None
+        self._last_stamp_ns: int | None = None  # of the previous frame, evaluated or not
         self.last_result: FrameResult | None = None
 
     def reconfigure(self, **changes: Any) -> MonitorConfig:
@@ -293,7 +298,8 @@ class Monitor:
         t0 = time.perf_counter()
         self.counters["frames_received"] += 1
         self.last_received_ns = frame.stamp_ns if received_ns is None else received_ns
-        reason = self.skip_reason(frame)
+        duplicate, self._last_stamp_ns = frame.stamp_ns == self._last_stamp_ns, frame.stamp_ns
+        reason = DUPLICATE_STAMP if duplicate else self.skip_reason(frame)
         if reason:
             return self._skip(frame, reason)
         cfg = self.config

@@ -118,6 +118,19 @@ def test_no_usable_patches_is_a_warning_naming_the_reason():
     assert res.numeric() == {}
 
 
+def test_an_image_with_the_previous_ones_stamp_is_skipped_as_a_duplicate(rng):
+    """A frame published or recorded twice would enter a still hold's frame differences as a second frame with the
+    same noise (sigma_temporal 5 % low in a bag audit, 2026-12-04); a driver that does not stamp its images is told."""
+    from noise_monitor.monitor.pipeline import DUPLICATE_STAMP
+
+    mon = make_monitor()
+    image = mono8(MODEL.simulate(scene(), META, rng)[0])
+    first, again, later = (mon.process(Frame(s, image, META)) for s in (5, 5, 6))
+    assert first.processed and later.processed
+    assert not again.processed and again.skip_reason == DUPLICATE_STAMP and again.level == WARN
+    assert mon.counters["frames_skipped"] == 1 and mon.counters["frames_received"] == 3
+
+
 # --- alarm state machine -------------------------------------------------------------------
 def test_alarm_needs_min_frames_and_clears_with_hysteresis():
     alarm = XiAlarm(threshold=1.0, hysteresis=0.3, min_frames=3, clear_frames=2)
@@ -411,9 +424,9 @@ def test_medians_over_the_patches_the_estimator_can_measure(rng):
     clean = scene()
     fine = 40.0 * cv2.GaussianBlur(rng.standard_normal((256, 256)).astype(np.float32), (0, 0), 0.8)  # pixel-scale texture
     x = np.mgrid[0:256, 0:256][1]
-    for content, some_declined in ((clean + fine * (x >= 64), True), (clean + fine, False)):
+    for stamp, (content, some_declined) in enumerate(((clean + fine * (x >= 64), True), (clean + fine, False))):
         noisy, _ = MODEL.simulate(np.clip(content, 5, 250).astype(np.float32), META, rng)
-        res = mon.process(Frame(0, mono8(noisy), META))
+        res = mon.process(Frame(stamp, mono8(noisy), META))
         assert res.processed, res.skip_reason
         out = est.predict(res.patches.extract(mono8(noisy)), META)
         ok = out["measurable"]
