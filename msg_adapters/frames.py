@@ -51,7 +51,8 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
             raise AdapterError(image_error)
         if is_compressed(image_msg):  # lossless formats decoded, lossy ones refused with the reason
             image_msg = decompress(image_msg)
-        frame.image_dn = image_to_gray_dn(image_msg, bit_depth=options.bit_depth, color=options.color)
+        frame.image_dn = image_to_gray_dn(image_msg, bit_depth=options.depth(raw.get("bit_depth")),
+                                          color=options.color)
         if black:  # the model reads signal: the camera's pedestal comes off first
             frame.image_dn = frame.image_dn - np.float32(black)
             frame.black_level_dn = black

@@ -336,7 +336,7 @@ class BagReader:
                            f"({clip(', '.join(self.libcamera_ids))}): name one with the node parameter hardware_id"
                            + (f" (not {clip(repr(hardware_id), 80)})" if hardware_id else ""))
         prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
-        options = FrameOptions(prof, bit_depth or (prof.bit_depth if prof else None), color, black_level_dn)
+        options = FrameOptions(prof, bit_depth, color, black_level_dn)
         keymap = parse_keymap(metadata_keymap) if metadata_keymap else None
         camera = hardware_id if self.libcamera_ids and hardware_id in self.libcamera_ids else ""
         meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap, camera))

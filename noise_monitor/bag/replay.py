@@ -310,7 +310,7 @@ def run_replay(
                 writer.write(debug_topic, rosbags_image(rgb, res.stamp_ns, bf.frame_id, typestore()), res.stamp_ns)
             if live is not None:
                 if bf.image_dn is not None and live.has_subscribers(input_topic):
-                    live.log_image(input_topic, _gray_image(bf.image_dn, opts.bit_depth), res.stamp_ns)
+                    live.log_image(input_topic, _gray_image(bf.image_dn, opts.depth(bf.raw_metadata.get("bit_depth"))), res.stamp_ns)
                 live.broadcast_time(res.stamp_ns)
             last_stamp, last_log = res.stamp_ns, bf.log_time_ns
         monitor.count_lost(gaps.flush())  # the last intervals, judged at the recording's end

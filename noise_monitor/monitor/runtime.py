@@ -59,7 +59,8 @@ RUNTIME_PARAMETERS: dict[str, tuple[Any, str]] = {
                         "serial), else '<profile name>/<camera_name>'; with metadata_source camera_ros and several "
                         "cameras on /diagnostics, set it: only that camera's metadata is read"),
     "profile": ("", "camera profile with the static metadata: bundled name or YAML path; '' = metadata topic only"),
-    "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the profile's bit_depth, else the container width"),
+    "bit_depth": (0, "bits per pixel in 16-bit images; 0 = the frame's metadata's bit_depth, else the profile's, "
+                     "else the container width"),
     "black_level_dn": (-1.0, "the camera's black level (pedestal, 8-bit DN scale; settable at run time) taken off "
                              "every image before the model reads it (overrides the metadata's per frame); -1 = the "
                              "frame's metadata black_level_dn, else the profile's (0 without)"),
@@ -163,9 +164,18 @@ class FrameOptions:
     """How messages become frames: static metadata, bit depth of 16-bit images, colour reduction."""
 
     profile: CameraProfile | None = None
-    bit_depth: int | None = None
+    bit_depth: int | None = None  # stated by the user (parameter, --bit-depth); None: see :meth:`depth`
     color: str = "luma"
     black_level_dn: float | None = None  # taken off every image; None: the frame's metadata's, else the profile's
+
+    def depth(self, stated: Any = None) -> int | None:
+        """Bits per pixel of 16-bit images: the user's, else the frame's metadata's (``stated``, when an integer in
+        1..16: a wrong one is the metadata's error, reported there), else the profile's."""
+        if self.bit_depth:
+            return self.bit_depth
+        if isinstance(stated, (int, float)) and float(stated).is_integer() and 1 <= stated <= 16:
+            return int(stated)
+        return self.profile.bit_depth if self.profile is not None else None
 
     @property
     def black_level(self) -> float:
@@ -210,7 +220,7 @@ class MonitorRuntime:
         p["camera_name"] = p["camera_name"] or DEFAULT_CAMERA_NAME
         self.hardware_id = p["hardware_id"] or f"{profile_name}/{p['camera_name']}"
         self.monitor = Monitor(self.config, estimator, self.model, p["camera_name"], self.hardware_id)
-        depth = int(p["bit_depth"]) or (self.profile.bit_depth if self.profile else None)
+        depth = int(p["bit_depth"]) or None
         #: keys of a params file's every-node sections that are not the monitor's (:meth:`from_params_file`)
         self.params_ignored: list[str] = []
         self.frame_options = FrameOptions(self.profile, depth, p["color"],

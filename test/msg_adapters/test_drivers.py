@@ -317,6 +317,31 @@ def test_camera_ros_gain_and_black_level_of_a_raw_bayer_image_leave_out_the_isp(
                 kv("ExposureTime", "10000"), kv("SensorBlackLevels", bad)])]))
 
 
+def test_the_bit_depth_a_frames_metadata_states_scales_its_16_bit_image():
+    """12-bit data in mono16 with metadata bit_depth 12: the image is read on the 12-bit scale, as --bit-depth 12 reads
+    it (until 2026-12-04 the metadata's bit depth went into the model but the image was scaled by the profile's: an
+    8-bit profile refused every frame, none scaled it as 16-bit and read frames as black); a stated bit depth wins."""
+    from types import SimpleNamespace
+
+    from msg_adapters import prepare_frame
+    from noise_monitor.monitor.runtime import FrameOptions
+
+    values = np.array([[100, 2000], [4095, 0]], dtype="<u2")
+    img = SimpleNamespace(header=None, height=2, width=2, step=4, encoding="mono16", is_bigendian=0,
+                          data=values.tobytes())
+    meta = {"gain_db": 6.0, "exposure_time_s": 0.01, "sensor_temperature_c": 30.0}
+    profile = load_profile("ev76c661")  # 8 bit
+    by_metadata = prepare_frame(img, 1, FrameOptions(profile), metadata={**meta, "bit_depth": 12})
+    stated = prepare_frame(img, 1, FrameOptions(profile, 12), metadata=meta)
+    np.testing.assert_allclose(by_metadata.image_dn, values * 255.0 / 4095.0, rtol=1e-6)
+    np.testing.assert_array_equal(by_metadata.image_dn, stated.image_dn)
+    assert by_metadata.metadata is not None and by_metadata.metadata.bit_depth == 12
+    profile_only = prepare_frame(img, 1, FrameOptions(profile), metadata=meta)
+    assert profile_only.image_dn is None and "8-bit" in profile_only.image_error
+    overruled = prepare_frame(img, 1, FrameOptions(profile, 16), metadata={**meta, "bit_depth": 12})
+    np.testing.assert_allclose(overruled.image_dn, values * 255.0 / 65535.0, rtol=1e-6)
+
+
 def test_keymap_validation_and_conversion():
     with pytest.raises(ValueError, match="unknown field 'gain'"):
         parse_keymap(["cam|Gain|gain|dB"])
