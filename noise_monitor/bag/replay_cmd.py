@@ -116,9 +116,20 @@ def _live_view(args: argparse.Namespace) -> Any:
     return live
 
 
+def default_out(bag: str) -> Path:
+    """out/<the bag's name without its storage suffix> (``run.day1.mcap`` -> ``out/run.day1``)."""
+    name = Path(bag.rstrip("/")).name
+    stem = name[: -len(Path(name).suffix)] if Path(name).suffix.lower() in (".mcap", ".db3") else name
+    return Path("out") / (stem or name)
+
+
 def run(args: argparse.Namespace) -> int:
-    out = Path(args.out) if args.out else Path("out") / Path(args.bag.rstrip("/")).name.split(".")[0]
+    if args.out is not None and not args.out.strip():
+        raise ValueError("--out is empty: name the output folder")
+    out = Path(args.out) if args.out is not None else default_out(args.bag)
     if args.json:
+        if Path(args.json).is_dir():
+            raise ValueError(f"--json {args.json} is a folder: name the file to write")
         refuse_overwriting_inputs([Path(args.json)], input_files(args.bag))
     if args.rate is not None and not (0 < args.rate < float("inf")):
         raise ValueError(f"--rate must be > 0, got {args.rate}")
@@ -126,8 +137,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         summary = replay(args.bag, args.profile, out, model_name=args.model, weights=args.weights,
                          device=args.device, config=args.params, camera_name=args.camera_name,
-                         **topic_overrides(args), bit_depth=args.bit_depth, threads=args.threads, plot=not args.no_plot, live=live,
-                         rate=args.rate)
+                         **topic_overrides(args), bit_depth=args.bit_depth, threads=args.threads,
+                         plot=not args.no_plot, live=live, rate=args.rate)
     finally:
         if live is not None:
             live.close()

@@ -298,6 +298,20 @@ def test_replay_command_and_errors(tmp_path, noisy_bag, capsys):
     broken.write_bytes(noisy_bag.read_bytes()[:5000])
     assert main(["replay", str(broken), "--profile", "ev76c661", "--out", str(tmp_path / "b")]) == 2
     assert "cannot read bag" in capsys.readouterr().err
+    # refused before any work: an empty --out, a --json that is a folder (until 2026-12-04: after the whole replay)
+    assert main(["replay", str(noisy_bag), "--profile", "ev76c661", "--out", ""]) == 2
+    assert "--out is empty" in capsys.readouterr().err
+    assert main(["replay", str(noisy_bag), "--out", str(tmp_path / "j"), "--json", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err and not (tmp_path / "j").exists()
+
+
+def test_the_default_output_folder_keeps_the_bags_whole_name():
+    """``run.day1.mcap`` and ``run.day2.mcap`` went to one out/run, the second replacing the first (until 2026-12-04)."""
+    from noise_monitor.bag.replay_cmd import default_out
+
+    assert default_out("field/run.day1.mcap") == Path("out/run.day1") != default_out("field/run.day2.mcap")
+    assert default_out("field/run_2026.12.04/") == Path("out/run_2026.12.04")  # a rosbag2 folder
+    assert default_out("a.DB3") == Path("out/a") and default_out(".mcap") == Path("out/.mcap")
 
 
 def test_frame_table_columns_episodes_and_csv(tmp_path):
