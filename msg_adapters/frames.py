@@ -21,14 +21,14 @@ from .metadata import BLACK_LEVEL, black_level_value, resolve_metadata
 
 def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
                   metadata: Mapping[str, Any] | Exception | str | None = None,
-                  metadata_stamp_ns: int | None = None, temperature_c: float | None = None,
+                  metadata_stamp_ns: int | None = None, temperature_c: float | str | None = None,
                   geometry: CameraGeometry | None = None, image_error: str | None = None,
                   index: int = 0, log_time_ns: int | None = None) -> Frame:
     """Convert an image message and the metadata chosen for it into a Frame.
 
     ``metadata``: the per-frame key/values (merged over the profile of ``options`` and the latest
     ``temperature_c``), or the error (an exception or its text) of a metadata message that could not be
-    read. ``geometry``: the latest CameraInfo, checked against the image size. ``image_error``: the image
+    read; ``temperature_c`` may be why the Temperature reading cannot be used. ``geometry``: the latest CameraInfo, checked against the image size. ``image_error``: the image
     message is known to be unusable (e.g. damaged bytes in a bag). A raw Bayer image takes the gain and black level of
     the sensor's output where the metadata tells them apart (camera_ros's ``RAW_GAIN``, without the ISP's digital gain,
     and ``RAW_BLACK_LEVEL``, the pedestal the ISP takes off).

@@ -10,7 +10,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from noise_monitor.physics import CameraMetadata, CameraProfile
+from noise_monitor.physics import CameraMetadata, CameraProfile, MetadataError
 from noise_monitor.physics.metadata import BLACK_LEVEL_MAX_DN, NUMERIC_FIELDS
 from noise_monitor.text import clip
 
@@ -102,21 +102,24 @@ def metadata_from_temperature(msg: Any) -> dict[str, float]:
 def resolve_metadata(
     static: Mapping[str, Any] | CameraProfile | None,
     dynamic: Mapping[str, Any],
-    temperature_c: float | None = None,
+    temperature_c: float | str | None = None,
 ) -> tuple[CameraMetadata | None, list[str]]:
     """Merge static profile < Temperature reading < per-frame metadata into a CameraMetadata.
 
     Returns ``(metadata, [])`` when complete, ``(None, missing_field_names)`` when fields are missing.
     Values that are present but invalid (out of range, unknown sensor type) raise
-    :class:`noise_monitor.physics.MetadataError` (a ValueError) naming them.
+    :class:`noise_monitor.physics.MetadataError` (a ValueError) naming them, as does a Temperature reading that
+    cannot be used (``temperature_c`` the reason: not finite, stale) where nothing else gives the temperature.
     """
     base = dict(static.values) if isinstance(static, CameraProfile) else dict(static or {})
     merged = metadata_from_mapping(base)
-    if temperature_c is not None:
+    if isinstance(temperature_c, (int, float)):
         merged["sensor_temperature_c"] = _number("temperature", temperature_c)
     reported = metadata_from_mapping(dynamic)
     reported.pop(BLACK_LEVEL, None)  # the image's, taken off it before (msg_adapters.frames)
     merged.update(reported)
+    if isinstance(temperature_c, str) and "sensor_temperature_c" not in merged:
+        raise MetadataError(f"sensor_temperature_c from the {temperature_c}")
     missing = [name for name in REQUIRED_FIELDS if name not in merged]
     if missing:
         return None, missing

@@ -79,7 +79,7 @@ class _Job:
     """A matched image waiting for the worker."""
 
     matched: Matched
-    temperature_c: float | None
+    temperature_c: float | str | None  # the latest Temperature reading, or why it cannot be used
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -174,7 +174,8 @@ class NoiseMonitorNode(Node):
         self.sync: StampSynchronizer = StampSynchronizer(p["sync_tolerance_s"], wait)
         self.gaps = GapCounter(expected_rate_hz=p["expected_rate_hz"])
         self._last_image_ns = 0
-        self._temperature_c: float | None = None
+        self._temperature_c: float | str | None = None  # the latest reading, or why it cannot be used
+        self._temperature_ns = 0  # when it arrived (node clock)
         self._geometry: CameraGeometry | None = None
         self._last_accept_ns: int | None = None
 
@@ -324,10 +325,21 @@ class NoiseMonitorNode(Node):
             self.get_logger().warning(f"ignoring CameraInfo: {exc}", throttle_duration_sec=10.0)
 
     def _on_temperature(self, msg: Any) -> None:
+        self._temperature_ns = self._now()
         try:
             self._temperature_c = metadata_from_temperature(msg)["sensor_temperature_c"]
-        except AdapterError as exc:
-            self.get_logger().warning(f"ignoring Temperature: {exc}", throttle_duration_sec=10.0)
+        except AdapterError as exc:  # the frames that need it say why (an older reading is no longer the camera's)
+            self._temperature_c = f"Temperature topic: {exc}"
+            self.get_logger().warning(f"Temperature unusable: {exc}", throttle_duration_sec=10.0)
+
+    def _temperature(self, now_ns: int) -> float | str | None:
+        """The latest Temperature reading for a frame now, or why there is none to use (stale after
+        metadata_timeout_s, as the metadata)."""
+        age = (now_ns - self._temperature_ns) / 1e9
+        timeout = self.runtime.config.metadata_timeout_s
+        if isinstance(self._temperature_c, float) and age > timeout:
+            return f"Temperature topic stale: last reading {age:.2f} s ago (timeout {timeout:g} s)"
+        return self._temperature_c
 
     def _enqueue(self, matched: Matched) -> None:
         max_rate = self.params["max_rate_hz"]
@@ -336,7 +348,7 @@ class NoiseMonitorNode(Node):
             self.monitor.count_dropped()
             return
         self._last_accept_ns = now
-        if self._worker.submit(_Job(matched, self._temperature_c)):
+        if self._worker.submit(_Job(matched, self._temperature(now))):
             self.monitor.count_dropped()  # the worker is busy: keep the newest frame only
 
     def _on_sync_timer(self) -> None:
@@ -410,8 +422,8 @@ class NoiseMonitorNode(Node):
 
     @property
     def temperature_c(self) -> float | None:
-        """The latest sensor temperature from the Temperature topic (None before the first)."""
-        return self._temperature_c
+        """The latest sensor temperature from the Temperature topic (None before the first or when unusable)."""
+        return self._temperature_c if isinstance(self._temperature_c, float) else None
 
     def summary(self) -> dict[str, Any]:
         """Counters, alarm episodes and the last status (for --json); the stamp intervals still waiting are judged."""

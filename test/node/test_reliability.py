@@ -275,6 +275,36 @@ def test_metadata_topic_dropping_out_and_returning(rig_factory):
     assert rig.status_for(rig.publish(i + 1)).level == OK  # metadata is back
 
 
+def test_an_unusable_or_stale_temperature_reading_is_named_not_replaced_by_an_older_one(rig_factory):
+    """The sensor temperature from its own topic: a NaN reading is the frame's reason (until 2026-12-04 the frames
+    said "metadata missing", or used the previous reading without a word) and so is a topic that went quiet (the
+    last reading was used however old)."""
+    from sensor_msgs.msg import Temperature
+
+    rig = rig_factory("temp", temperature_topic="/temp/temperature", metadata_timeout_s=0.5)
+    pub = rig.cam.create_publisher(Temperature, "/temp/temperature", qos_profile_sensor_data)
+    assert rig.spin_until(lambda: pub.get_subscription_count() > 0, TIMEOUT_S)
+    meta = {k: v for k, v in DYNAMIC.items() if k != "sensor_temperature_c"}
+
+    def reading(celsius: float) -> None:
+        pub.publish(Temperature(temperature=celsius))
+        assert rig.spin_until(lambda: rig.node._temperature_ns > 0 and (
+            rig.node.temperature_c == celsius or (celsius != celsius and rig.node.temperature_c is None)), TIMEOUT_S)
+
+    reading(30.0)
+    assert rig.status_for(rig.publish(0, meta=meta)).level == OK
+    reading(float("nan"))
+    report = rig.status_for(rig.publish(1, meta=meta))
+    assert report.level == WARN and "sensor_temperature_c from the Temperature topic" in report.message
+    assert "not finite" in report.message
+    reading(30.0)
+    assert rig.status_for(rig.publish(2, meta=meta)).level == OK
+    rig.spin_until(lambda: False, 0.8)  # the topic goes quiet beyond metadata_timeout_s
+    report = rig.status_for(rig.publish(3, meta=meta))
+    assert report.level == WARN and "Temperature topic stale: last reading" in report.message
+    assert rig.status_for(rig.publish(4)).level == OK  # the metadata's own temperature needs no topic
+
+
 def test_camera_publisher_restart_is_stale_then_recovers(rig_factory):
     rig = rig_factory("restart", image_timeout_s=0.5)
     for i in range(3):
