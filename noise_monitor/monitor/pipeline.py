@@ -476,11 +476,12 @@ class Monitor:
     def _status(self, xi: float, xi_f: float, meta: CameraMetadata) -> tuple[int, str]:
         cfg, state = self.config, self.alarm.state
         detail = f"xi {xi:+.2f} DN, filtered {xi_f:+.2f} DN, threshold {cfg.xi_threshold_dn:g} DN"
-        if state.active:
-            return self._alarm_level(), f"xi alarm: {state.cause} ({detail})"
         outside = meta.outside_paper_ranges()
+        ranges = f"metadata outside the estimator's training ranges: {', '.join(outside)}"
+        if state.active:  # an alarm at such metadata says so: the estimate behind it is an extrapolation
+            return self._alarm_level(), f"xi alarm: {state.cause} ({detail}){'; ' + ranges if outside else ''}"
         if outside:
-            return WARN, f"metadata outside the estimator's training ranges: {', '.join(outside)} ({detail})"
+            return WARN, f"{ranges} ({detail})"
         if state.name == "pending":
             return OK, (f"noise matches the model so far; |xi| above threshold for {state.above} frame(s), evidence "
                         f"{state.evidence:.1f} of {cfg.alarm_evidence:g} ({detail})")

@@ -131,6 +131,19 @@ def test_an_image_with_the_previous_ones_stamp_is_skipped_as_a_duplicate(rng):
     assert mon.counters["frames_skipped"] == 1 and mon.counters["frames_received"] == 3
 
 
+def test_an_alarm_at_metadata_outside_the_training_ranges_says_so(rng):
+    """Until 2026-12-04 the alarm's message replaced the training-range warning: an alarm raised on an extrapolated
+    estimate (gain 30 dB, beyond the estimator's training) read like any other."""
+    hot = replace(META, gain_db=30.0)
+    calm = make_monitor().process(next(frames(rng, 1, meta=hot))[0])
+    assert calm.level == WARN and calm.message.startswith("metadata outside the estimator's training ranges: gain_db")
+    mon = make_monitor()
+    results = [mon.process(frame) for frame, _ in frames(rng, 12, meta=hot, extra_sigma=8.0)]
+    alarmed = [r for r in results if r.message.startswith("xi alarm")]
+    assert alarmed and all(r.message.endswith("; metadata outside the estimator's training ranges: gain_db")
+                           for r in alarmed)
+
+
 # --- alarm state machine -------------------------------------------------------------------
 def test_alarm_needs_min_frames_and_clears_with_hysteresis():
     alarm = XiAlarm(threshold=1.0, hysteresis=0.3, min_frames=3, clear_frames=2)
