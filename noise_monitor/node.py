@@ -374,30 +374,40 @@ class NoiseMonitorNode(Node):
 
     # --- worker thread -------------------------------------------------------------------
     def _work(self, job: _Job) -> None:
+        """Evaluate a frame and publish its outputs; a failure anywhere is logged and the worker goes on (the frame
+        counted once: skipped with the reason when the evaluation itself failed)."""
+        received = self.monitor.counters["frames_received"]
         try:
-            result = self._evaluate(job)
+            frame = self._prepare(job)
+            result = self.runtime.process(frame, received_ns=job.matched.received_ns)
         except Exception as exc:  # keep the node alive; the status names the failure
             self.get_logger().error(f"frame evaluation failed: {exc!r}")
-            result = self.monitor.reject(job.matched.stamp_ns, f"evaluation failed: {exc}", job.matched.received_ns)
-        self.period.add(result)
-        self._publish(rclpy_messages(result, namespace=self.namespace_out, frame_id=job.matched.image.header.frame_id))
-        if self.live is not None:
-            self._mirror(self._image_sub.topic_name, job.matched.image, result.stamp_ns)
-            self.live.broadcast_time(result.stamp_ns)
+            result = self.monitor.reject(job.matched.stamp_ns, f"evaluation failed: {exc}", job.matched.received_ns,
+                                         counted=self.monitor.counters["frames_received"] > received)
+            frame = None
+        try:
+            self.period.add(result)
+            self._publish(rclpy_messages(result, namespace=self.namespace_out,
+                                         frame_id=job.matched.image.header.frame_id))
+            if frame is not None:
+                self._publish_debug_image(frame.image_dn, result, job.matched.image.header)
+            if self.live is not None:
+                self._mirror(self._image_sub.topic_name, job.matched.image, result.stamp_ns)
+                self.live.broadcast_time(result.stamp_ns)
+        except Exception as exc:  # an output that failed: the next frame's are tried again
+            self.get_logger().error(f"publishing the frame's outputs failed: {exc!r}", throttle_duration_sec=10.0)
 
-    def _evaluate(self, job: _Job) -> FrameResult:
+    def _prepare(self, job: _Job) -> Any:
+        """The job's Frame (image, metadata and the driver's held parameters merged, Temperature, CameraInfo)."""
         m = job.matched
         held, metadata = self._held, m.metadata
         if isinstance(held, str) and not isinstance(metadata, str):
             metadata = held  # the driver's parameters could not be read
         elif isinstance(held, dict) and held and not isinstance(metadata, (str, Exception)):
             metadata = {**held, **(metadata or {})}
-        frame = prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=metadata,
-                              metadata_stamp_ns=m.metadata_stamp_ns, temperature_c=job.temperature_c,
-                              geometry=self._geometry)
-        result = self.runtime.process(frame, received_ns=m.received_ns)
-        self._publish_debug_image(frame.image_dn, result, m.image.header)
-        return result
+        return prepare_frame(m.image, m.stamp_ns, self.runtime.frame_options, metadata=metadata,
+                             metadata_stamp_ns=m.metadata_stamp_ns, temperature_c=job.temperature_c,
+                             geometry=self._geometry)
 
     def _publish_debug_image(self, image_dn: Any, result: FrameResult, header: Any) -> None:
         """``~/debug_image`` at most at debug_image_rate_hz: the frame with its patches coloured by xi."""

@@ -278,9 +278,10 @@ class Monitor:
         return self._result(frame, level, message, processed=False, skip_reason=reason,
                             alarm_active=state.active, alarm_state=state.name, cause=state.cause)
 
-    def reject(self, stamp_ns: int, reason: str, received_ns: int | None = None) -> FrameResult:
-        """Count and report an input that never became a Frame (e.g. an unsupported image encoding)."""
-        self.counters["frames_received"] += 1
+    def reject(self, stamp_ns: int, reason: str, received_ns: int | None = None, counted: bool = False) -> FrameResult:
+        """Count and report an input that never became a Frame (e.g. an unsupported image encoding), or one whose
+        evaluation failed (``counted``: :meth:`process` had counted it)."""
+        self.counters["frames_received"] += not counted
         self.last_received_ns = stamp_ns if received_ns is None else received_ns
         return self._skip(Frame(stamp_ns, None, None), reason)
 

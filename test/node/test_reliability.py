@@ -305,6 +305,36 @@ def test_an_unusable_or_stale_temperature_reading_is_named_not_replaced_by_an_ol
     assert rig.status_for(rig.publish(4)).level == OK  # the metadata's own temperature needs no topic
 
 
+def test_a_failure_inside_the_evaluation_or_the_outputs_counts_the_frame_once_and_the_worker_goes_on(rig_factory):
+    """The estimator raising inside the monitor's evaluation (after it counted the frame): the frame is skipped with
+    the reason and counted once (until 2026-12-04 twice); an output that fails to publish is logged and the next
+    frames are evaluated (it would have ended the worker thread: every later frame only "dropped")."""
+    rig = rig_factory("fail", debug_image_rate_hz=100.0)
+    assert rig.status_for(rig.publish(0)).level == OK
+    predict = rig.node.monitor.estimator.predict
+    calls = {"n": 0}
+
+    def once(*args: Any, **kwargs: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise RuntimeError("CUDA error: an illegal memory access")
+        return predict(*args, **kwargs)
+
+    rig.node.monitor.estimator.predict = once
+    report = rig.status_for(rig.publish(1))
+    assert report.level == WARN and "evaluation failed: CUDA error" in report.message
+    counters = rig.node.monitor.counters
+    assert counters["frames_received"] == 2 and counters["frames_skipped"] == 1, counters
+
+    def broken(*args: Any) -> None:
+        raise OSError("the debug image's publisher is gone")
+
+    rig.node._publish_debug_image = broken
+    assert rig.status_for(rig.publish(2)).level == OK  # ~/frame went out before the failing output
+    assert rig.status_for(rig.publish(3)).level == OK  # and the worker lives on
+    assert counters["frames_received"] == 4 and counters["frames_processed"] == 3, counters
+
+
 def test_camera_publisher_restart_is_stale_then_recovers(rig_factory):
     rig = rig_factory("restart", image_timeout_s=0.5)
     for i in range(3):
