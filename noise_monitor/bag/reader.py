@@ -291,12 +291,12 @@ class BagReader:
             return metadata_from_vendor(msg, profile)
         return metadata_from_mapping({k: getattr(msg, k) for k in _METADATA_NAMES if hasattr(msg, k)})
 
-    def _timeline(self, topic: str | None, convert) -> tuple[list[int], list[Any]]:
-        """(sorted header stamps, converted values) of a small side topic, errors kept as AdapterError; messages that
-        convert to None (not this camera's) left out."""
+    def _timeline(self, topic: str | None, convert) -> _Timeline:
+        """The converted values of a small side topic by time, errors kept as AdapterError; messages that convert to
+        None (not this camera's) left out."""
         if topic is None:
-            return [], []
-        items = []
+            return _Timeline([], [], False)
+        items, unstamped = [], False
         for _, log_time, msg in self.messages([topic]):
             try:
                 if isinstance(msg, DamagedMessage):
@@ -305,9 +305,12 @@ class BagReader:
             except (AdapterError, ValueError) as exc:
                 value = AdapterError(f"{topic}: {exc}")
             if value is not None:
-                items.append((_stamp_ns(msg, log_time), value))
-        items.sort(key=lambda x: x[0])
-        return [s for s, _ in items], [v for _, v in items]
+                stamp = _stamp_ns(msg, log_time)
+                unstamped |= stamp == int(log_time) and not _has_stamp(msg)
+                items.append((stamp, int(log_time), value))
+        at = 1 if unstamped else 0  # a topic without header stamps is matched by the time it was recorded
+        items.sort(key=lambda x: x[at])
+        return _Timeline([x[at] for x in items], [x[2] for x in items], unstamped)
 
     # --- frames ----------------------------------------------------------------------------------
     def frames(self, profile: CameraProfile | str | Path | None = None, bit_depth: int | None = None,
@@ -339,22 +342,22 @@ class BagReader:
         options = FrameOptions(prof, bit_depth, color, black_level_dn)
         keymap = parse_keymap(metadata_keymap) if metadata_keymap else None
         camera = hardware_id if self.libcamera_ids and hardware_id in self.libcamera_ids else ""
-        meta_t, meta_v = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap, camera))
-        temp_t, temp_v = self._timeline(self.temperature_topic, metadata_from_temperature)
-        info_t, info_v = self._timeline(self.camera_info_topic, camera_geometry)
+        meta = self._timeline(self.metadata_topic, lambda m: self._metadata_of(m, prof, keymap, camera))
+        temps = self._timeline(self.temperature_topic, metadata_from_temperature)
+        infos = self._timeline(self.camera_info_topic, camera_geometry)
         held = self.metadata_topic is not None and self.topics[self.metadata_topic] in HELD_TYPES
         tol = int(sync_tolerance_s * 1e9)
         if self.image_topic is None:
             raise BagError(f"bag {self.path} was opened without topic detection: no image topic")
         for index, (_, log_time, msg) in enumerate(self.messages([self.image_topic])):
             stamp = _stamp_ns(msg, log_time)
-            mi = match_stamp(meta_t, stamp, 0 if held else tol)
-            temp = _usable(_at(temp_v, match_stamp(temp_t, stamp, tol)))
+            mi = meta.match(stamp, int(log_time), 0 if held else tol)
+            temp = _usable(temps.value(temps.match(stamp, int(log_time), tol)))
             yield prepare_frame(
-                msg, stamp, options, metadata=meta_v[mi] if mi is not None else None,
-                metadata_stamp_ns=meta_t[mi] if mi is not None and not held else None,
+                msg, stamp, options, metadata=meta.values[mi] if mi is not None else None,
+                metadata_stamp_ns=meta.stamp_for(mi, stamp, int(log_time)) if mi is not None and not held else None,
                 temperature_c=temp["sensor_temperature_c"] if temp else None,
-                geometry=_usable(_at(info_v, match_stamp(info_t, stamp, tol))),
+                geometry=_usable(infos.value(infos.match(stamp, int(log_time), tol))),
                 image_error=msg.reason if isinstance(msg, DamagedMessage) else None,
                 index=index, log_time_ns=int(log_time))
 
@@ -374,8 +377,31 @@ def _usable(value: Any) -> Any:
     return None if isinstance(value, Exception) else value
 
 
-def _at(values: list[Any], i: int | None) -> Any:
-    return values[i] if i is not None else None
+def _has_stamp(msg: Any) -> bool:
+    st = getattr(getattr(msg, "header", None), "stamp", None)
+    return st is not None and int(st.sec) * 1_000_000_000 + int(st.nanosec) > 0
+
+
+@dataclass
+class _Timeline:
+    """A side topic's values by time: their header stamps, or where the driver does not stamp them (a zero or no
+    header stamp) the times they were recorded, matched with the image's (until 2026-12-04 such metadata, timed by
+    its recording, was matched against the images' header stamps: the previous frame's gain for every frame)."""
+
+    times: list[int]
+    values: list[Any]
+    by_log_time: bool
+
+    def match(self, stamp_ns: int, log_time_ns: int, tolerance_ns: int) -> int | None:
+        """The index of the value for an image of this header stamp and log time (:func:`match_stamp`)."""
+        return match_stamp(self.times, log_time_ns if self.by_log_time else stamp_ns, tolerance_ns)
+
+    def value(self, i: int | None) -> Any:
+        return self.values[i] if i is not None else None
+
+    def stamp_for(self, i: int, stamp_ns: int, log_time_ns: int) -> int:
+        """Value i's time on the image's header clock (for its age)."""
+        return stamp_ns - (log_time_ns - self.times[i]) if self.by_log_time else self.times[i]
 
 
 def open_bag(path: str | Path, image_topic: str | None = None, metadata_topic: str | None = None,

@@ -162,6 +162,28 @@ def test_topics_recorded_without_messages_and_a_recorded_monitors_debug_view_are
         assert len(frames) == 3 and all(f.image_dn is not None and f.image_dn.mean() == 90 for f in frames), name
 
 
+def test_metadata_without_header_stamps_is_matched_by_the_time_it_was_recorded(tmp_path, sim_bag):
+    """A driver that leaves its metadata's header stamp zero, recorded 40 ms after capture as the images are: matched
+    by the recording's times (until 2026-12-04 its recording time met the images' header stamps: every frame got the
+    previous frame's gain, the first none)."""
+    from rosbags.highlevel import AnyReader
+
+    latency = 40_000_000
+    unstamped = tmp_path / "unstamped.mcap"
+    with AnyReader([sim_bag], default_typestore=typestore()) as reader, BagWriter(unstamped) as w:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            if conn.topic.endswith("metadata"):
+                msg.header.stamp.sec, msg.header.stamp.nanosec = 0, 0
+            w.write(conn.topic, msg, stamp + latency)
+    truth = [r["true_metadata"]["gain_db"] for r in load_truth(sim_bag)["frames"]]
+    with open_bag(unstamped) as reader:
+        frames = list(reader.frames("ev76c661"))
+    assert len(set(truth)) == 4 and [f.metadata.gain_db for f in frames] == pytest.approx(truth)
+    assert all(f.metadata_age_s == pytest.approx(0.0) for f in frames)
+
+
 def test_bad_image_is_skipped_with_reason(tmp_path):
     path = tmp_path / "bad.mcap"
     msg = image_msg(np.zeros((8, 8), np.uint8), 7)
