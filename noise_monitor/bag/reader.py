@@ -76,7 +76,7 @@ def _stamp_ns(msg: Any, log_time: int) -> int:
 
 def _resolve_bag_path(path: Path) -> Path:
     """The bag path rosbags should open: a rosbag2 dir, or the single storage file of a dir without
-    metadata.yaml (e.g. a copied MCAP folder), or a bare .mcap/.db3 file."""
+    metadata.yaml (e.g. a copied MCAP folder), or a bare .mcap/.db3 file, or a ROS 1 .bag file."""
     if not path.exists():
         raise FileNotFoundError(f"bag {path} does not exist")
     if path.is_dir() and (path / "metadata.yaml").is_file():
@@ -90,8 +90,11 @@ def _resolve_bag_path(path: Path) -> Path:
             raise BagError(f"{path} is a folder without metadata.yaml and {len(files)} .mcap/.db3 files; "
                            "pass the bag file itself")
         return files[0]
-    if path.is_file() and path.suffix not in (".mcap", ".db3"):
-        raise BagError(f"{path}: not a bag (expected a rosbag2 folder, a .mcap or a .db3 file)")
+    if path.is_file() and path.suffix.lower() not in (".mcap", ".db3", ".bag"):
+        raise BagError(f"{path}: not a bag (expected a rosbag2 folder, a .mcap, .db3 or ROS 1 .bag file)")
+    if path.is_file() and path.suffix != path.suffix.lower():  # rosbags tells the storage by the suffix
+        raise BagError(f"{path}: rosbags reads bag files by their lower-case suffix: rename it to "
+                       f"{path.with_suffix(path.suffix.lower()).name}")
     return path
 
 
@@ -259,7 +262,11 @@ class BagReader:
             yield conn.topic, log_time, msg
 
     def raw_messages(self, topics: list[str] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
-        """(topic, message type, log time ns, CDR bytes) in log-time order, without deserialising."""
+        """(topic, message type, log time ns, CDR bytes) in log-time order, without deserialising; a ROS 1 bag holds
+        no CDR bytes (a BagError)."""
+        if not self._reader.is2:
+            raise BagError(f"{self.path} is a ROS 1 bag, whose messages are not ROS 2's bytes: convert it first "
+                           "(rosbags-convert --src BAG.bag --dst FOLDER) to publish it")
         conns = [c for c in self._reader.connections if topics is None or c.topic in topics]
         it = self._reader.messages(connections=conns)
         while True:

@@ -14,7 +14,7 @@ from .staging import input_files, refuse_overwriting_inputs, write_text_atomic
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3) or a bare .mcap / .db3 file")
+    parser.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3), a bare .mcap / .db3 file or a ROS 1 .bag")
     parser.add_argument("--profile", help="camera profile YAML or bundled name; optional when the bag's metadata "
                                           "carries every field")
     parser.add_argument("--out", metavar="DIR", help="output folder (default out/<bag name>): replay.mcap, "

@@ -7,7 +7,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-BAG_SUFFIXES = (".mcap", ".db3")
+BAG_SUFFIXES = (".mcap", ".db3", ".bag")  # .bag: ROS 1
 _CHUNK = 1 << 20
 
 
@@ -46,7 +46,7 @@ def content_hash(bag: Path) -> str:
 
 
 def _walk(root: Path) -> Iterable[Path]:
-    """Bags below a folder: rosbag2 folders (metadata.yaml; not descended into) and bare .mcap/.db3 files."""
+    """Bags below a folder: rosbag2 folders (metadata.yaml; not descended into) and bare .mcap/.db3/.bag files."""
     for dirpath, dirnames, filenames in os.walk(root):
         d = Path(dirpath)
         if "metadata.yaml" in filenames:
@@ -55,7 +55,7 @@ def _walk(root: Path) -> Iterable[Path]:
             continue
         dirnames.sort()
         for name in sorted(filenames):
-            if name.endswith(BAG_SUFFIXES):
+            if name.lower().endswith(BAG_SUFFIXES):
                 yield d / name
 
 
@@ -74,13 +74,13 @@ def find_bags(inputs: Iterable[str | Path]) -> tuple[list[Path], list[Problem]]:
             problems.append(Problem(str(p), "does not exist"))
             continue
         if p.is_file():
-            found = [p] if p.suffix in BAG_SUFFIXES else []
+            found = [p] if p.suffix.lower() in BAG_SUFFIXES else []
             if not found:
-                problems.append(Problem(str(p), "not a bag (expected a rosbag2 folder, a .mcap or a .db3 file)"))
+                problems.append(Problem(str(p), "not a bag (expected a rosbag2 folder, a .mcap, .db3 or ROS 1 .bag file)"))
         else:
             found = list(_walk(p))
             if not found:
-                problems.append(Problem(str(p), "folder holds no bag (.mcap, .db3 or a rosbag2 folder)"))
+                problems.append(Problem(str(p), "folder holds no bag (.mcap, .db3, .bag or a rosbag2 folder)"))
         for bag in found:
             key = bag.resolve()
             if key not in seen:

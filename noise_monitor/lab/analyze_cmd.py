@@ -12,7 +12,7 @@ from .shape import fixed_shape_text
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="rosbag2 directory (MCAP or sqlite3) or .mcap file")
+    parser.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3), a bare .mcap / .db3 file or a ROS 1 .bag")
     parser.add_argument("--profile", help="camera profile: bundled name (icx285, ev76c661, generic) or YAML path; "
                                           "optional if the bag's metadata carries every field")
     add_input_arguments(parser)

@@ -184,6 +184,33 @@ def test_metadata_without_header_stamps_is_matched_by_the_time_it_was_recorded(t
     assert all(f.metadata_age_s == pytest.approx(0.0) for f in frames)
 
 
+def test_a_ros1_bag_is_read_as_its_rosbag2_conversion(tmp_path, sim_bag):
+    """Field campaigns recorded with ROS 1: the .bag file's frames are the same as those of the rosbag2 bag it was
+    converted from (rosbags reads both; until 2026-12-04 a .bag was "not a bag"); play, which publishes the recorded
+    CDR bytes, asks for the conversion; an upper-case suffix is named."""
+    from rosbags.convert import convert
+    from rosbags.typesys import Stores
+
+    ros1 = tmp_path / "field.bag"
+    convert([sim_bag], ros1, dst_storage="sqlite3", dst_version=None, compress=None, compress_mode="file",
+            default_typestore=typestore(), typestore=get_typestore(Stores.ROS1_NOETIC), exclude_topics=[],
+            include_topics=[], exclude_msgtypes=[], include_msgtypes=[])
+    with open_bag(sim_bag) as reader:
+        ref = list(reader.frames("ev76c661"))
+    with open_bag(ros1) as reader:
+        assert (reader.image_topic, reader.metadata_topic) == ("/camera/image_raw", "/camera/metadata")
+        frames = list(reader.frames("ev76c661"))
+        with pytest.raises(BagError, match="is a ROS 1 bag.*rosbags-convert"):
+            next(reader.raw_messages())
+    assert len(frames) == len(ref) == 4
+    for f, r in zip(frames, ref):
+        assert f.stamp_ns == r.stamp_ns and f.metadata == r.metadata and np.array_equal(f.image_dn, r.image_dn)
+    upper = tmp_path / "FIELD.MCAP"
+    shutil.copy(sim_bag, upper)
+    with pytest.raises(BagError, match="rename it to FIELD.mcap"):
+        open_bag(upper)
+
+
 def test_bad_image_is_skipped_with_reason(tmp_path):
     path = tmp_path / "bad.mcap"
     msg = image_msg(np.zeros((8, 8), np.uint8), 7)

@@ -429,6 +429,10 @@ def test_a_link_to_a_bag_is_a_duplicate_and_a_path_named_twice_counts_once(tmp_p
     assert bags == [bag]
     assert [(Path(p.path).name, p.reason) for p in problems] == [
         ("link.mcap", f"duplicate of {bag} (the same file, linked): counted once")]
+    ros1 = tmp_path / "ros1" / "field.bag"  # ROS 1 bags are campaign bags too
+    ros1.parent.mkdir()
+    ros1.write_bytes(b"x")
+    assert find_bags([ros1.parent]) == ([ros1], []) and find_bags([ros1]) == ([ros1], [])
 
 
 def test_a_copy_of_a_bag_is_replayed_once(fleet: dict[str, Path], tmp_path: Path) -> None:
