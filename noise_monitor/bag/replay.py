@@ -317,7 +317,7 @@ def run_replay(
         if periods is not None and periods.frames:  # the last, partial period ends with the last image
             report(last_stamp)
     wall = time.perf_counter() - t_wall
-    if len(table) != n_images:
+    if len(table) < n_images:
         raise BagError(f"bag {bag}: read {len(table)} images but its index lists {n_images}")
     episodes = alarm_episodes(table)
     processed = int(table.column("processed").sum())
@@ -330,6 +330,8 @@ def run_replay(
         "topics_in": topics,
         "topics_out": {**output_topics(namespace), **({debug_topic: IMAGE_TYPE} if last_debug is not None else {})},
         "frames_total": len(table),
+        # images beyond those the bag's index (metadata.yaml) lists: a stale index, every one replayed
+        "frames_beyond_index": len(table) - n_images,
         "frames_processed": processed,
         "frames_skipped": len(table) - processed,
         # images missing from the recording (lost before it), inferred from header-stamp gaps as the node does

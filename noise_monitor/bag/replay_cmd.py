@@ -52,6 +52,9 @@ def print_summary(s: dict[str, Any]) -> None:
           f"{s['frames_skipped']} skipped; estimator {s['estimator']}")
     for reason, n in s["skip_reasons"].items():
         print(f"  skipped {n:4d} x {reason}")
+    if s.get("frames_beyond_index"):
+        print(f"  note: the bag's index (metadata.yaml) lists {s['frames_total'] - s['frames_beyond_index']} images; "
+              f"all {s['frames_total']} in its storage were replayed")
     if s.get("frames_lost"):
         print(f"  lost    {s['frames_lost']:4d} frames before the recording (gaps in the image stamps)")
     if s.get("temporal_noise_changes"):

@@ -14,8 +14,10 @@ from mcap.reader import make_reader
 from msg_adapters import ERROR, STALE, WARN, reports_from_msg
 from msg_adapters.diagnostics import jazzy_typestore
 from msg_adapters.outputs import DIAGNOSTICS_TOPIC, HOLD_KEYS, IMAGE_TYPE, OUTPUT_TOPICS, debug_image_topic
+from noise_monitor.bag import BagError
 from noise_monitor.bag.messages import image_msg, metadata_msg
 from noise_monitor.bag.replay import replay
+from noise_monitor.bag.replay_cmd import print_summary
 from noise_monitor.bag.results import SCENE_DEPENDENT_KEYS, truth_check
 from noise_monitor.bag.simulate import load_truth, simulate_bag
 from noise_monitor.bag.staging import write_text_atomic
@@ -433,3 +435,27 @@ def test_replay_names_the_camera_by_its_drivers_id(tmp_path, estimator):
     kw = {"estimator": estimator, "progress": False, "plot": False}
     assert replay(bag, "icx285", None, **kw)["hardware_id"] == "robot1/front"
     assert replay(bag, "icx285", None, hardware_id="left-front", **kw)["hardware_id"] == "left-front"
+
+
+def test_a_stale_index_listing_fewer_images_than_the_storage_holds(tmp_path, estimator, capsys):
+    """A recording whose metadata.yaml was written before its last images (a recorder stopped hard, a bag edited):
+    every image in the storage is replayed and the summary says how many lie beyond the index (until 2026-12-04 the
+    whole bag was replayed, then refused: "read 6 images but its index lists 3", no outputs). An index listing more
+    than the storage holds is still refused: images are missing."""
+    import yaml
+
+    bag = simulate_bag(tmp_path / "stale", "icx285", "static", frames=6, width=96, height=64, hold_s=0.0)
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    for topic in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if topic["topic_metadata"]["name"].endswith("image_raw"):
+            topic["message_count"] = 3
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    s = replay(bag, "icx285", tmp_path / "out", estimator=estimator, progress=False, plot=False)
+    assert (s["frames_total"], s["frames_processed"], s["frames_beyond_index"]) == (6, 6, 3)
+    print_summary(s)
+    assert "index (metadata.yaml) lists 3 images; all 6 in its storage were replayed" in capsys.readouterr().out
+    for topic in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        topic["message_count"] = 9
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    with pytest.raises(BagError, match="damaged: read 6 of the 9 messages"):
+        replay(bag, "icx285", tmp_path / "out2", estimator=estimator, progress=False, plot=False)
