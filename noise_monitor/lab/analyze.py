@@ -11,6 +11,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..bag.staging import write_text_atomic
 from ..physics import CameraProfile, Effect, NoiseModel, load_plugin_file, load_profile
 from ..physics.effects import effect_class
 from ..physics.metadata import profile_from_mapping
@@ -48,7 +49,12 @@ def parse_add_effect(text: str) -> EffectSpec:
                 fixed[key.strip()] = _number(cls.name, key.strip(), val)
         unknown = sorted((set(fixed) | set(free)) - {p.name for p in cls.params})
         if unknown:
-            raise ValueError(f"effect {cls.name!r} has no parameter(s) {', '.join(unknown)}")
+            raise ValueError(f"effect {cls.name!r} has no parameter(s) {', '.join(unknown)}; its parameters: "
+                             f"{', '.join(p.name for p in cls.params) or 'none'}")
+        fixed_only = sorted(p.name for p in cls.params if p.name in free and not p.fittable)
+        if fixed_only:
+            raise ValueError(f"effect {cls.name!r}: {', '.join(fixed_only)} cannot be fitted (a fixed parameter, "
+                             "e.g. a pattern's seed): give a value")
         cls(**fixed)  # validates values and bounds
         return EffectSpec(cls, fixed, tuple(free))
     name, sep, val = text.partition("=")
@@ -131,9 +137,15 @@ def analyze(
     t0 = time.perf_counter()
     if write_profile and not add_effects:
         raise ValueError("--write-profile needs at least one --add-effect")
+    check_outputs(bag_or_frames if isinstance(bag_or_frames, (str, Path)) else None, report_dir=report_dir,
+                  files={"--write-profile": write_profile, "--write-plugin-skeleton": write_plugin_skeleton})
     plugin_names = [n for f in plugins for n in load_plugin_file(f, override=replace_builtins)]
     prof = load_profile(profile) if isinstance(profile, (str, Path)) else profile
     specs = [parse_add_effect(a) for a in add_effects]
+    names = [s.cls.name for s in specs]
+    if len(set(names)) < len(names):
+        raise ValueError(f"--add-effect names {', '.join(sorted({n for n in names if names.count(n) > 1}))} twice: "
+                         "give each effect once (NAME:p=v,q=fit sets several of its parameters)")
     frames, n, source = _frames(bag_or_frames, prof, topics, bit_depth)
     with tqdm(total=n, desc="measure", unit="frame", disable=not progress) as bar:
         meas = measure_frames(frames(), tolerance=tolerance, progress=bar)
@@ -237,9 +249,8 @@ def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[E
         prof = profile_from_mapping({"name": "analyzed", **values})
     new = CameraProfile(prof.name, dict(prof.values), {**dict(prof.effects), **{e.name: dict(e.values) for e in effects}})
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     head = "".join(f"# effects from the plug-in file {f}: load it with --effect-plugin {f}\n" for f in plugins)
-    p.write_text(head + new.to_yaml())
+    write_text_atomic(p, head + new.to_yaml())
     load_profile(p)  # the written profile must load again
     return p
 
@@ -250,13 +261,34 @@ def _write_skeleton(path: str | Path, sig: dict[str, Any]) -> Path:
         raise ValueError("--write-plugin-skeleton: the residual is within the measurement's uncertainty; "
                          "there is no effect to write a plug-in for")
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(plugin_skeleton(sig, p.name))
+    write_text_atomic(p, plugin_skeleton(sig, p.name))
     return p
 
 
 def write_json(path: str | Path, summary: dict[str, Any]) -> Path:
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(summary, indent=1, default=float))
+    write_text_atomic(p, json.dumps(summary, indent=1, default=float))
     return p
+
+
+def check_outputs(bag: str | Path | None, report_dir: str | Path | None = None,
+                  files: dict[str, str | Path | None] | None = None) -> None:
+    """ValueError before any work for outputs that cannot be written: a report folder that is a file, an output
+    file that is a folder or whose folder is a file, an output that is the input bag (it would be overwritten)."""
+    from ..bag.staging import input_files, refuse_overwriting_inputs
+
+    named = {flag: Path(f) for flag, f in (files or {}).items() if f}
+    for flag, f in named.items():
+        if f.is_dir():
+            raise ValueError(f"{flag} {f} is a folder: name the file to write")
+        parent = next((q for q in f.absolute().parents if q.exists()), None)
+        if parent is not None and not parent.is_dir():
+            raise ValueError(f"{flag} {f}: {parent} is a file, not a folder")
+    outputs = list(named.values())
+    if report_dir is not None:
+        folder = Path(report_dir)
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"--report {folder} is a file: name a folder for report.html and summary.json")
+        outputs += [folder / "report.html", folder / "summary.json"]
+    if bag is not None:
+        refuse_overwriting_inputs(outputs, input_files(bag))

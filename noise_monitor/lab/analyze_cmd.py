@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..bag.input_options import add_input_arguments, topic_overrides
-from .analyze import analyze, component_change_text, write_json
+from .analyze import analyze, check_outputs, component_change_text, write_json
 from .left import left_text
 from .measure import field_conditions_text, scene_in_single_views_text, scene_in_views_text
 from .noise_events import events_text
@@ -39,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_outputs(args.bag, files={"--json": args.json})
     summary = analyze(
         args.bag,
         profile=args.profile,

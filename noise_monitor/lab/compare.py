@@ -853,7 +853,7 @@ class Comparison:
         except EffectError:
             raise
         except Exception as exc:  # a plug-in's own failure, named (the CLI prints one line)
-            raise EffectError(f"effect(s) {names} failed to evaluate: {exc}") from exc
+            raise EffectError(f"effect(s) {names} failed to evaluate: {str(exc) or type(exc).__name__}") from exc
         if not all(np.all(np.isfinite(a)) for a in new.values()):
             raise EffectError(f"effect(s) {names} returned a NaN or infinite variance")
         comps = {c: np.maximum(self.clip_aware[c] + new[c] - self.unclipped[c], 0.0) for c in MEASURED}

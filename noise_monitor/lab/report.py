@@ -15,6 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..bag.staging import write_text_atomic  # noqa: E402
 from ..physics import NoiseModel  # noqa: E402
 from .analyze import component_change_text  # noqa: E402
 from .compare import Comparison, as_measured, model_curve, signed_sigma  # noqa: E402
@@ -385,6 +386,6 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     parts.append("<h2>Measurement</h2><pre>" + html.escape(json.dumps(summary["measurement"], indent=1)) + "</pre>")
     parts.append("</body></html>")
     path = out / "report.html"
-    path.write_text("\n".join(parts))
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    write_text_atomic(path, "\n".join(parts))  # a link in the folder is replaced, never followed
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=1, default=float))
     return path

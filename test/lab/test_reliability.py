@@ -61,6 +61,16 @@ class BadModifier(Effect):
     def modify(self, cond):
         raise KeyError("gain_table")
 ''',
+    "params_int.py": "from noise_monitor.physics.effects import Effect\nclass P(Effect):\n    name = 'rel_p'\n"
+                     "    params = 5\n",
+    "params_tuple.py": "from noise_monitor.physics.effects import Effect\nclass P(Effect):\n    name = 'rel_p'\n"
+                       "    params = (('amplitude', 'DN', 1.0, (0.0, 10.0)),)\n",
+    "default_outside.py": "from noise_monitor.physics.effects import Effect, Param\nclass P(Effect):\n"
+                          "    name = 'rel_p'\n    params = (Param('amplitude', 'DN', 50.0, (0.0, 10.0)),)\n",
+    "same_name.py": "from noise_monitor.physics.effects import Effect, Param\nclass Q(Effect):\n"
+                    "    name = 'rel_raises'\n    params = (Param('sigma_dn', 'DN', 0.5, (0.0, 10.0)),)\n",
+    "no_sigma.py": "from noise_monitor.physics.effects import Effect, Param\nclass N(Effect):\n"
+                   "    name = 'rel_no_sigma'\n    params = (Param('sigma_dn', 'DN', 0.5, (0.0, 10.0)),)\n",
     "import_error.py": "import vendor_sdk_that_is_not_installed\n",
     "nothing.py": "X = 1\n",
 }
@@ -143,6 +153,51 @@ def test_analyze_with_an_unusable_plugin_file(capsys, bag, plugins, file, match)
     assert re.search(match, one_line(err))
 
 
+@pytest.mark.parametrize("files,match", [
+    (["params_int.py"], "effect 'rel_p': params must be a tuple of Param\\(name, unit, default, \\(lo, hi\\)\\), got 5"),
+    (["params_tuple.py"], "effect 'rel_p': params must be a tuple of Param.*got \\(\\('amplitude'"),
+    (["default_outside.py"], "effect 'rel_p': parameter 'amplitude' default 50 is outside its bounds \\[0, 10\\]"),
+    (["raises.py", "same_name.py"], "same_name.py defines 'rel_raises', which .*raises.py defines too: rename one"),
+    (["no_sigma.py"], "effect\\(s\\) rel_no_sigma failed to evaluate: NotImplementedError$"),
+])
+def test_a_malformed_plugin_is_named_when_it_loads(capsys, bag, plugins, files, match):
+    """Until 2026-12-04: a TypeError / AttributeError traceback while fitting, a default outside its bounds
+    accepted, a second plug-in of one name silently replacing the first, an empty reason after the colon."""
+    args = [a for f in files for a in ("--effect-plugin", plugins[f])]
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--no-estimator", *args)
+    assert code == 2 and re.search(match, one_line(err)), err
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--no-estimator", *args[:2], *args[:2])
+    assert "defines too" not in err  # one file given twice is one plug-in
+
+
+def test_analyze_refuses_outputs_it_cannot_or_must_not_write_before_any_work(capsys, tmp_path, bag):
+    """An output that is the input bag (until 2026-12-04 --json BAG replaced the bag by the summary), a --report
+    that is a file, a --json that is a folder: refused at once, nothing written; a link in the report folder is
+    replaced, never followed (it wrote outside the folder)."""
+    import hashlib
+
+    before = hashlib.sha256(bag.read_bytes()).hexdigest()
+    for flag, extra in (("--json", ()), ("--write-profile", ("--add-effect", "prnu")),
+                        ("--write-plugin-skeleton", ())):
+        code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--no-estimator", flag, bag, *extra)
+        assert code == 2 and "is the input" in one_line(err)
+    assert hashlib.sha256(bag.read_bytes()).hexdigest() == before
+    (tmp_path / "file").write_text("x")
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--report", tmp_path / "file")
+    assert code == 2 and "--report " in one_line(err) and "is a file: name a folder" in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--json", tmp_path)
+    assert code == 2 and "is a folder: name the file to write" in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu",
+                               "--write-profile", tmp_path / "file" / "p.yaml")
+    assert code == 2 and "is a file, not a folder" in one_line(err)
+    report, outside = tmp_path / "report", tmp_path / "outside.txt"
+    report.mkdir()
+    outside.write_text("ORIGINAL")
+    (report / "summary.json").symlink_to(outside)
+    code, _, _ = run_analyze(capsys, bag, "--profile", "icx285", "--no-estimator", "--report", report)
+    assert code == 0 and outside.read_text() == "ORIGINAL" and not (report / "summary.json").is_symlink()
+
+
 def test_analyze_with_unknown_or_out_of_range_added_effects(capsys, bag):
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "no_such_effect")
     assert code == 2 and "unknown effect 'no_such_effect' (a plug-in's? load its file with --effect-plugin); known: " in one_line(err)
@@ -150,6 +205,15 @@ def test_analyze_with_unknown_or_out_of_range_added_effects(capsys, bag):
     assert code == 2 and "prnu." in one_line(err) and "is outside" in one_line(err)
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu=lots")
     assert code == 2 and "expected a number or 'fit', got 'lots'" in one_line(err)
+    # a close name suggested, the parameters listed, a fixed parameter not fitted, an effect given twice
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "pnru")
+    assert code == 2 and "unknown effect 'pnru' (did you mean 'prnu'? " in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu:sigma_pc=fit")
+    assert code == 2 and "has no parameter(s) sigma_pc; its parameters: sigma_pct, seed" in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu:seed=fit")
+    assert code == 2 and "seed cannot be fitted" in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu", "--add-effect", "prnu=1")
+    assert code == 2 and "--add-effect names prnu twice" in one_line(err)
 
 
 def test_analyze_on_unusable_bags(capsys, tmp_path, bag):

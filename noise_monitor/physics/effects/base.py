@@ -83,6 +83,8 @@ class Effect:
     spatial: ClassVar[bool] = False
     params: ClassVar[tuple[Param, ...]] = ()
     description: ClassVar[str] = ""
+    #: the file a plug-in effect was loaded from (None: built in, or registered by code)
+    plugin_file: ClassVar[str | None] = None
     #: plain-language reading of the effect's signature in residuals (format fields: the parameters)
     signature: ClassVar[str] = ""
 

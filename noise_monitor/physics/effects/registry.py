@@ -1,9 +1,11 @@
 """Effect registry: built-ins, plug-ins from Python files and the ``noise_monitor.effects`` entry points."""
 from __future__ import annotations
 
+import difflib
 import functools
 import importlib.util
 import inspect
+import math
 import sys
 from collections.abc import Callable, Iterable, Mapping
 from importlib.metadata import entry_points
@@ -11,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ...text import clip
-from .base import DISTRIBUTIONS, STRUCTURES, Distribution, Effect, EffectError
+from .base import DISTRIBUTIONS, STRUCTURES, Distribution, Effect, EffectError, Param
 from .builtin import BUILTIN_EFFECTS
 
 ENTRY_POINT_GROUP = "noise_monitor.effects"
@@ -58,6 +60,7 @@ def register(cls: type[Effect], override: bool = False) -> type[Effect]:
     if cls.structure not in STRUCTURES:
         raise EffectError(f"effect {clip(cls.name, 200)!r}: unknown structure {clip(repr(cls.structure), 80)}; "
                           f"choose from {', '.join(STRUCTURES)}")
+    _check_params(cls)
     builtin = cls in BUILTIN_EFFECTS
     if cls.name in _BUILTIN_NAMES and not builtin and not override:
         raise EffectError(f"plug-in effect {cls.name!r} ({cls.__module__}.{cls.__qualname__}) has the name of a "
@@ -66,6 +69,30 @@ def register(cls: type[Effect], override: bool = False) -> type[Effect]:
         _contain_exits(cls)
     _REGISTRY[cls.name] = cls
     return cls
+
+
+def _check_params(cls: type[Effect]) -> None:
+    """An effect's ``params``: a tuple of :class:`Param` with distinct names, finite bounds lo <= hi and the
+    default inside them (a plug-in's mistake named when it loads, not as a traceback while fitting)."""
+    where = f"effect {clip(cls.name, 200)!r}"
+    if not isinstance(cls.params, (tuple, list)) or not all(isinstance(p, Param) for p in cls.params):
+        raise EffectError(f"{where}: params must be a tuple of Param(name, unit, default, (lo, hi)), got "
+                          f"{clip(repr(cls.params), 120)}")
+    names = [p.name for p in cls.params]
+    if len(set(names)) < len(names) or not all(isinstance(n, str) and n.isidentifier() for n in names):
+        raise EffectError(f"{where}: parameter names must be distinct identifiers, got {clip(repr(names), 120)}")
+    for p in cls.params:
+        try:
+            lo, hi = (float(b) for b in p.bounds)
+            default = float(p.default)
+        except (TypeError, ValueError):
+            raise EffectError(f"{where}: parameter {p.name!r} needs a numeric default and bounds (lo, hi), got "
+                              f"{clip(repr(p.default), 40)} and {clip(repr(p.bounds), 80)}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo <= default <= hi):
+            raise EffectError(f"{where}: parameter {p.name!r} default {default:g} is outside its bounds "
+                              f"[{lo:g}, {hi:g}]" if math.isfinite(lo) and math.isfinite(hi) and lo <= hi else
+                              f"{where}: parameter {p.name!r} bounds {clip(repr(p.bounds), 80)} are not finite "
+                              "with lo <= hi")
 
 
 def _load_entry_points() -> None:
@@ -98,8 +125,14 @@ def load_plugin_file(path: str | Path, override: bool = False) -> list[str]:
     except Exception as exc:
         raise EffectError(f"effect plug-in {p} failed to import: {clip(str(exc))}") from exc
     names = []
+    source = str(p.resolve())
     for obj in vars(module).values():
         if inspect.isclass(obj) and issubclass(obj, Effect) and obj.__module__ == module.__name__ and obj.name:
+            known = _REGISTRY.get(obj.name)
+            if known is not None and known not in BUILTIN_EFFECTS and known.plugin_file != source:
+                raise EffectError(f"effect plug-in {p} defines {obj.name!r}, which {known.plugin_file} defines too: "
+                                  "rename one (each effect name is one effect)")
+            obj.plugin_file = source
             register(obj, override=override)
             names.append(obj.name)
     if not names:
@@ -116,7 +149,9 @@ def available() -> dict[str, type[Effect]]:
 def effect_class(name: str) -> type[Effect]:
     reg = available()
     if name not in reg:
-        raise EffectError(f"unknown effect {name!r} (a plug-in's? load its file with --effect-plugin); known: "
+        close = difflib.get_close_matches(name.lower(), list(reg), n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise EffectError(f"unknown effect {name!r} ({hint}a plug-in's? load its file with --effect-plugin); known: "
                           f"{', '.join(sorted(reg))}")
     return reg[name]
 
