@@ -109,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"unexplained: {un['reading']}")
     if "plugin_skeleton_written" in summary:
         print(f"plug-in skeleton: {summary['plugin_skeleton_written']}")
+    for added in summary.get("added_effects", []):  # the values the profile gets (fitted ones with their error)
+        print(f"added {added['effect']}: " + ", ".join(_added_text(k, v, added) for k, v in added["params"].items()))
     if "rms_error_after_dn" in summary:
         print(f"rms error before {summary['rms_error_before_dn']:.4f} DN, after {summary['rms_error_after_dn']:.4f} DN "
               f"(raw {summary['rms_error_before_raw_dn']:.4f} -> {summary['rms_error_after_raw_dn']:.4f} DN)")
@@ -125,6 +127,16 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, summary)
     return 0
+
+
+def _added_text(name: str, value: float, added: dict) -> str:
+    """An added effect's parameter: fitted ('fitted +- error', or the range fitting as well) or held ('fixed')."""
+    if name not in added["fitted"]:
+        return f"{name}={value:.4g} (fixed)"
+    span = added["param_ranges"].get(name)
+    if span is not None:
+        return _param_text(name, value, span)
+    return f"{name}={value:.4g} +- {added['param_errors'].get(name, float('nan')):.2g} (fitted)"
 
 
 def _param_text(name: str, value: float, fits_as_well: list[float] | None) -> str:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ def test_analyze_add_effect_report_and_profile(prnu_bag: Path, tmp_path: Path, c
     assert rc == 0
     out = capsys.readouterr().out
     assert "rms error before" in out and "PRNU" in out
+    assert re.search(r"added prnu: sigma_pct=\d\.\d+ \+- [\d.e-]+ \(fitted\), seed=0 \(fixed\)", out)
     summary = json.loads(js.read_text())
     for key in ("rms_error_dn", "by_condition", "candidates", "rms_error_before_dn", "rms_error_after_dn"):
         assert key in summary
