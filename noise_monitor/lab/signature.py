@@ -441,7 +441,11 @@ def _suggest(sig: dict[str, Any]) -> dict[str, Any]:
         both = "blinking" in traits and sig["kind"] == "temporal and fixed"
         return {"distribution": "mixture", "temporal": "blinking" in traits, "structure": "pixel",
                 "spatial": spatial, "temporal_share": "both" if both else None}
-    structure = "row" if dominant.endswith("row") else "column" if dominant.endswith("column") else "pixel"
+    # a line component seen beside a pixel-wise dominant one (a single view's: no hold to split it) is the structure
+    # the traits name; the skeleton's description says the same
+    lines = [k for k in ("row", "column") if {LINE_TRAITS[k], LINE_TRAITS[f"temporal_{k}"]} & set(sig["traits"])]
+    structure = ("row" if dominant.endswith("row") else "column" if dominant.endswith("column")
+                 else lines[0] if len(lines) == 1 else "pixel")
     return {"distribution": "gaussian", "temporal": dominant.startswith("temporal"), "structure": structure,
             "spatial": spatial, "temporal_share": "both" if sig["kind"] == "temporal and fixed" else None}
 

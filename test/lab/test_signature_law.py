@@ -36,3 +36,16 @@ def test_a_prnu_reads_as_growing_with_the_intensity_squared(tmp_path: Path) -> N
     assert (law["intensity_power"], law["exposure_power"], law["gain_power"]) == (2, 0, 0)
     assert law["amplitude_dn2"] == pytest.approx((0.02 * 128.0) ** 2, rel=0.2)
     assert "law = (v / 128) ** 2" in skeleton.read_text()
+
+
+def test_a_skeletons_structure_follows_the_line_traits_beside_a_pixel_wise_dominant_component():
+    """A single view's residual (no hold to split it): the dominant component is pixel-wise ('single') but rows are
+    significant; the skeleton said "Seen: ...; rows" with ``structure = "pixel"`` until 2026-12-04."""
+    from noise_monitor.lab.signature import LINE_TRAITS, _suggest
+
+    sig = {"traits": [LINE_TRAITS["row"]], "dominant_component": "single", "sign": "excess", "kind": "fixed",
+           "spatial": None}
+    assert _suggest(sig)["structure"] == "row"
+    both = {**sig, "traits": [LINE_TRAITS["row"], LINE_TRAITS["column"]]}
+    assert _suggest(both)["structure"] == "pixel"  # rows and columns: no one line structure
+    assert _suggest({**sig, "dominant_component": "column"})["structure"] == "column"
