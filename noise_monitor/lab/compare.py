@@ -952,7 +952,10 @@ def region_table(comp: Comparison, extra: Sequence[Effect] = ()) -> list[dict[st
     for region in sorted(meas_var):
         ms = math.sqrt(max(float(np.mean(meas_var[region])), 0.0))
         mm = math.sqrt(max(float(np.mean(model_var[region])), 0.0))
-        rows.append({"region": region, "blocks": len(meas_var[region]), "measured_sigma_dn": ms,
+        n = len(meas_var[region])
+        var_err = float(np.std(meas_var[region], ddof=1)) / math.sqrt(n) if n > 1 else 0.0  # of the blocks' mean
+        rows.append({"region": region, "blocks": n, "measured_sigma_dn": ms,
+                     "measured_sigma_err_dn": var_err / (2.0 * ms) if ms > 0 else 0.0,
                      "model_sigma_dn": mm, "mean_residual_dn": ms - mm, "rms_residual_dn": abs(ms - mm)})
     return rows
 
@@ -1041,10 +1044,15 @@ def by_condition(rows: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any
         for value in sorted(groups):
             g = groups[value]
             res = np.asarray([r["residual_dn"] for r in g])
+            sigma = np.asarray([r["measured_sigma_dn"] for r in g])
+            err = np.asarray([0.5 * (r["measured_sigma_err_below_dn"] + r["measured_sigma_err_above_dn"]) for r in g])
+            rms = float(np.sqrt(np.mean(sigma**2)))
             table.append({
                 key: value,
                 "cells": len(g),
-                "measured_sigma_dn": float(np.sqrt(np.mean([r["measured_sigma_dn"] ** 2 for r in g]))),
+                "measured_sigma_dn": rms,
+                # the rms's standard error from the cells' (independent) errors
+                "measured_sigma_err_dn": float(np.sqrt(np.sum((sigma * err) ** 2)) / (len(g) * max(rms, 1e-12))),
                 "model_sigma_dn": float(np.sqrt(np.mean([r["model_sigma_dn"] ** 2 for r in g]))),
                 "mean_residual_dn": float(res.mean()),
                 "rms_residual_dn": float(np.sqrt(np.mean(res**2))),

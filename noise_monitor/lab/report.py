@@ -72,12 +72,17 @@ def _nlf_plot(summary: dict[str, Any], comp: Comparison, after: NoiseModel | Non
 
 def _condition_plot(summary: dict[str, Any]) -> str:
     keys = [k for k in CONDITION_LABELS if k in summary["by_condition"]]
-    fig, axes = plt.subplots(1, len(keys), figsize=(3.8 * len(keys), 3.4), squeeze=False, layout="constrained")
+    cols = min(3, len(keys))
+    nrows = -(-len(keys) // cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 3.3 * nrows), squeeze=False, layout="constrained")
     after = summary.get("by_condition_after")
-    for ax, key in zip(axes[0], keys):
+    for ax in axes.flat[len(keys):]:
+        ax.set_visible(False)
+    for ax, key in zip(axes.flat, keys):
         rows = summary["by_condition"][key]
         x = np.arange(len(rows))
-        ax.plot(x, [r["measured_sigma_dn"] for r in rows], "o-", color="k", label="measured")
+        ax.errorbar(x, [r["measured_sigma_dn"] for r in rows], yerr=[r["measured_sigma_err_dn"] for r in rows],
+                    fmt="o-", color="k", capsize=3, label="measured (1 sigma)")
         ax.plot(x, [r["model_sigma_dn"] for r in rows], "s--", color="tab:red", label="model")
         if after:
             ax.plot(x, [r["model_sigma_dn"] for r in after[key]], "^:", color="tab:green", label="model + added")
@@ -86,7 +91,7 @@ def _condition_plot(summary: dict[str, Any]) -> str:
         ax.set_xlabel(CONDITION_LABELS[key])
         ax.set_ylabel("rms noise sigma [DN]")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
+    axes.flat[0].legend(fontsize=8)
     fig.suptitle("Model vs measurement per condition")
     return _png(fig)
 

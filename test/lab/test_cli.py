@@ -36,6 +36,8 @@ def test_analyze_add_effect_report_and_profile(prnu_bag: Path, tmp_path: Path, c
         assert key in summary
     for key in ("intensity_dn", "gain_db", "exposure_time_s", "sensor_temperature_c", "time_s", "component"):
         assert summary["by_condition"][key]
+    for key in ("intensity_dn", "gain_db", "region"):  # the per-condition figure's error bars
+        assert all(0.0 <= r["measured_sigma_err_dn"] < 0.5 * r["measured_sigma_dn"] for r in summary["by_condition"][key])
     best = summary["candidates"][0]
     assert set(best) >= {"effect", "significant", "explained_fraction", "params"}
     assert best["effect"] == "prnu" and best["significant"]
