@@ -226,14 +226,24 @@ def _excess_map_plot(comp: Comparison, component: str) -> str:
 
 
 def _table(rows: Sequence[dict[str, Any]], cols: Sequence[str]) -> str:
-    head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
+    head = "".join(f"<th title=\"{html.escape(c)}\">{html.escape(_header(c))}</th>" for c in cols)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols) + "</tr>" for r in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+def _header(key: str) -> str:
+    """A JSON key as a column header: words, and its unit in brackets (``measured_sigma_dn`` -> measured sigma
+    [DN]); the key itself is the header's tooltip."""
+    units = {"_dn2": " [DN^2]", "_dn": " [DN]", "_db": " [dB]", "_s": " [s]", "_c": " [degC]", "_pct": " [%]"}
+    suffix = next((s for s in units if key.endswith(s)), "")
+    return key[: len(key) - len(suffix)].replace("_", " ") + units.get(suffix, "")
+
+
 def _fmt(v: Any) -> str:
-    if isinstance(v, bool) or v is None:
-        return str(v)
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
     if isinstance(v, float):
         return f"{v:.4g}"
     if isinstance(v, dict):
