@@ -382,9 +382,15 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], comp: Comparison,
     for title, b64 in images.items():
         parts.append(f"<h2>{html.escape(title)}</h2><img alt='{html.escape(title)}' src='data:image/png;base64,{b64}'>")
     parts.append("<h2>Where the model fails (by condition)</h2>")
+    added_rows: dict[str, list[dict[str, Any]]] = summary.get("by_condition_after") or {}
     for key, rows in summary["by_condition"].items():
         count = "blocks" if rows and "blocks" in rows[0] else "cells"
         cols = [key, count, "measured_sigma_dn", "model_sigma_dn", "mean_residual_dn", "rms_residual_dn"]
+        if key in added_rows:  # the model with the added effects beside it, matched by the condition's value
+            by_value = {r[key]: r for r in added_rows[key]}
+            rows = [{**r, "model_added_sigma_dn": by_value.get(r[key], {}).get("model_sigma_dn"),
+                     "rms_residual_added_dn": by_value.get(r[key], {}).get("rms_residual_dn")} for r in rows]
+            cols += ["model_added_sigma_dn", "rms_residual_added_dn"]
         parts.append(f"<h3>{html.escape(CONDITION_LABELS.get(key, key))}</h3>" + _table(rows, cols))
     if summary.get("estimator"):
         rows = [{"model": name, "frames": v["frames"], "xi_mean_dn": v["xi_dn"]["mean"],

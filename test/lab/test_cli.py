@@ -47,6 +47,7 @@ def test_analyze_add_effect_report_and_profile(prnu_bag: Path, tmp_path: Path, c
     assert fixed_after < 0.3 * fixed_before and f"fixed {fixed_before:.4f} -> {fixed_after:.4f} DN" in out
     html = (report / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 5 and "<table>" in html and "Estimator on the same frames" in html
+    assert html.count(">rms residual added [DN]</th>") >= 5 and ">True<" not in html and ">None<" not in html
     # the estimator sees the hidden PRNU as noise the paper's model lacks (xi < 0); with it added, xi moves
     # most of the way to 0 (measured with the shipped weights: -1.011 -> +0.244 DN; the truth is about -2.3 DN: the
     # estimator under-reads noise of a shape the stated model lacks, bench/estimator_shape_leakage.py)
