@@ -84,7 +84,7 @@ class DSNU(Effect):
     description = "Dark-signal non-uniformity: pixels differ in dark current (fixed pattern, grows with t and T)."
     signature = (
         "signal-independent residual variance that grows with exposure and temperature like the dark "
-        "current and is absent from frame differences: dark-signal non-uniformity, DSNU = {fraction:.2f} x dark signal"
+        "current and is absent from frame differences: dark-signal non-uniformity, DSNU = {fraction:.3g} x dark signal"
     )
 
     def sigma_dn(self, signal_dn, cond: Conditions):
@@ -160,7 +160,7 @@ class HotPixels(Effect):
     description = "Hot pixels: a few pixels with a dark current many times the mean (heavy tail, grows with t and T)."
     signature = (
         "a heavy positive tail of isolated bright pixels that repeat in every frame and grow with exposure "
-        "and temperature: hot pixels, {fraction_pct:.3f} % of pixels at {dark_multiplier:.0f} x the dark current"
+        "and temperature: hot pixels, {fraction_pct:.3g} % of pixels at {dark_multiplier:.5g} x the dark current"
     )
 
     def mixture(self, signal_dn, cond: Conditions):
