@@ -59,11 +59,12 @@ def parse_add_effect(text: str) -> EffectSpec:
         return EffectSpec(cls, fixed, tuple(free))
     name, sep, val = text.partition("=")
     cls = effect_class(name.strip())
+    fittable = [p for p in cls.params if p.fittable]
+    if not fittable:  # e.g. pn: in every model already, with nothing to fit or set
+        raise ValueError(f"effect {cls.name!r} has no fittable parameter: nothing to fit or set "
+                         "(the paper's sources pn, dcsn and rn are in every model)")
     if not sep or val.strip().lower() == "fit":
         return EffectSpec.fit_all(cls)
-    fittable = [p for p in cls.params if p.fittable]
-    if not fittable:
-        raise ValueError(f"effect {cls.name!r} has no fittable parameter to set")
     fixed = {fittable[0].name: _number(cls.name, fittable[0].name, val)}
     cls(**fixed)
     return EffectSpec(cls, fixed, ())

@@ -214,6 +214,8 @@ def test_analyze_with_unknown_or_out_of_range_added_effects(capsys, bag):
     assert code == 2 and "seed cannot be fitted" in one_line(err)
     code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "prnu", "--add-effect", "prnu=1")
     assert code == 2 and "--add-effect names prnu twice" in one_line(err)
+    code, _, err = run_analyze(capsys, bag, "--profile", "icx285", "--add-effect", "pn")  # was before = after, exit 0
+    assert code == 2 and "effect 'pn' has no fittable parameter: nothing to fit or set" in one_line(err)
 
 
 def test_analyze_on_unusable_bags(capsys, tmp_path, bag):
