@@ -185,7 +185,11 @@ def analyze(
         "cells": _strip(rows),
     }
     if write_plugin_skeleton:
-        out["plugin_skeleton_written"] = str(_write_skeleton(write_plugin_skeleton, out["unexplained"]))
+        if out["unexplained"]["residual_significant"]:
+            out["plugin_skeleton_written"] = str(_write_skeleton(write_plugin_skeleton, out["unexplained"]))
+        else:  # the analysis stands; only the skeleton has nothing to describe
+            out["plugin_skeleton_not_written"] = ("the residual is within the measurement's uncertainty: there is no "
+                                                  "effect to write a plug-in for")
     after_model = None
     if specs:
         res = fit(comp, specs)
@@ -258,9 +262,6 @@ def _write_profile(path: str | Path, prof: CameraProfile | None, effects: list[E
 
 def _write_skeleton(path: str | Path, sig: dict[str, Any]) -> Path:
     """A plug-in file prefilled from the residual's signature (it must import and register)."""
-    if not sig["residual_significant"]:
-        raise ValueError("--write-plugin-skeleton: the residual is within the measurement's uncertainty; "
-                         "there is no effect to write a plug-in for")
     p = Path(path)
     write_text_atomic(p, plugin_skeleton(sig, p.name))
     return p

@@ -109,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"unexplained: {un['reading']}")
     if "plugin_skeleton_written" in summary:
         print(f"plug-in skeleton: {summary['plugin_skeleton_written']}")
+    if "plugin_skeleton_not_written" in summary:
+        print(f"no plug-in skeleton written: {summary['plugin_skeleton_not_written']}")
     for added in summary.get("added_effects", []):  # the values the profile gets (fitted ones with their error)
         print(f"added {added['effect']}: " + ", ".join(_added_text(k, v, added) for k, v in added["params"].items()))
     if "rms_error_after_dn" in summary:
