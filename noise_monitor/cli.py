@@ -23,15 +23,15 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "node": ("noise_monitor.node",
              "run the live ROS 2 noise monitor node (image + metadata in, /diagnostics and sigma/xi topics out)"),
     "replay": ("noise_monitor.bag.replay_cmd",
-               "Replay a bag through the monitor pipeline (as the node would run it) and summarise noise and alarms."),
+               "replay a bag through the monitor pipeline (as the node would run it) and summarise noise and alarms"),
     "campaign": ("noise_monitor.fleet.campaign_cmd",
-                 "Replay many bags on Ray or a local process pool, resumable; Parquet, campaign.json, HTML report."),
+                 "replay many bags on Ray or a local process pool, resumable; Parquet, campaign.json, HTML report"),
     "play": ("noise_monitor.bag.play_cmd",
-             "Publish a bag into live ROS 2 topics (original timing, --rate factor, --loop); no ROS install needed."),
+             "publish a bag into live ROS 2 topics (original timing, --rate factor, --loop); no ROS install needed"),
     "simulate-bag": ("noise_monitor.bag.simulate_cmd",
-                     "Simulate a camera over a scenario and write a rosbag2 bag (MCAP/sqlite3) plus <out>.truth.json."),
+                     "simulate a camera over a scenario and write a rosbag2 bag (MCAP/sqlite3) plus <out>.truth.json"),
     "analyze": ("noise_monitor.lab.analyze_cmd",
-                "Compare the noise model with the noise measured in a bag, diagnose missing effects, add them, report."),
+                "compare the noise model with the noise measured in a bag, diagnose missing effects, add them, report"),
     "train": ("noise_monitor.estimator.train_cmd",
               "train an estimator variant (full_meta, drne, wo_meta, min_meta, full_meta_paper) on simulated data"),
     "evaluate": ("noise_monitor.estimator.evaluate_cmd",
@@ -43,13 +43,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
                         "the monitor per frame on field-like campaigns of your own scenes (--images), clean and with the "
                         "gain stated wrong: xi error, false alarms, detection"),
     "effects": ("noise_monitor.physics.effects_cmd",
-                "List the noise effects (built-in and plug-ins) with their parameters."),
+                "list the noise effects (built-in and plug-ins) with their parameters"),
     "profile": ("noise_monitor.profiles.profile_cmd",
-                "Make camera profiles: from-emva turns an EMVA 1288 datasheet (YAML) or the EMVA reference "
-                "implementation's results XML into a profile for the node."),
+                "make camera profiles: from-emva turns an EMVA 1288 datasheet (YAML) or the EMVA reference "
+                "implementation's results XML into a profile for the node"),
     "characterize": ("noise_monitor.profiles.characterize_cmd",
-                     "Characterize a camera from a photon-transfer recording (EMVA 1288): K, dark noise, saturation, "
-                     "dark current, DSNU, PRNU, linearity; HTML report, JSON and a profile for the node."),
+                     "characterize a camera from a photon-transfer recording (EMVA 1288): K, dark noise, saturation, "
+                     "dark current, DSNU, PRNU, linearity; HTML report, JSON and a profile for the node"),
 }
 #: Python packages whose absence means an optional part of the installation is missing.
 OPTIONAL = {"rclpy": "ROS 2 Jazzy's rclpy (pip install \"ros-jazzy-rclpy[fastrtps]\" ros-jazzy-common-interfaces)"}
