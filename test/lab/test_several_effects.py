@@ -80,7 +80,7 @@ def test_a_lead_claimed_alone_that_took_up_a_partner_is_refitted_with_it(tmp_pat
     assert dsnu_line.endswith(f"fraction={claimed['dsnu']['fraction']:.4g}  "
                               f"(alone: fraction={cands['dsnu']['params']['fraction']:.4g})")
     html = (report / "report.html").read_text()
-    assert "<th>claimed_params</th>" in html and f"fraction={claimed['dsnu']['fraction']:.4g}" in html
+    assert '<th title="claimed_params">claimed params</th>' in html and f"fraction={claimed['dsnu']['fraction']:.4g}" in html
     assert "<p>Left by the claims (" in html and "within the measurement&#x27;s scatter" in html  # all four found
 
 
