@@ -397,19 +397,25 @@ def signature(comp: Comparison, rows: Sequence[dict[str, Any]] | None = None) ->
             if spatial and spatial["significant"]:
                 traits.append(f"a region: {spatial['pattern']}")
     scene = _scene_may_explain(comp, stats, sig) and not isolated_fixed and not isolated_temporal
+    # no still view at all: every component is a single frame's, where texture finer than a block reads as noise
+    unheld = bool(sig) and not any(len(s.frames) >= 2 for s in comp.meas.segments)
     out.update({
         "sign": "excess" if sign > 0 else "deficit",
         "dominant_component": dominant,
         "traits": traits,
         "law": law,
         "spatial": spatial,
-        "scene_may_explain": scene,
+        "scene_may_explain": scene or unheld,
     })
     out["suggested"] = _suggest(out)
     law_text = _law_text(law, observations[dominant].pooled) if law and dominant else ""
     out["reading"] = (f"{kind} noise the model lacks ({'; '.join(traits)}), strongest in the {dominant} "
                       f"component: {law_text}" if dominant else f"{kind} noise the model lacks: {'; '.join(traits)}")
-    if scene:
+    if unheld:
+        out["reading"] += ("; or the scene's texture: the recording holds no still view, so every component is measured "
+                           "in single frames, where texture finer than a block cannot be told from noise (a still "
+                           "camera or a flat chart tells them apart)")
+    elif scene:
         out["reading"] += ("; or the scene's texture: most of it is measured in views from one camera pose whose fixed "
                            "pattern shows the scene, with as much variance (a moved camera or a flat chart tells them "
                            "apart)")
