@@ -271,7 +271,7 @@ class NoiseMonitorNode(Node):
         lost = self.gaps.observe(stamp)
         self.monitor.count_lost(lost, self.gaps.implausible - implausible)
         self._last_image_ns = self._now()
-        for matched in self.sync.add_image(stamp, msg, self._now()):
+        for matched in self.sync.add_image(stamp, msg, self._last_image_ns):
             self._enqueue(matched)
 
     def _on_metadata(self, msg: Any) -> None:

@@ -65,13 +65,21 @@ class DamagedMessage:
     reason: str
 
 
+#: the suffixes of bag files: rosbag2's MCAP and sqlite3 storage, ROS 1 bags
+BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+
+
+def _header_ns(msg: Any) -> int | None:
+    """Header stamp of a message in ns; None when it has no (or a zero) header stamp."""
+    st = getattr(getattr(msg, "header", None), "stamp", None)
+    ns = None if st is None else int(st.sec) * 1_000_000_000 + int(st.nanosec)
+    return ns if ns is not None and ns > 0 else None
+
+
 def _stamp_ns(msg: Any, log_time: int) -> int:
     """Header stamp of a message in ns; the log time when it has no (or a zero) header stamp."""
-    st = getattr(getattr(msg, "header", None), "stamp", None)
-    if st is None:
-        return int(log_time)
-    ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
-    return ns if ns > 0 else int(log_time)
+    ns = _header_ns(msg)
+    return int(log_time) if ns is None else ns
 
 
 def _resolve_bag_path(path: Path) -> Path:
@@ -90,7 +98,7 @@ def _resolve_bag_path(path: Path) -> Path:
             raise BagError(f"{path} is a folder without metadata.yaml and {len(files)} .mcap/.db3 files; "
                            "pass the bag file itself")
         return files[0]
-    if path.is_file() and path.suffix.lower() not in (".mcap", ".db3", ".bag"):
+    if path.is_file() and path.suffix.lower() not in BAG_SUFFIXES:
         raise BagError(f"{path}: not a bag (expected a rosbag2 folder, a .mcap, .db3 or ROS 1 .bag file)")
     if path.is_file() and path.suffix != path.suffix.lower():  # rosbags tells the storage by the suffix
         raise BagError(f"{path}: rosbags reads bag files by their lower-case suffix: rename it to "
@@ -312,9 +320,9 @@ class BagReader:
             except (AdapterError, ValueError) as exc:
                 value = AdapterError(f"{topic}: {exc}")
             if value is not None:
-                stamp = _stamp_ns(msg, log_time)
-                unstamped |= stamp == int(log_time) and not _has_stamp(msg)
-                items.append((stamp, int(log_time), value))
+                stamp = _header_ns(msg)
+                unstamped |= stamp is None
+                items.append((int(log_time) if stamp is None else stamp, int(log_time), value))
         at = 1 if unstamped else 0  # a topic without header stamps is matched by the time it was recorded
         items.sort(key=lambda x: x[at])
         return _Timeline([x[at] for x in items], [x[2] for x in items], unstamped)
@@ -382,11 +390,6 @@ class BagReader:
 def _usable(value: Any) -> Any:
     """A side-topic value, or None when its message could not be converted."""
     return None if isinstance(value, Exception) else value
-
-
-def _has_stamp(msg: Any) -> bool:
-    st = getattr(getattr(msg, "header", None), "stamp", None)
-    return st is not None and int(st.sec) * 1_000_000_000 + int(st.nanosec) > 0
 
 
 @dataclass

@@ -7,7 +7,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-BAG_SUFFIXES = (".mcap", ".db3", ".bag")  # .bag: ROS 1
+from ..bag.reader import BAG_SUFFIXES
+
 _CHUNK = 1 << 20
 
 
