@@ -14,8 +14,11 @@ that rosbags can deserialise bags recorded with these drivers without their pack
   and pixel format: converted by the profile's ``driver_black_level_dn`` (8-bit DN per unit); without it, or at -10000 (the
   camera has none), the profile's black level applies.
 - Intel RealSense (IntelRealSense/realsense-ros): ``realsense2_camera_msgs/msg/Metadata``, a JSON object
-  with librealsense's frame metadata: ``actual_exposure`` in microseconds, ``gain_level`` in the sensor's
-  relative gain units (mapped to dB through the profile's ``gain_range_db`` over ``driver_gain_range``).
+  with librealsense's frame metadata: ``actual_exposure`` in microseconds on the depth and infrared streams, in
+  100 us on the colour stream (the RGB sensor's control granularity, librealsense#8243), ``gain_level`` in the sensor's
+  relative gain units (mapped to dB through the profile's ``gain_range_db`` over ``driver_gain_range``). The colour
+  stream (header ``frame_id`` ``<camera>_color_optical_frame``, or its colour controls among the keys) does not
+  update ``actual_exposure`` while its auto-exposure runs (librealsense#2549): such metadata is refused.
 - Orbbec (orbbec/OrbbecSDK_ROS2, Gemini 330 series): ``orbbec_camera_msgs/msg/Metadata`` on ``<stream>/metadata``, the
   SDK's frame metadata as JSON with the image's header. Its units differ by sensor (``exposure`` "usually 100 us for
   the color sensor and 1 us for depth/infrared", ``gain`` a level on some models), so it is read through the node's
@@ -223,11 +226,24 @@ def json_metadata(msg: Any) -> dict[str, Any]:
     return data
 
 
+#: Frame metadata only the RealSense RGB sensor reports (librealsense's names as realsense-ros writes them).
+_REALSENSE_COLOUR_KEYS = frozenset({"white_balance", "manual_white_balance", "auto_white_balance_temperature", "hue",
+                                    "saturation", "gamma", "power_line_frequency", "low_light_compensation"})
+
+
 def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
     data = json_metadata(msg)
+    header = getattr(msg, "header", None)
+    colour = "_color_" in str(getattr(header, "frame_id", "")) or bool(_REALSENSE_COLOUR_KEYS & set(data))
     out: dict[str, float | str] = {}
-    if "actual_exposure" in data:
-        out["exposure_time_s"] = _exposure_us("actual_exposure", data["actual_exposure"])
+    if colour and "actual_exposure" in data and _num("auto_exposure", data.get("auto_exposure", 0), "flag"):
+        raise AdapterError("driver metadata actual_exposure of a RealSense colour stream under auto-exposure "
+                           "(auto_exposure = 1) is the manual setting, not the frame's (librealsense#2549): turn the "
+                           "colour stream's auto-exposure off (rgb_camera.enable_auto_exposure: false)")
+    if "actual_exposure" in data:  # the RGB sensor counts in 100 us, depth and infrared in us
+        scale = 100.0 if colour else 1.0
+        out["exposure_time_s"] = _exposure_us("actual_exposure", _num("actual_exposure", data["actual_exposure"],
+                                                                       "100 us" if colour else "us") * scale)
     if "gain_level" in data:
         out["gain_db"] = map_gain("gain_level", data["gain_level"], _gain_range(profile), _driver_range(profile))
     if not out:

@@ -56,7 +56,7 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
                 continue
             m, meta_i = next(stated), meta_i + 1
             exp_us, gain_db, temp = m["exposure_time_s"] * 1e6, m["gain_db"], m["sensor_temperature_c"]
-            if kind in ("flir", "realsense", "orbbec"):  # these report no temperature: a sensor_msgs/Temperature does
+            if kind in ("flir", "realsense", "realsense_color", "orbbec"):  # these report no temperature: a sensor_msgs/Temperature does
                 w.write("/camera/temperature", t["sensor_msgs/msg/Temperature"](
                     header=msg.header, temperature=temp, variance=0.0), log_time)
             if kind == "flir":
@@ -76,10 +76,16 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
                     if desc[0] == 1 and desc[1][0] in ("float32", "float64"):
                         kw[name] = np.float32(kw[name])
                 w.write("/basler/current_params", t[BASLER](**kw), log_time)  # no header: log time
-            elif kind == "realsense":
+            elif kind == "realsense":  # an infrared stream: actual_exposure in us, valid under auto-exposure
                 js = json.dumps({"frame_number": 1, "actual_exposure": int(round(exp_us)),
-                                 "gain_level": gain_db / 24.0 * 232 + 16, "auto_exposure": 1})
-                w.write("/camera/color/metadata", t[REALSENSE](header=msg.header, json_data=js), log_time)
+                                 "gain_level": gain_db / 24.0 * 232 + 16, "auto_exposure": 1, "laser_power": 150})
+                header = dataclasses.replace(msg.header, frame_id="camera_infra1_optical_frame")
+                w.write("/camera/infra1/metadata", t[REALSENSE](header=header, json_data=js), log_time)
+            elif kind == "realsense_color":  # the RGB sensor: actual_exposure in 100 us, auto-exposure off
+                js = json.dumps({"frame_number": 1, "actual_exposure": int(round(exp_us / 100)),
+                                 "gain_level": gain_db / 24.0 * 232 + 16, "auto_exposure": 0, "white_balance": 4600})
+                header = dataclasses.replace(msg.header, frame_id="camera_color_optical_frame")
+                w.write("/camera/color/metadata", t[REALSENSE](header=header, json_data=js), log_time)
             elif kind == "orbbec":  # the SDK's frame metadata, exposure in 100 us on the color stream, gain a level
                 js = json.dumps({"frame_number": meta_i, "auto_exposure": 0, "exposure": round(exp_us / 100),
                                  "gain": round(gain_db * 10), "white_balance": 4600})  # a level 0..240 (int)
@@ -119,8 +125,8 @@ def _driver_bag(tmp_path, kind: str, src=None, raise_dn: Callable[[int], float] 
     return dst, truth
 
 
-@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "orbbec", "aravis", "aravis_slow", "keymap",
-                                  "camera_ros", "camera_ros2"])
+@pytest.mark.parametrize("kind", ["flir", "basler", "realsense", "realsense_color", "orbbec", "aravis", "aravis_slow",
+                                  "keymap", "camera_ros", "camera_ros2"])
 def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
     """Each driver's metadata in a bag gives the stated metadata; camera_ros's on /diagnostics (found there, other
     nodes' arrays left aside), the camera named by hardware_id where two publish there (a clear error without)."""
@@ -132,9 +138,9 @@ def test_driver_metadata_in_bags_gives_the_stated_metadata(tmp_path, kind):
             next(reader.frames(PROFILE))
         camera = {"hardware_id": "/base/imx708@1a"}
     profile = PROFILE
-    if kind in ("realsense", "orbbec"):
+    if kind in ("realsense", "realsense_color", "orbbec"):
         profile = profile_from_mapping({**load_profile("ev76c661").values, "gain_range_db": [0.0, 24.0],
-                                        "driver_gain_range": [16, 248] if kind == "realsense" else [0, 240]})
+                                        "driver_gain_range": [0, 240] if kind == "orbbec" else [16, 248]})
     keymap = ["acme_cam|ExposureMs|exposure_time_s|ms", "*|GainX|gain_db|factor",
               "acme_cam|SensorTempK|sensor_temperature_c|K"] if kind == "keymap" else None
     if kind == "orbbec":
@@ -183,6 +189,19 @@ def test_driver_messages_with_bad_fields_name_them():
         metadata_from_vendor(ns(__msgtype__=REALSENSE, json_data="{oops"), PROFILE)
     with pytest.raises(AdapterError, match="neither actual_exposure nor gain_level"):
         metadata_from_vendor(ns(__msgtype__=REALSENSE, json_data='{"frame_number": 3}'), PROFILE)
+    # the colour stream counts in 100 us (librealsense#8243; read as us until 2026-12-04: 100x too short) and does
+    # not update actual_exposure under its auto-exposure (librealsense#2549), told by its frame_id or colour keys
+    colour = ns(frame_id="camera_color_optical_frame")
+    assert metadata_from_vendor(ns(__msgtype__=REALSENSE, header=colour, json_data='{"actual_exposure": 200}'),
+                                PROFILE) == {"exposure_time_s": pytest.approx(0.02)}
+    assert metadata_from_vendor(ns(__msgtype__=REALSENSE, json_data='{"actual_exposure": 200, "hue": 0}'),
+                                PROFILE) == {"exposure_time_s": pytest.approx(0.02)}
+    assert metadata_from_vendor(ns(__msgtype__=REALSENSE, header=ns(frame_id="camera_depth_optical_frame"),
+                                   json_data='{"actual_exposure": 200, "auto_exposure": 1}'),
+                                PROFILE) == {"exposure_time_s": pytest.approx(200e-6)}
+    with pytest.raises(AdapterError, match="colour stream under auto-exposure"):
+        metadata_from_vendor(ns(__msgtype__=REALSENSE, header=colour,
+                                json_data='{"actual_exposure": 200, "auto_exposure": 1}'), PROFILE)
     assert flir
 
 
