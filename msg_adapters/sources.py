@@ -21,7 +21,7 @@ from typing import Any
 from .keymap import ORBBEC_UNITS, keymap_entries, metadata_from_json_keymap, metadata_from_keymap, parse_keymap
 from .libcamera import libcamera_status, metadata_from_camera_ros
 from .metadata import metadata_from_diagnostics
-from .parameter_events import metadata_from_parameters, parameter_values, preset_keymap
+from .parameter_events import driver_parameter_names, metadata_from_parameters, parameter_values, preset_keymap
 from .vendor import HELD_SOURCES, SOURCE_TYPES, message_class, metadata_from_vendor
 
 METADATA_SOURCES = ("diagnostics", "keymap", *SOURCE_TYPES, "camera_ros", "parameters")
@@ -86,15 +86,15 @@ def resolve_source(source: str, topic: str, keymap: str = "", driver_node: str =
             if values is None:
                 return None
             state.update(values)
-            return metadata_from_parameters(state, km, profile)
+            return metadata_from_parameters(state, km, profile, driver)
 
         def from_values(values: dict[str, Any]) -> dict[str, Any]:
             for name, value in values.items():
                 state.setdefault(name, value)
-            return metadata_from_parameters(state, km, profile)
+            return metadata_from_parameters(state, km, profile, driver)
 
         return MetadataSource(source, ParameterEvent, PARAMETER_EVENTS_TOPIC, from_event, held=True,
-                              driver_node=driver_node, parameter_names=tuple(e.key for e in km),
+                              driver_node=driver_node, parameter_names=driver_parameter_names(driver, km),
                               from_values=from_values)
     if not topic:
         return None

@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
@@ -299,16 +300,16 @@ class NoiseMonitorNode(Node):
         if ready and not self._driver_read:
             self._driver_read = True
             assert self.metadata_source is not None
-            self._driver.get_parameters(list(self.metadata_source.parameter_names)).add_done_callback(
-                self._on_driver_parameters)
+            for name in self.metadata_source.parameter_names:  # one by one: a name the driver lacks fails the request
+                self._driver.get_parameters([name]).add_done_callback(partial(self._on_driver_parameters, name))
         elif not ready:
             self._driver_read = False
 
-    def _on_driver_parameters(self, future: Any) -> None:
+    def _on_driver_parameters(self, name: str, future: Any) -> None:
         src = self.metadata_source
         assert src is not None and src.from_values is not None
         try:
-            values: dict | str = src.from_values(read_values(src.parameter_names, future.result().values))
+            values: dict | str = src.from_values(read_values([name], future.result().values))
         except AdapterError as exc:
             values = str(exc)
         except Exception as exc:  # the service call failed: try again when the driver is next up

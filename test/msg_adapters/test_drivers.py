@@ -406,6 +406,20 @@ def test_parameter_events_of_the_driver_node_only():
         "exposure_time_s": pytest.approx(0.0156), "gain_db": pytest.approx(6.0)}
     with pytest.raises(ValueError, match="no parameter preset for driver 'ids'"):
         preset_keymap("ids")
+    # under the camera's auto-exposure the exposure parameter is the manual setting (until 2026-12-04 read as the
+    # frame's): v4l2_camera's auto_exposure 0 / 3 and usb_cam's autoexposure (its default) are refused
+    with pytest.raises(AdapterError, match="v4l2_camera auto_exposure = 3: the camera's auto-exposure"):
+        metadata_from_parameters({**values, "auto_exposure": 3}, preset_keymap("v4l2_camera"), profile, "v4l2_camera")
+    assert metadata_from_parameters({**values, "auto_exposure": 1}, preset_keymap("v4l2_camera"), profile,
+                                    "v4l2_camera")["exposure_time_s"] == pytest.approx(0.0156)  # manual
+    usb = {"autoexposure": False, "exposure": 100, "gain": 2}
+    assert metadata_from_parameters(usb, preset_keymap("usb_cam"), profile, "usb_cam") == {
+        "exposure_time_s": pytest.approx(0.01), "gain_db": pytest.approx(12.0)}
+    with pytest.raises(AdapterError, match="usb_cam autoexposure = True"):
+        metadata_from_parameters({**usb, "autoexposure": True}, preset_keymap("usb_cam"), profile, "usb_cam")
+    # gain -1: the device's own gain, not reported (the profile's applies; was an error: -1 outside the gain range)
+    assert metadata_from_parameters({**usb, "gain": -1}, preset_keymap("usb_cam"), profile, "usb_cam") == {
+        "exposure_time_s": pytest.approx(0.01)}
 
 
 def test_the_basler_drivers_black_level_converted_by_the_profile():

@@ -633,6 +633,7 @@ def test_parameter_events_of_a_v4l2_driver_node_give_the_metadata(rig_factory, t
     rig.executor.add_node(driver)
     driver.declare_parameter("exposure_time_absolute", 50)
     driver.declare_parameter("gain", 0)
+    driver.declare_parameter("auto_exposure", 1)  # V4L2 manual mode
     temp = rig.cam.create_publisher(Temperature, "/pcam/temperature", 10)
     assert rig.spin_until(lambda: temp.get_subscription_count() > 0, TIMEOUT_S)
     temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))
@@ -642,11 +643,24 @@ def test_parameter_events_of_a_v4l2_driver_node_give_the_metadata(rig_factory, t
                                                       "gain_db": pytest.approx(18.0)}, TIMEOUT_S), rig.node._held
     assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
     report, _ = rig.step(0, metadata={})
-    rig.executor.remove_node(driver)
-    driver.destroy_node()
     assert report.level == OK, report.message
     for key in ("sigma_pn", "sigma_dcsn", "sigma_rn", "sigma_model"):
         assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
+    # the camera's auto-exposure on (aperture priority): the exposure parameter is no longer the frame's; until
+    # 2026-12-04 the frames kept the manual 10 ms
+    driver.set_parameters([Parameter("auto_exposure", value=3)])
+    assert rig.spin_until(lambda: isinstance(rig.node._held, str), TIMEOUT_S), rig.node._held
+    auto, _ = rig.step(1, metadata={})
+    assert auto.level == WARN and "v4l2_camera auto_exposure = 3: the camera's auto-exposure" in auto.message
+    driver.set_parameters([Parameter("auto_exposure", value=1)])
+    assert rig.spin_until(lambda: isinstance(rig.node._held, dict), TIMEOUT_S), rig.node._held
+    read_at = rig.node._temperature_ns
+    temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))  # fresh for the frame below
+    assert rig.spin_until(lambda: rig.node._temperature_ns != read_at, TIMEOUT_S)
+    again, _ = rig.step(2, metadata={})
+    rig.executor.remove_node(driver)
+    driver.destroy_node()
+    assert again.level == OK, again.message
 
 
 def test_a_v4l2_driver_that_started_first_is_read_at_start(rig_factory, tmp_path):
@@ -674,9 +688,9 @@ def test_a_v4l2_driver_that_started_first_is_read_at_start(rig_factory, tmp_path
                           metadata_driver_node="/early/v4l2_camera", temperature_topic="/early/temperature")
         temp = rig.cam.create_publisher(Temperature, "/early/temperature", 10)
         assert rig.spin_until(lambda: temp.get_subscription_count() > 0, TIMEOUT_S)
-        temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))
         assert rig.spin_until(lambda: rig.node._held == {"exposure_time_s": pytest.approx(0.01),
                                                           "gain_db": pytest.approx(18.0)}, TIMEOUT_S), rig.node._held
+        temp.publish(Temperature(temperature=DYNAMIC["sensor_temperature_c"]))  # fresh for the frame below
         assert rig.spin_until(lambda: rig.node.temperature_c is not None, TIMEOUT_S)
         report, _ = rig.step(0, metadata={})
         assert report.level == OK, report.message
@@ -684,6 +698,13 @@ def test_a_v4l2_driver_that_started_first_is_read_at_start(rig_factory, tmp_path
             assert float(report.values[key]) == pytest.approx(float(ref.values[key]), rel=1e-5), key
         driver.set_parameters([Parameter("gain", value=120)])  # a change: 12 dB by the event
         assert rig.spin_until(lambda: rig.node._held.get("gain_db") == pytest.approx(12.0), TIMEOUT_S), rig.node._held
+        # a driver started under its auto-exposure (v4l2_camera's auto_exposure 3): read at start, refused; each
+        # parameter is read on its own (one the driver lacks, exposure_auto here, fails a request of several names)
+        late = rig_factory("late", metadata_source="parameters", metadata_topic="", profile=str(prof),
+                           metadata_driver_node="/early/v4l2_camera")
+        driver.declare_parameter("auto_exposure", 3)
+        assert late.spin_until(lambda: isinstance(late.node._held, str), TIMEOUT_S), late.node._held
+        assert "auto_exposure = 3" in late.node._held
     finally:
         spinner.shutdown()
         driver.destroy_node()
