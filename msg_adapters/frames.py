@@ -39,7 +39,8 @@ def prepare_frame(image_msg: Any, stamp_ns: int, options: FrameOptions, *,
         raw = {**raw, **{key: raw[own] for key, own in (("gain_db", RAW_GAIN), (BLACK_LEVEL, RAW_BLACK_LEVEL))
                          if own in raw}}
     header = getattr(image_msg, "header", None)
-    frame = Frame(stamp_ns, None, None, index=index, log_time_ns=log_time_ns, raw_metadata=dict(raw),
+    said = {"sensor_temperature_c": float(temperature_c)} if isinstance(temperature_c, (int, float)) else {}
+    frame = Frame(stamp_ns, None, None, index=index, log_time_ns=log_time_ns, raw_metadata={**said, **raw},
                   frame_id=clip(str(getattr(header, "frame_id", "") or ""), 200),
                   metadata_age_s=None if metadata_stamp_ns is None else (stamp_ns - metadata_stamp_ns) / 1e9)
     try:  # a reported black level that is no number of DN makes the frame's metadata unusable (below)

@@ -118,6 +118,7 @@ class Recording:
     skipped: dict[str, int]
     static: dict[str, Any]
     unusable: str = ""  # the frames skipped as unusable, said (empty: none)
+    depth_note: str = ""  # how the bit depth was inferred (empty: stated)
     kinds_given: bool = False  # each set's kind (dark / flat) stated by the recording (an EMVA image set)
 
     @property
@@ -126,26 +127,38 @@ class Recording:
         return 255.0 / (2**self.bit_depth - 1)
 
 
-def _bit_depth(path: str | Path, override: int | None, topics: dict[str, str | None]) -> int:
-    """Bits per pixel: the override, the metadata's bit_depth, else the image container's width."""
+def _bit_depth(path: str | Path, override: int | None, topics: dict[str, str | None]) -> tuple[int, str]:
+    """Bits per pixel and, when inferred, how: the override, the metadata's bit_depth, else the image container's
+    width; in 16-bit words the fewest ADC bits that hold the recording's largest code (a photon-transfer recording
+    reaches the ADC's top; drivers of 10-16 bit cameras mostly state no bit depth), said in a note."""
     if override:
-        return override
+        return override, ""
     with open_bag(path, **topics) as reader:
         for frame in reader.frames():
             bd = frame.raw_metadata.get("bit_depth")
             if bd is not None:
-                return int(bd)
+                return int(bd), ""
             break
-        for _, _, msg in reader.messages([reader.image_topic] if reader.image_topic else []):  # the container width
-            return 16 if "16" in str(getattr(msg, "encoding", "")) else 8
-    return 8
+        encoding = next((str(getattr(msg, "encoding", "")) for _, _, msg in
+                         reader.messages([reader.image_topic] if reader.image_topic else [])), "")
+        if "16" not in encoding:
+            return 8, ""
+        tops = [float(f.image_dn.max()) for f in reader.frames(bit_depth=16) if f.image_dn is not None]
+    if not tops:
+        return 16, ""
+    top = int(round(max(tops) * 65535.0 / 255.0))
+    bits = next(b for b in (8, 10, 12, 14, 16) if top <= 2**b - 1)
+    if bits == 16:
+        return 16, ""
+    return bits, (f"bit depth {bits} inferred from the images' largest code, {top}, in 16-bit words (the metadata "
+                  f"states none): --bit-depth states it")
 
 
 def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: str | None = None,
                    metadata_topic: str | None = None, temperature_topic: str | None = None) -> Recording:
     """Frames of a bag grouped into sets (see module doc)."""
     topics = {"image_topic": image_topic, "metadata_topic": metadata_topic, "temperature_topic": temperature_topic}
-    depth = _bit_depth(path, bit_depth, topics)
+    depth, depth_note = _bit_depth(path, bit_depth, topics)
     sets: list[FrameSet] = []
     skipped: dict[str, int] = {}
     example: dict[str, str] = {}  # a full reason of each kind skipped
@@ -195,7 +208,8 @@ def read_recording(path: str | Path, bit_depth: int | None = None, image_topic: 
                                 "(`simulate-bag --scenario ptc` shows one)")
     for s in sets:
         s.compute()
-    return Recording(sets, depth, shape, count, skipped, static, _skips(skipped, example, count) if example else "")
+    return Recording(sets, depth, shape, count, skipped, static, _skips(skipped, example, count) if example else "",
+                     depth_note=depth_note)
 
 
 def _skips(skipped: dict[str, int], example: dict[str, str], count: int) -> str:
@@ -305,8 +319,9 @@ def characterize(rec: Recording, dark_tolerance: float = DARK_TOLERANCE) -> dict
         result = _characterize(rec, dark_tolerance)
     except CharacterizeError as exc:
         raise CharacterizeError(f"{exc} ({rec.unusable})" if rec.unusable else str(exc)) from None
-    if rec.unusable:
-        result["notes"].insert(0, rec.unusable)
+    for note in (rec.unusable, rec.depth_note):
+        if note:
+            result["notes"].insert(0, note)
     return result
 
 

@@ -22,8 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                                     "characterize.json, profile.yaml")
     parser.add_argument("--json", metavar="PATH", help="also write the figures JSON here")
     parser.add_argument("--name", help="profile name (default: the bag's name)")
-    parser.add_argument("--bit-depth", type=int, help="ADC bits of the images (default: metadata, else the "
-                                                      "image container)")
+    parser.add_argument("--bit-depth", type=int, help="ADC bits of the images (default: metadata, else 8 for 8-bit "
+                                                      "images and, in 16-bit words, the fewest bits holding the "
+                                                      "largest code)")
     parser.add_argument("--sensor-type", choices=("ccd", "cmos"), help="for the profile when the metadata lacks it")
     parser.add_argument("--pixel-size-um", type=float, help="for the profile when the metadata lacks it")
     parser.add_argument("--dark-tolerance", type=float, default=DARK_TOLERANCE,

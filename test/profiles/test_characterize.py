@@ -157,6 +157,47 @@ def test_a_camera_ros_recording_gives_the_same_figures(recording, tmp_path):
     assert (tmp_path / "char" / "profile.yaml").is_file()
 
 
+def test_a_flir_recording_with_its_temperature_topic_and_no_bit_depth(recording, tmp_path, capsys):
+    """A FLIR camera's photon-transfer recording: ImageMetaData (exposure us, gain dB, no temperature, no bit depth) and
+    the temperature on a sensor_msgs/Temperature topic. Until 2026-12-04 characterize read no temperature ("dark current
+    at unknown degC", the doubling temperature "not determined: dark frames at one temperature only", no profile)
+    and took the 12-bit images for 16-bit ones (dark sets mixed with flat fields). Now the figures are those of the
+    recording with the camera's own metadata, the bit depth inferred from the largest code and said."""
+    import numpy as np
+
+    from msg_adapters.metadata import metadata_from_diagnostics
+    from msg_adapters.vendor import FLIR, register_vendor_types
+    from noise_monitor.bag.reader import open_bag
+    from noise_monitor.bag.writer import typestore
+
+    store = typestore()
+    register_vendor_types(store)
+    t = store.types
+    bag = tmp_path / "flir_ptc.mcap"
+    with open_bag(recording["bag"]) as reader, BagWriter(bag, store=store) as w:
+        for topic, log_time, msg in reader.messages([reader.image_topic, reader.metadata_topic]):
+            if topic == reader.image_topic:
+                w.write("/flir/image_raw", msg, log_time)
+                continue
+            m = metadata_from_diagnostics(msg)
+            w.write("/flir/temperature", t["sensor_msgs/msg/Temperature"](
+                header=msg.header, temperature=m["sensor_temperature_c"], variance=0.0), log_time)
+            w.write("/flir/meta", t[FLIR](header=msg.header, camera_time=0, brightness=-1,
+                                          exposure_time=int(round(m["exposure_time_s"] * 1e6)),
+                                          max_exposure_time=10**7, gain=np.float32(m["gain_db"])), log_time)
+    assert main(["characterize", str(bag), "--out", str(tmp_path / "char"), "--json", str(tmp_path / "c.json"),
+                 "--sensor-type", "cmos", "--pixel-size-um", "3.45"]) == 0
+    printed = capsys.readouterr().out
+    assert "bit depth 12 inferred from the images' largest code, 4095" in printed
+    result = json.loads((tmp_path / "c.json").read_text())
+    got, want = result["figures"], recording["result"]["figures"]
+    assert result["conditions"]["bit_depth"] == recording["result"]["conditions"]["bit_depth"] == 12
+    for field in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
+                  "doubling_temperature_k", "dsnu_e", "prnu_pct"):
+        assert got[field]["value"] == pytest.approx(want[field]["value"], rel=1e-4), field  # whole us: 1e-7 apart
+    assert (tmp_path / "char" / "profile.yaml").is_file()
+
+
 def test_ptc_plan_needs_enough_frames():
     frames = plan(MIN_FRAMES)
     assert len(frames) <= MIN_FRAMES and {f.kind for f in frames} == {"flat", "dark"}
