@@ -46,10 +46,14 @@ def content_hash(bag: Path) -> str:
     return h.hexdigest()
 
 
-def _walk(root: Path) -> Iterable[Path]:
-    """Bags below a folder: rosbag2 folders (metadata.yaml; not descended into) and bare .mcap/.db3/.bag files."""
+def _walk(root: Path, skip: Path | None = None) -> Iterable[Path]:
+    """Bags below a folder: rosbag2 folders (metadata.yaml; not descended into) and bare .mcap/.db3/.bag files;
+    ``skip``: a folder not searched (the campaign's own outputs, which hold replayed bags)."""
     for dirpath, dirnames, filenames in os.walk(root):
         d = Path(dirpath)
+        if skip is not None and d.resolve() == skip:
+            dirnames[:] = []
+            continue
         if "metadata.yaml" in filenames:
             dirnames[:] = []
             yield d
@@ -60,12 +64,14 @@ def _walk(root: Path) -> Iterable[Path]:
                 yield d / name
 
 
-def find_bags(inputs: Iterable[str | Path]) -> tuple[list[Path], list[Problem]]:
-    """Bags named by ``inputs`` (bag files, rosbag2 folders, folders searched recursively), each once.
+def find_bags(inputs: Iterable[str | Path], skip: str | Path | None = None) -> tuple[list[Path], list[Problem]]:
+    """Bags named by ``inputs`` (bag files, rosbag2 folders, folders searched recursively), each once; a folder's
+    search leaves out ``skip`` (the campaign's output folder: its per-bag replays are no recordings).
 
     Paths that do not exist, files that are not bags, folders without bags and links to a bag found before are
     problems, not errors (a path named twice is counted once).
     """
+    skipped = Path(skip).resolve() if skip is not None else None
     bags: list[Path] = []
     seen: dict[Path, Path] = {}  # resolved path -> the path it was first found as
     problems: list[Problem] = []
@@ -79,7 +85,7 @@ def find_bags(inputs: Iterable[str | Path]) -> tuple[list[Path], list[Problem]]:
             if not found:
                 problems.append(Problem(str(p), "not a bag (expected a rosbag2 folder, a .mcap, .db3 or ROS 1 .bag file)"))
         else:
-            found = list(_walk(p))
+            found = list(_walk(p, skipped))
             if not found:
                 problems.append(Problem(str(p), "folder holds no bag (.mcap, .db3, .bag or a rosbag2 folder)"))
         for bag in found:

@@ -23,7 +23,7 @@ from noise_monitor.monitor.config import default_params_path, read_ros_params
 from noise_monitor.paths import camera_profile_path
 from noise_monitor.physics import load_profile
 
-from .bags import Problem, content_hash, find_bags, fingerprint
+from .bags import content_hash, find_bags, fingerprint
 from .frames import merge, require_pyarrow
 from .manifest import Manifest
 from .pool import LocalPool
@@ -87,18 +87,18 @@ def _duplicates(paths: list[str], sizes: dict[str, tuple[int, int]], manifest: M
     return out
 
 
-def _executor(backend: str, ray_address: str | None, workers: int, timeout_s: float | None,
-              problems: list[Problem]) -> LocalPool | RayPool:
-    """Ray (local or the cluster at ray_address) or the local pool; an unusable Ray is reported, the pool runs."""
+def _executor(backend: str, ray_address: str | None, workers: int,
+              timeout_s: float | None) -> tuple[LocalPool | RayPool, str | None]:
+    """Ray (local or the cluster at ray_address) or the local pool, and why Ray was not used where it was asked for
+    (the pool runs instead)."""
     if backend == "pool":
-        return LocalPool(workers, timeout_s)
+        return LocalPool(workers, timeout_s), None
     try:
-        return RayPool(ray_address, workers, timeout_s)
+        return RayPool(ray_address, workers, timeout_s), None
     except RayUnavailable as exc:
         if backend == "auto" and ray_address is None and "not installed" in str(exc):
-            return LocalPool(workers, timeout_s)  # Ray is optional: the pool gives the same results
-        problems.append(Problem(ray_address or "ray", f"{exc}; ran on the local process pool instead"))
-        return LocalPool(workers, timeout_s)
+            return LocalPool(workers, timeout_s), None  # Ray is optional: the pool gives the same results
+        return LocalPool(workers, timeout_s), f"Ray at {ray_address or 'local'}: {exc}; ran on the local process pool"
 
 
 def _entry(outcome: dict[str, Any]) -> dict[str, Any]:
@@ -160,7 +160,7 @@ def run_campaign(
                                 plugins=plugins, memory_limit_mb=memory_limit_mb, bag_outputs=bag_outputs,
                                 image_topic=image_topic, metadata_topic=metadata_topic)
     t0 = time.perf_counter()
-    bags, problems = find_bags(inputs)
+    bags, problems = find_bags(inputs, skip=out)
     paths = [str(b.resolve()) for b in bags]
     settings = replace(settings, key=settings_key(settings))  # the bags' outputs of these settings: their own folder
     manifest = Manifest(out, settings.key)
@@ -170,8 +170,10 @@ def run_campaign(
     for path, entry in _duplicates(paths, {p: prints[p] for p in todo}, manifest).items():  # content replayed once
         manifest.record(entry)
         todo.remove(path)
-    executor = _executor(backend, ray_address, workers, timeout_s, problems) if todo else None
-    run_info: dict[str, Any] = executor.describe() if executor else {"backend": None}
+    executor, backend_note = _executor(backend, ray_address, workers, timeout_s) if todo else (None, None)
+    run_info: dict[str, Any] = executor.describe() if executor else {"backend": "none (every bag finished before)"}
+    if backend_note:
+        run_info["backend_note"] = backend_note
     finished = frames = 0
     interrupted = False
     bar = tqdm(total=len(todo), unit="bag", desc="campaign", disable=not progress, position=0)
@@ -205,13 +207,18 @@ def run_campaign(
     campaign["interrupted"] = interrupted
     outputs = {"json": str(out / OUTPUTS["json"]), "manifest": str(manifest.path)}
     if not interrupted:
-        parts = [(bag_dir(out, b["sha256"], settings.key) / "frames.parquet", b["path"]) for b in campaign["bags"]]
-        if parts:
-            campaign["frames_in_table"] = merge(parts, out / OUTPUTS["parquet"])
-            outputs["parquet"] = str(out / OUTPUTS["parquet"])
-        if report:
-            write_html(campaign, out / OUTPUTS["html"])
-            outputs["html"] = str(out / OUTPUTS["html"])
+        try:  # Ctrl-C here still leaves campaign.json, marked interrupted (the table and report are rewritten on resume)
+            parts = [(bag_dir(out, b["sha256"], settings.key) / "frames.parquet", b["path"]) for b in campaign["bags"]]
+            if parts:
+                campaign["frames_in_table"] = merge(parts, out / OUTPUTS["parquet"])
+                outputs["parquet"] = str(out / OUTPUTS["parquet"])
+            if report:
+                write_html(campaign, out / OUTPUTS["html"])
+                outputs["html"] = str(out / OUTPUTS["html"])
+        except KeyboardInterrupt:
+            interrupted = campaign["interrupted"] = True
+            campaign.pop("frames_in_table", None)
+            outputs = {k: v for k, v in outputs.items() if k in ("json", "manifest")}
     campaign["outputs"] = outputs
     tmp = out / (OUTPUTS["json"] + ".tmp")
     tmp.write_text(json.dumps(campaign, indent=1))

@@ -15,7 +15,8 @@ HELP = ("Replay many bags through the monitor (Ray tasks or a local process pool
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("inputs", nargs="+", metavar="BAG_OR_DIR",
-                        help="bags (rosbag2 folders, .mcap, .db3) or folders searched recursively for bags")
+                        help="bags (rosbag2 folders, .mcap, .db3, ROS 1 .bag) or folders searched recursively for bags "
+                             "(the --out folder left out)")
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output folder: manifest.jsonl, campaign.json, frames.parquet, report.html, bags/")
     who = parser.add_mutually_exclusive_group()
@@ -56,6 +57,8 @@ def _print(c: dict[str, Any]) -> None:
           f"{t['alarm_episodes']} alarm episode(s), {t['cameras']} camera(s)")
     print(f"backend {run['backend']}: {run['bags_run']} bags run in {run['wall_time_s']} s "
           f"({run['frames_per_s']} frames/s), {run['bags_resumed']} finished in an earlier run")
+    if run.get("backend_note"):
+        print(f"  note: {run['backend_note']}")
     for p in (*c["failed"], *c["duplicates"], *c["problems"]):
         print(f"  not evaluated: {p['path']}: {p['reason']}")
     print("\ncameras by health (worst first):")

@@ -75,6 +75,17 @@ def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
         names += [n for n in s.names if n not in names]
     schema = pa.schema([fields[n] for n in names])
     tmp = path.with_name(path.name + ".tmp")
+    try:
+        rows = _write_parts(parts, schema, tmp)
+    except BaseException:  # an interrupt or a bad part leaves no half-written table behind
+        tmp.unlink(missing_ok=True)
+        raise
+    tmp.replace(path)
+    return rows
+
+
+def _write_parts(parts: list[tuple[Path, str]], schema: pa.Schema, tmp: Path) -> int:
+    """The parts, each with its bag column and the columns it lacks, into ``tmp``; returns rows."""
     rows = 0
     with pq.ParquetWriter(tmp, schema) as writer:
         for p, bag in parts:
@@ -89,5 +100,4 @@ def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
                     tab = tab.add_column(i, field, missing)
             writer.write_table(tab.select(schema.names).cast(schema))
             rows += tab.num_rows
-    tmp.replace(path)
     return rows

@@ -78,7 +78,7 @@ def _bag_row(e: dict[str, Any]) -> dict[str, Any]:
                wall_s=e.get("wall_s"), peak_rss_mb=e.get("peak_rss_mb"),
                temporal_noise_changes=r.get("temporal_noise_changes", 0),  # absent from records of older versions
                temporal_light_steps=r.get("temporal_light_steps", 0),
-               frames_lost=r.get("frames_lost", 0))
+               frames_lost=r.get("frames_lost", 0), metadata_overrides=r.get("metadata_overrides", {}))
     return row
 
 
@@ -151,6 +151,13 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     if light_steps:
         findings.append(f"the light stepped {light_steps} time(s) while the camera held still (a lamp switched; each "
                         "restarted its frame-difference measurement)")
+    overrides: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        for key, pair in r["metadata_overrides"].items():
+            overrides.setdefault(key, pair)
+    if overrides:
+        findings.append("the bags' metadata set camera constants over the profile's (the profile's are not used): "
+                        + ", ".join(f"{k} {v['bag']} (profile {v['profile']})" for k, v in sorted(overrides.items())))
     worst = max(symptoms, key=lambda k: symptoms[k])
     return {
         "hardware_id": hw, "profiles": sorted({str(r["profile"]) for r in rows}), "bags": len(rows),
@@ -164,6 +171,7 @@ def _camera(hw: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "mean": means, "trends": trends, "xi_threshold_dn": thr,
         "health": round(1.0 - symptoms[worst], 4), "health_limited_by": worst if symptoms[worst] > 0 else None,
         "symptoms": {k: round(v, 4) for k, v in symptoms.items()}, "findings": findings,
+        "metadata_overrides": overrides,
     }
 
 
@@ -286,7 +294,10 @@ def _camera_figure(campaign: dict[str, Any]) -> str | None:
                     va="bottom", fontsize=8, color="tab:orange")
         ax.set_ylabel("noise sigma per bag [DN]")
         ax.set_ylim(0, ax.get_ylim()[1] * 1.3)
-        ax.legend(fontsize=7, loc="upper center", ncol=3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7, loc="upper center", ncol=3)
+        else:  # every frame of the camera's bags skipped: nothing to draw
+            ax.text(0.5, 0.5, "no frame evaluated", transform=ax.transAxes, ha="center", va="center", fontsize=9)
         ax = row[2]
         temp = [r["conditions"]["sensor_temperature_c"] for r in rows]
         ax.plot(t, [np.nan if v is None else v for v in temp], "o-", ms=3, color="tab:purple", label="temperature")
@@ -370,7 +381,8 @@ def write_html(campaign: dict[str, Any], path: Path) -> None:
         f"{t['cameras']} cameras, {t['frames_total']} frames ({t['frames_processed']} processed, "
         f"{t['frames_skipped']} skipped; {t['frames_lost']} missing from the recordings by their stamps), "
         f"{t['alarm_episodes']} alarm episodes. Backend {html.escape(str(run['backend']))}, "
-        f"{run['bags_run']} bags run in {run['wall_time_s']} s ({run['bags_resumed']} finished before).</p>",
+        f"{run['bags_run']} bags run in {run['wall_time_s']} s ({run['bags_resumed']} finished before)"
+        + (f"; {html.escape(run['backend_note'])}" if run.get("backend_note") else "") + ".</p>",
         "<h2>Cameras ranked by health</h2><p>Health = 1 - the worst symptom: fraction of frames in alarm, "
         "fraction not evaluated, |mean xi| and a significant xi drift over the campaign (0 below a quarter of the "
         "alarm threshold, 1 at the threshold), "

@@ -167,6 +167,7 @@ def _record(summary: dict[str, Any], table: FrameTable) -> dict[str, Any]:
                                           "sigma_temporal", "sigma_temporal_model")},
         "conditions": conditions,
         "xi_threshold_dn": summary["config"]["xi_threshold_dn"],
+        "metadata_overrides": summary.get("metadata_overrides") or {},  # camera constants the bag set over the profile
     }
 
 

@@ -299,8 +299,10 @@ def test_ray_gives_the_pool_results(pool_run: tuple[dict, Path], fleet: dict[str
 def test_unreachable_ray_and_worker_memory_limit_reported(fleet: dict[str, Path], tmp_path: Path) -> None:
     c = run_campaign([fleet["good"] / "a0.mcap"], tmp_path, profile="ev76c661", backend="ray",
                      ray_address="127.0.0.1:9", workers=1, memory_limit_mb=1.0, progress=False)
-    assert c["problems"][0]["path"] == "127.0.0.1:9"
-    assert "unreachable" in c["problems"][0]["reason"] and "local process pool" in c["problems"][0]["reason"]
+    # the backend's trouble is no rejected input (until 2026-12-04 the address was listed among them as a bag path)
+    assert c["problems"] == [] and c["totals"]["inputs_rejected"] == 0
+    note = c["run"]["backend_note"]
+    assert note.startswith("Ray at 127.0.0.1:9") and "unreachable" in note and "local process pool" in note
     assert c["run"]["backend"] == "pool"
     assert c["failed"][0]["reason"].startswith("worker memory limit exceeded: resident")
 
@@ -455,3 +457,58 @@ def test_a_copy_of_a_bag_is_replayed_once(fleet: dict[str, Path], tmp_path: Path
     again = run_campaign([bags], out, **kw)
     assert again["run"]["bags_run"] == 0 and again["run"]["bags_resumed"] == 3
     assert again["totals"]["bags_duplicate"] == 2 and again["totals"]["bags_evaluated"] == 2
+
+
+def test_an_output_folder_inside_the_inputs_is_not_searched(fleet: dict[str, Path], tmp_path: Path) -> None:
+    """``campaign rec --out rec/campaign_out --bag-outputs`` twice: until 2026-12-04 the second run found the first's
+    per-bag replays (MCAPs of the monitor's outputs) as bags and ranked a phantom camera, every frame "metadata
+    missing"."""
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    for name in ("a0.mcap", "a1.mcap"):
+        shutil.copy(fleet["good"] / name, rec / name)
+    kw = {"profile": "ev76c661", "backend": "pool", "workers": 1, "progress": False, "bag_outputs": True}
+    first = run_campaign([rec], rec / "campaign_out", **kw)
+    again = run_campaign([rec], rec / "campaign_out", **kw)
+    assert first["totals"]["bags_found"] == again["totals"]["bags_found"] == 2
+    assert again["run"]["bags_resumed"] == 2 and again["totals"]["cameras"] == 1
+
+
+def test_metadata_that_overrides_the_profile_is_named_per_camera(fleet: dict[str, Path], tmp_path: Path) -> None:
+    """An ev76c661 bag (its metadata states the camera's constants) replayed under the icx285 profile: the bag's
+    values win, as in replay and the node; until 2026-12-04 campaign.json and the report said nothing of it (the
+    camera listed under "ICX285" with the numbers of the bag's own camera)."""
+    c = run_campaign([fleet["good"] / "a0.mcap"], tmp_path / "out", profile="icx285", backend="pool", workers=1,
+                     progress=False)
+    cam = c["cameras"][0]
+    assert cam["metadata_overrides"]["full_well_e"] == {"profile": 14000.0, "bag": 8400.0}
+    assert any(f.startswith("the bags' metadata set camera constants over the profile's") and
+               "full_well_e 8400.0 (profile 14000.0)" in f for f in cam["findings"])
+    assert "full_well_e 8400.0 (profile 14000.0)" in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_ctrl_c_while_the_table_is_merged_leaves_campaign_json(fleet: dict[str, Path], tmp_path: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """An interrupt while the per-frame table is merged (the bags all replayed): until 2026-12-04 no campaign.json was
+    written (or an older one stayed, saying not interrupted) and frames.parquet.tmp was left behind."""
+    kw = {"profile": "ev76c661", "backend": "pool", "workers": 1, "progress": False}
+    bags = [fleet["good"] / "a0.mcap", fleet["good"] / "a1.mcap"]
+    run_campaign(bags[:1], tmp_path / "out", **kw)  # an earlier campaign.json in the folder
+    read = pq.read_table
+    calls = []
+
+    def interrupted(*args: object, **kwargs: object) -> object:
+        calls.append(args)
+        if len(calls) == 2:  # Ctrl-C after the first part is written
+            raise KeyboardInterrupt
+        return read(*args, **kwargs)
+
+    monkeypatch.setattr(pq, "read_table", interrupted)
+    with pytest.raises(KeyboardInterrupt, match="campaign interrupted: 2 of 2 bags finished"):
+        run_campaign(bags, tmp_path / "out", **kw)
+    monkeypatch.undo()
+    c = json.loads((tmp_path / "out" / "campaign.json").read_text())
+    assert c["interrupted"] and c["totals"]["bags_evaluated"] == 2 and "parquet" not in c["outputs"]
+    assert not list((tmp_path / "out").glob("*.tmp"))
+    again = run_campaign(bags, tmp_path / "out", **kw)  # the resume writes the table and report
+    assert not again["interrupted"] and again["frames_in_table"] == sum(b["frames_total"] for b in again["bags"])
