@@ -29,7 +29,7 @@ from .estimate import estimator_views
 from .left import left_by_claims
 from .measure import Measurements, SegmentTolerance, measure_frames
 from .noise_events import events, set_apart, without_segments
-from .signature import plugin_skeleton, unexplained
+from .signature import plugin_skeleton, scene_or_effect, unexplained
 
 
 def parse_add_effect(text: str) -> EffectSpec:
@@ -184,10 +184,14 @@ def analyze(
         "left_by_claims": left_by_claims(comp, diag),
         "cells": _strip(rows),
     }
-    if write_plugin_skeleton:
-        if out["unexplained"]["residual_significant"]:
+    if write_plugin_skeleton:  # when not written, the analysis stands; only the skeleton has nothing to describe
+        if scene_or_effect(out["unexplained"]):
+            out["plugin_skeleton_not_written"] = (
+                "the residual may be the scene's texture, which these data cannot tell from an effect: record a still "
+                "camera (several frames of one view) or a flat chart, then write the skeleton from that recording")
+        elif out["unexplained"]["residual_significant"]:
             out["plugin_skeleton_written"] = str(_write_skeleton(write_plugin_skeleton, out["unexplained"]))
-        else:  # the analysis stands; only the skeleton has nothing to describe
+        else:
             out["plugin_skeleton_not_written"] = ("the residual is within the measurement's uncertainty: there is no "
                                                   "effect to write a plug-in for")
     after_model = None

@@ -9,6 +9,7 @@ from .left import left_text
 from .measure import field_conditions_text, scene_in_single_views_text, scene_in_views_text
 from .noise_events import events_text
 from .shape import fixed_shape_text
+from .signature import scene_or_effect
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -107,6 +108,8 @@ def run(args: argparse.Namespace) -> int:
     un = summary["unexplained"]
     if un["significant"]:
         print(f"unexplained: {un['reading']}")
+    elif scene_or_effect(un):
+        print(f"not established (an effect or the scene): {un['reading']}")
     if "plugin_skeleton_written" in summary:
         print(f"plug-in skeleton: {summary['plugin_skeleton_written']}")
     if "plugin_skeleton_not_written" in summary:

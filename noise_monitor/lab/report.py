@@ -24,6 +24,7 @@ from .left import left_text  # noqa: E402
 from .measure import BLOCK, field_conditions_text, scene_in_single_views_text, scene_in_views_text  # noqa: E402
 from .noise_events import events_text  # noqa: E402
 from .shape import fixed_shape_text  # noqa: E402
+from .signature import scene_or_effect  # noqa: E402
 
 CONDITION_LABELS = {
     "intensity_dn": "intensity [DN]",
@@ -261,6 +262,7 @@ def _unexplained_html(un: dict[str, Any] | None) -> str:
     if not un["residual_significant"]:
         return head + "<p>The residual is within the measurement's uncertainty.</p>"
     intro = ("<p class='sig'>No candidate effect explains it: " if un["significant"]
+             else "<p>Not established (an effect or the scene's texture): " if scene_or_effect(un)
              else f"<p>Explained by {html.escape(', '.join(un['explained_by']))}; before that: ")
     rows = [{"component": k, **{x: v for x, v in st.items()}} for k, st in un["components"].items()]
     parts = [head, intro + html.escape(un["reading"]) + "</p>",

@@ -457,10 +457,18 @@ def _suggest(sig: dict[str, Any]) -> dict[str, Any]:
 
 
 def unexplained(comp: Comparison, rows: Sequence[dict[str, Any]], candidates: Sequence[Any]) -> dict[str, Any]:
-    """``analyze``'s ``unexplained`` entry: significant when the residual is and no candidate explains it."""
+    """``analyze``'s ``unexplained`` entry: significant when the residual is, no candidate explains it and the scene's
+    texture cannot (``scene_may_explain``: then the residual is unexplained or the scene's, which these data cannot
+    tell apart)."""
     sig = signature(comp, rows)
     claimed = [c.effect for c in candidates if c.significant]
-    return {"significant": bool(sig["residual_significant"] and not claimed), "explained_by": claimed, **sig}
+    return {"significant": bool(sig["residual_significant"] and not claimed and not sig.get("scene_may_explain")),
+            "explained_by": claimed, **sig}
+
+
+def scene_or_effect(un: dict[str, Any]) -> bool:
+    """Whether an ``unexplained`` entry's residual is significant, unclaimed, and may be the scene's texture."""
+    return bool(un["residual_significant"] and not un["explained_by"] and un.get("scene_may_explain"))
 
 
 # --- plug-in skeleton ------------------------------------------------------------------------------

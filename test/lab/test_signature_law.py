@@ -54,11 +54,12 @@ def test_a_skeletons_structure_follows_the_line_traits_beside_a_pixel_wise_domin
 def test_a_recording_without_a_still_view_names_the_scene_as_an_alternative(tmp_path):
     """A clean camera that never held still (vibrating by 4 px): every component is a single frame's, where scene
     texture reads as noise; until 2026-12-04 the lab reported "unexplained: fixed noise ... rows" without a word of
-    the scene (rms error 0.000 DN)."""
-    from noise_monitor.bag.simulate import simulate_bag
-
+    the scene (rms error 0.000 DN), and until later that day counted it as unexplained and wrote a plug-in skeleton for
+    it: now it is not established (an effect or the scene), and the skeleton waits for a recording that tells."""
     bag = simulate_bag(tmp_path / "vib.mcap", "ev76c661", "campaign", frames=40, width=160, height=128,
                        vibration_px=4.0)
-    un = analyze(bag, "ev76c661", estimator=None)["unexplained"]
-    assert un["residual_significant"] and un["scene_may_explain"]
+    lab = analyze(bag, "ev76c661", estimator=None, write_plugin_skeleton=tmp_path / "skel.py")
+    un = lab["unexplained"]
+    assert un["residual_significant"] and un["scene_may_explain"] and not un["significant"]
     assert "the recording holds no still view" in un["reading"]
+    assert not (tmp_path / "skel.py").exists() and "scene's texture" in lab["plugin_skeleton_not_written"]

@@ -86,3 +86,4 @@ def test_the_bundled_chart_recording_says_its_residual_may_be_the_scene(capsys: 
     printed = capsys.readouterr().out
     assert "no candidate effect is significant" in printed
     assert "or the scene's texture: most of it is measured in views from one camera pose" in printed
+    assert "not established (an effect or the scene): fixed noise" in printed and "unexplained:" not in printed
