@@ -495,14 +495,17 @@ class Monitor:
 
     def idle_report(self, now_ns: int) -> StatusReport:
         """Status when no new frame was processed: STALE after ``image_timeout_s`` without images,
-        otherwise the last frame's status."""
+        otherwise the last frame's status (OK while the first frame received is still being evaluated)."""
         timeout = self.config.image_timeout_s
         if self.last_received_ns is None:
             return StatusReport(STALE, self.name, "no image received yet", self.hardware_id, dict(
                 {k: str(v) for k, v in self.counters.items()}))
         age = (now_ns - self.last_received_ns) / 1e9
-        if age > timeout or self.last_result is None:
+        values = {**{k: str(v) for k, v in self.counters.items()}, "image_age_s": _fmt(age)}
+        if age > timeout:
             return StatusReport(STALE, self.name, f"no image for {age:.1f} s (timeout {timeout:g} s)",
-                                self.hardware_id, {**{k: str(v) for k, v in self.counters.items()},
-                                                   "image_age_s": _fmt(age)})
+                                self.hardware_id, values)
+        if self.last_result is None:  # until 2026-12-04 STALE, "no image for 0.3 s (timeout 2 s)"
+            return StatusReport(OK, self.name, f"image received {age:.1f} s ago, its evaluation not finished yet",
+                                self.hardware_id, values)
         return self.last_result.report()

@@ -285,6 +285,16 @@ def test_idle_report_goes_stale(rng):
     assert stale.hardware_id == "icx285/cam" and stale.name == "noise_monitor: cam"
 
 
+def test_idle_report_while_the_first_frame_is_evaluated():
+    """An image received, its evaluation not finished (the node's worker busy with the first frame): until 2026-12-04
+    STALE "no image for 0.3 s (timeout 1 s)", contradicting itself."""
+    mon = make_monitor(image_timeout_s=1.0)
+    mon.last_received_ns = 10_000_000_000  # as process() sets it on entry
+    first = mon.idle_report(10_300_000_000)
+    assert first.level == OK and first.message == "image received 0.3 s ago, its evaluation not finished yet"
+    assert mon.idle_report(11_600_000_000).level == STALE
+
+
 # --- outputs -------------------------------------------------------------------------------
 def test_outputs_same_topics_and_values_for_rclpy_and_rosbags(rng):
     mon = make_monitor()
