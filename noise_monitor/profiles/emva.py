@@ -274,6 +274,12 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
         above = f" above the dark offset {offset:g} DN ({adc - offset:.0f} DN)" if offset else f" ({adc} DN)"
         raise DatasheetError(f"contradictory: saturation capacity {ds.saturation_capacity_e:g} e- x K {k:g} DN/e- = "
                              f"{sat_dn:.0f} DN exceeds the {ds.bit_depth}-bit ADC range{above} at base gain")
+    if sat_dn + offset < adc / 8.0:  # three bits above saturation unused: the figures' DN are another bit depth's
+        fits = next(b for b in range(1, 17) if sat_dn + offset <= 2**b - 1)
+        raise DatasheetError(f"saturation capacity {ds.saturation_capacity_e:g} e- x K {k:g} DN/e- = {sat_dn:.0f} DN "
+                             f"is {(sat_dn + offset) / adc:.1%} of the {ds.bit_depth}-bit ADC range: a camera saturates "
+                             f"near its ADC's top; the figures fit a bit_depth of {fits} ({(sat_dn + offset) / (2**fits - 1):.0%} "
+                             "of its range): state the ADC's bits, not those of the 16-bit words the images come in")
     t_meas = ds.measurement_exposure_s
     temp_meas = ds.measurement_temperature_c if ds.measurement_temperature_c is not None else ds.dark_current_temperature_c
     a_sn = ds.sense_node_gain_v_per_e or DEFAULT_SENSE_NODE_GAIN_V_PER_E
