@@ -280,6 +280,12 @@ def profile_from_datasheet(ds: Datasheet) -> ProfileResult:
                              f"is {(sat_dn + offset) / adc:.1%} of the {ds.bit_depth}-bit ADC range: a camera saturates "
                              f"near its ADC's top; the figures fit a bit_depth of {fits} ({(sat_dn + offset) / (2**fits - 1):.0%} "
                              "of its range): state the ADC's bits, not those of the 16-bit words the images come in")
+    if ds.prnu_pct and ds.prnu_pct < 0.05:  # cameras: 0.1-5 %
+        notes.append(f"PRNU {ds.prnu_pct:g} % is below any camera's (0.1-5 %): a fraction where percent is asked "
+                     f"({100 * ds.prnu_pct:g} %)? used as given")
+    if ds.quantum_efficiency_pct is not None and ds.quantum_efficiency_pct < 1.0:
+        notes.append(f"quantum efficiency {ds.quantum_efficiency_pct:g} %: a fraction where percent is asked "
+                     f"({100 * ds.quantum_efficiency_pct:g} %)? (recorded only)")
     t_meas = ds.measurement_exposure_s
     temp_meas = ds.measurement_temperature_c if ds.measurement_temperature_c is not None else ds.dark_current_temperature_c
     a_sn = ds.sense_node_gain_v_per_e or DEFAULT_SENSE_NODE_GAIN_V_PER_E

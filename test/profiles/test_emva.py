@@ -143,6 +143,16 @@ def test_bad_datasheets_are_rejected_with_the_reason(changes, message):
         profile_from_datasheet(datasheet_from_mapping(_doc(**changes)))
 
 
+def test_figures_given_as_fractions_where_percent_is_asked_are_said():
+    """PRNU 0.0055 (0.55 % as a fraction) and a QE of 0.68: until 2026-12-04 taken without a word."""
+    notes = profile_from_datasheet(datasheet_from_mapping(_doc(
+        prnu_pct=0.0055, quantum_efficiency={"percent": 0.68, "wavelength_nm": 525}))).notes
+    assert any(n.startswith("PRNU 0.0055 % is below any camera's (0.1-5 %): a fraction where percent is asked (0.55 %)")
+               for n in notes), notes
+    assert any(n.startswith("quantum efficiency 0.68 %: a fraction where percent is asked (68 %)") for n in notes)
+    assert not any("fraction where percent" in n for n in profile_from_datasheet(datasheet_from_mapping(_doc())).notes)
+
+
 @pytest.mark.parametrize("field", REQUIRED)
 def test_missing_figure_is_named(field):
     with pytest.raises(DatasheetError, match=f"missing figure.*{field}"):
