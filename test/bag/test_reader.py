@@ -296,7 +296,8 @@ def test_flir_vendor_metadata_temperature_topic_and_invalid_values(tmp_path):
     with open_bag(path) as reader:
         assert (reader.metadata_topic, reader.temperature_topic) == ("/flir/meta", "/flir/temperature")
         ok, bad = reader.frames(profile="icx285")
-    assert ok.raw_metadata == {"exposure_time_s": pytest.approx(0.0025), "gain_db": 6.0}
+    # the frame's metadata as recorded, the Temperature topic's reading with it (characterize reads it there)
+    assert ok.raw_metadata == {"exposure_time_s": pytest.approx(0.0025), "gain_db": 6.0, "sensor_temperature_c": 31.5}
     assert ok.skip_reason is None and ok.metadata.sensor_temperature_c == 31.5
     assert ok.metadata.exposure_time_s == pytest.approx(0.0025)
     assert bad.metadata is None and "gain_db" in bad.metadata_error
