@@ -121,10 +121,9 @@ def test_profile_runs_in_replay_and_lab(recording, tmp_path):
     assert summary["frames_processed"] == 4
 
 
-def test_a_camera_ros_recording_gives_the_same_figures(recording, tmp_path):
-    """A Raspberry Pi camera's photon-transfer recording through camera_ros: the same images with libcamera's metadata
-    on /diagnostics (ExposureTime in whole us, AnalogueGain and DigitalGain factors, SensorTemperature; other nodes'
-    arrays beside it) give the figures of the recording with the camera's own metadata."""
+def _as_driver(src: Path, dst: Path, image_topic: str, write_metadata) -> Path:
+    """The recording ``src`` with its metadata re-written as a driver publishes it: ``write_metadata(w, types, header,
+    metadata, log_time)`` writes the driver's messages for each metadata message (its CameraMetadata fields)."""
     from msg_adapters.metadata import metadata_from_diagnostics
     from msg_adapters.vendor import register_vendor_types
     from noise_monitor.bag.reader import open_bag
@@ -132,28 +131,41 @@ def test_a_camera_ros_recording_gives_the_same_figures(recording, tmp_path):
 
     store = typestore()
     register_vendor_types(store)
-    kv, st, arr = (store.types[f"diagnostic_msgs/msg/{n}"] for n in ("KeyValue", "DiagnosticStatus", "DiagnosticArray"))
-    bag = tmp_path / "camera_ros_ptc.mcap"
-    with open_bag(recording["bag"]) as reader, BagWriter(bag, store=store) as w:
+    with open_bag(src) as reader, BagWriter(dst, store=store) as w:
         for topic, log_time, msg in reader.messages([reader.image_topic, reader.metadata_topic]):
             if topic == reader.image_topic:
-                w.write("/camera/image_raw", msg, log_time)
-                continue
-            m = metadata_from_diagnostics(msg)
-            libcamera = [kv(key="AnalogueGain", value=f"{10 ** (m['gain_db'] / 20):.6f}"),
-                         kv(key="DigitalGain", value="1.000000"),
-                         kv(key="ExposureTime", value=str(round(m["exposure_time_s"] * 1e6))),
-                         kv(key="SensorTemperature", value=f"{m['sensor_temperature_c']:.6f}")]
-            w.write("/diagnostics", arr(header=msg.header, status=[st(level=0, name="battery", message="",
-                    hardware_id="bms", values=[kv(key="voltage", value="12.1")])]), log_time)
-            w.write("/diagnostics", arr(header=msg.header, status=[st(level=0, name="", message="",
-                    hardware_id="/base/axi/pcie@120000/rp1/i2c@88000/imx477@1a", values=libcamera)]), log_time)
+                w.write(image_topic, msg, log_time)
+            else:
+                write_metadata(w, store.types, msg.header, metadata_from_diagnostics(msg), log_time)
+    return dst
+
+
+def _same_figures(got: dict, want: dict, fields: tuple[str, ...]) -> None:
+    for field in fields:
+        assert got[field]["value"] == pytest.approx(want[field]["value"], rel=1e-4), field  # whole us: 1e-7 apart
+
+
+def test_a_camera_ros_recording_gives_the_same_figures(recording, tmp_path):
+    """A Raspberry Pi camera's photon-transfer recording through camera_ros: the same images with libcamera's metadata
+    on /diagnostics (ExposureTime in whole us, AnalogueGain and DigitalGain factors, SensorTemperature; other nodes'
+    arrays beside it) give the figures of the recording with the camera's own metadata."""
+    def libcamera(w, t, header, m, log_time) -> None:
+        kv, st, arr = (t[f"diagnostic_msgs/msg/{n}"] for n in ("KeyValue", "DiagnosticStatus", "DiagnosticArray"))
+        values = [kv(key="AnalogueGain", value=f"{10 ** (m['gain_db'] / 20):.6f}"),
+                  kv(key="DigitalGain", value="1.000000"),
+                  kv(key="ExposureTime", value=str(round(m["exposure_time_s"] * 1e6))),
+                  kv(key="SensorTemperature", value=f"{m['sensor_temperature_c']:.6f}")]
+        w.write("/diagnostics", arr(header=header, status=[st(level=0, name="battery", message="", hardware_id="bms",
+                                                              values=[kv(key="voltage", value="12.1")])]), log_time)
+        w.write("/diagnostics", arr(header=header, status=[st(level=0, name="", message="", values=values,
+                hardware_id="/base/axi/pcie@120000/rp1/i2c@88000/imx477@1a")]), log_time)
+
+    bag = _as_driver(recording["bag"], tmp_path / "camera_ros_ptc.mcap", "/camera/image_raw", libcamera)
     assert main(["characterize", str(bag), "--out", str(tmp_path / "char"), "--json", str(tmp_path / "c.json"),
                  "--bit-depth", "12", "--sensor-type", "cmos", "--pixel-size-um", "3.45"]) == 0
-    got, want = json.loads((tmp_path / "c.json").read_text())["figures"], recording["result"]["figures"]
-    for field in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
-                  "doubling_temperature_k", "dsnu_e", "prnu_pct", "black_level_dn"):
-        assert got[field]["value"] == pytest.approx(want[field]["value"], rel=1e-4), field  # whole us: 1e-7 apart
+    _same_figures(json.loads((tmp_path / "c.json").read_text())["figures"], recording["result"]["figures"],
+                  ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
+                   "doubling_temperature_k", "dsnu_e", "prnu_pct", "black_level_dn"))
     assert (tmp_path / "char" / "profile.yaml").is_file()
 
 
@@ -165,36 +177,24 @@ def test_a_flir_recording_with_its_temperature_topic_and_no_bit_depth(recording,
     recording with the camera's own metadata, the bit depth inferred from the largest code and said."""
     import numpy as np
 
-    from msg_adapters.metadata import metadata_from_diagnostics
-    from msg_adapters.vendor import FLIR, register_vendor_types
-    from noise_monitor.bag.reader import open_bag
-    from noise_monitor.bag.writer import typestore
+    from msg_adapters.vendor import FLIR
 
-    store = typestore()
-    register_vendor_types(store)
-    t = store.types
-    bag = tmp_path / "flir_ptc.mcap"
-    with open_bag(recording["bag"]) as reader, BagWriter(bag, store=store) as w:
-        for topic, log_time, msg in reader.messages([reader.image_topic, reader.metadata_topic]):
-            if topic == reader.image_topic:
-                w.write("/flir/image_raw", msg, log_time)
-                continue
-            m = metadata_from_diagnostics(msg)
-            w.write("/flir/temperature", t["sensor_msgs/msg/Temperature"](
-                header=msg.header, temperature=m["sensor_temperature_c"], variance=0.0), log_time)
-            w.write("/flir/meta", t[FLIR](header=msg.header, camera_time=0, brightness=-1,
-                                          exposure_time=int(round(m["exposure_time_s"] * 1e6)),
-                                          max_exposure_time=10**7, gain=np.float32(m["gain_db"])), log_time)
+    def flir(w, t, header, m, log_time) -> None:
+        w.write("/flir/temperature", t["sensor_msgs/msg/Temperature"](
+            header=header, temperature=m["sensor_temperature_c"], variance=0.0), log_time)
+        w.write("/flir/meta", t[FLIR](header=header, camera_time=0, brightness=-1, max_exposure_time=10**7,
+                                      exposure_time=int(round(m["exposure_time_s"] * 1e6)),
+                                      gain=np.float32(m["gain_db"])), log_time)
+
+    bag = _as_driver(recording["bag"], tmp_path / "flir_ptc.mcap", "/flir/image_raw", flir)
     assert main(["characterize", str(bag), "--out", str(tmp_path / "char"), "--json", str(tmp_path / "c.json"),
                  "--sensor-type", "cmos", "--pixel-size-um", "3.45"]) == 0
-    printed = capsys.readouterr().out
-    assert "bit depth 12 inferred from the images' largest code, 4095" in printed
+    assert "bit depth 12 inferred from the images' largest code, 4095" in capsys.readouterr().out
     result = json.loads((tmp_path / "c.json").read_text())
-    got, want = result["figures"], recording["result"]["figures"]
     assert result["conditions"]["bit_depth"] == recording["result"]["conditions"]["bit_depth"] == 12
-    for field in ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
-                  "doubling_temperature_k", "dsnu_e", "prnu_pct"):
-        assert got[field]["value"] == pytest.approx(want[field]["value"], rel=1e-4), field  # whole us: 1e-7 apart
+    _same_figures(result["figures"], recording["result"]["figures"],
+                  ("system_gain_dn_per_e", "temporal_dark_noise_e", "read_noise_e", "saturation_capacity_e",
+                   "doubling_temperature_k", "dsnu_e", "prnu_pct"))
     assert (tmp_path / "char" / "profile.yaml").is_file()
 
 
