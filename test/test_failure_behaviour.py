@@ -276,6 +276,8 @@ def test_sqlite3_row_with_null_data_is_a_named_skip_and_a_play_error(tmp_path, c
 @pytest.mark.parametrize("argv,command,needle", [
     (["play", "{bag}", "--rate", "1e-300"], "play", "rate must be in [0.001, 1000]"),
     (["play", "{bag}", "--rate", "nan"], "play", "rate must be in"),
+    # before 2026-12-04: accepted, and no /clock published
+    (["play", "{bag}", "--clock", "0"], "play", "--clock must be > 0 Hz, got 0 (leave it out for no /clock)"),
     (["simulate-bag", "{tmp}/x.mcap", "--profile", "icx285", "--scenario", "static", "--width", "1000000",
       "--height", "1000000"], "simulate-bag", "width must be in [8, 8192] pixels"),
     (["simulate-bag", "{tmp}/x.mcap", "--profile", "icx285", "--scenario", "static", "--fps", "inf"],

@@ -17,16 +17,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait-subscribers", type=float, default=0.0, metavar="SECONDS",
                         help="first wait up to SECONDS for a subscriber on the image and metadata topics")
     parser.add_argument("--json", metavar="PATH", help="write playback statistics (messages per topic, timing)")
-    parser.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
+    parser.add_argument("--clock", type=float, nargs="?", const=40.0, default=None, metavar="HZ",
                         help="also publish the bag's time on /clock (default 40 Hz), for nodes with use_sim_time")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.clock is not None and not args.clock > 0:  # 0 published no /clock without a word (until 2026-12-04)
+        raise ValueError(f"--clock must be > 0 Hz, got {args.clock:g} (leave it out for no /clock)")
     stop = threading.Event()  # Ctrl-C / SIGTERM end the playback; its statistics are still printed and written
     handlers = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         stats = play(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
-                     wait_subscribers_s=args.wait_subscribers, should_stop=stop.is_set, clock_hz=args.clock)
+                     wait_subscribers_s=args.wait_subscribers, should_stop=stop.is_set, clock_hz=args.clock or 0.0)
     finally:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
