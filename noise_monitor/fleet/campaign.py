@@ -104,7 +104,7 @@ def _executor(backend: str, ray_address: str | None, workers: int,
 def _entry(outcome: dict[str, Any]) -> dict[str, Any]:
     """A manifest line from a worker's outcome (fingerprint filled in for failures the driver saw)."""
     e = {k: outcome.get(k) for k in ("path", "status", "reason", "sha256", "size", "mtime_ns", "frames", "record",
-                                      "wall_s", "cpu_s", "task_s", "peak_rss_mb", "worker")}
+                                      "wall_s", "cpu_s", "task_s", "peak_rss_mb", "worker", "hardware_id")}
     if e["size"] is None:
         try:
             e["size"], e["mtime_ns"] = fingerprint(Path(outcome["path"]))

@@ -66,6 +66,8 @@ def _print(c: dict[str, Any]) -> None:
         print(f"  #{cam['rank']} {cam['hardware_id']}: health {cam['health']:.2f}, {cam['bags']} bags, "
               f"mean xi {cam['mean']['xi'] if cam['mean']['xi'] is not None else 'n/a'} DN"
               + (f"; {'; '.join(cam['findings'])}" if cam["findings"] else ""))
+    for cam in c.get("cameras_not_evaluated", []):
+        print(f"  {cam['hardware_id']}: not evaluated, {cam['bags_failed']} bag(s) failed: {cam['reason']}")
     for kind, path in c["outputs"].items():
         print(f"  {kind:8s} {path}")
 

@@ -187,7 +187,8 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
             primary.setdefault(e["sha256"], e["path"])
     for e in ordered:
         if e["status"] != "ok":
-            failed.append({"path": e["path"], "reason": e.get("reason", "unknown")})
+            failed.append({"path": e["path"], "reason": e.get("reason", "unknown"),
+                           **({"hardware_id": e["hardware_id"]} if e.get("hardware_id") else {})})
         elif primary.get(e["sha256"]) == e["path"]:
             bags.append(_bag_row(e))
         else:
@@ -200,6 +201,10 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
     cameras = sorted((_camera(hw, rows) for hw, rows in by_cam.items()), key=lambda c: (c["health"], c["hardware_id"]))
     for rank, c in enumerate(cameras, 1):
         c["rank"] = rank
+    unevaluated: dict[str, list[dict[str, Any]]] = defaultdict(list)  # cameras whose every bag failed
+    for f in failed:
+        if f.get("hardware_id") and f["hardware_id"] not in by_cam:
+            unevaluated[f["hardware_id"]].append(f)
     episodes = sorted(({"hardware_id": b["hardware_id"], "bag": b["path"], **a} for b in bags for a in b["alarms"]),
                       key=lambda a: a["start_ns"])
     recorded = {e["path"] for e in entries}
@@ -220,6 +225,8 @@ def summarize(paths: Sequence[str], entries: Sequence[dict[str, Any]], problems:
         },
         "run": run,
         "cameras": cameras,
+        "cameras_not_evaluated": [{"hardware_id": hw, "bags_failed": len(rows), "reason": rows[0]["reason"]}
+                                  for hw, rows in sorted(unevaluated.items())],
         "bags": bags,
         "alarm_episodes": episodes,
         "failed": failed,
@@ -391,6 +398,9 @@ def write_html(campaign: dict[str, Any], path: Path) -> None:
         _table(cams, ["rank", "camera", "health", "limited by", "bags", "frames", "processed", "in alarm", "episodes",
                       "mean xi [DN]", "mean DCSN [DN]", "xi trend [DN/week]", "DCSN trend [DN/week]", "findings"]),
         *(f"<p><img src='data:image/png;base64,{f}'></p>" for f in figs),
+        *(["<h2>Cameras not evaluated</h2><p>Every bag of these cameras failed (the first reason):</p>",
+           _table([[c["hardware_id"], c["bags_failed"], c["reason"]] for c in campaign["cameras_not_evaluated"]],
+                  ["camera", "bags failed", "reason"])] if campaign.get("cameras_not_evaluated") else []),
         "<h2>Alarm episodes (UTC)</h2>",
         _table(eps, ["camera", "bag", "start", "end", "duration [s]", "frames", "xi sign", "peak xi [DN]", "cause"]),
         "<h2>Not evaluated</h2>", _table(bad, ["input", "reason"]) if bad else "<p>none</p>",

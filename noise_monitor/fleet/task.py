@@ -185,7 +185,7 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
                     load_plugin_file(plugin)
                     _PLUGINS.add(plugin)
             sha = outcome["sha256"] = content_hash(bag)
-            hw = camera_id(bag, settings.image_topic, settings.metadata_topic)
+            hw = outcome["hardware_id"] = camera_id(bag, settings.image_topic, settings.metadata_topic)
             spec = settings.profiles.resolve(hw)
             prof = load_profile(spec) if spec else None
             out = bag_dir(settings.out_dir, sha, settings.key)

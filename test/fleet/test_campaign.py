@@ -151,6 +151,10 @@ def test_bad_inputs_reported_by_name_and_rest_completes(pool_run: tuple[dict, Pa
     assert (t["bags_found"], t["bags_evaluated"], t["bags_failed"], t["bags_duplicate"], t["inputs_rejected"]) == \
         (10, 4, 5, 1, 2)
     assert t["frames_total"] == 3 * 6 + 40 and t["cameras"] == 2
+    # a camera whose every bag failed is named (until 2026-12-04 it was missing from every camera list); those of
+    # workers killed (hang, crash) are not known to the driver
+    assert c["cameras_not_evaluated"] == [{"hardware_id": "robot9/rear", "bags_failed": 1,
+                                           "reason": reasons["stranger.mcap"]}]
 
 
 def test_report_outputs_and_alarm_times(pool_run: tuple[dict, Path]) -> None:
