@@ -21,6 +21,8 @@ static fields) fixes the sensor while the operating conditions stay random.
 from __future__ import annotations
 
 import json
+import os
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -204,16 +206,31 @@ def imagery_of(data: dict[str, np.ndarray]) -> Imagery:
     return Imagery.from_dict(json.loads(str(data["imagery_json"]))) if "imagery_json" in data else Imagery()
 
 
+class DamagedDataset(ValueError):
+    """A dataset file that cannot be read (cut short by an interrupted or disk-full write before 2026-12-04)."""
+
+
 def save(data: dict[str, np.ndarray], path: Path) -> None:
+    """Write atomically: a temporary file renamed into place (an interrupted run leaves no truncated dataset)."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **data)  # type: ignore[arg-type]  # numpy's stub types **kwds as allow_pickle
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **data)  # type: ignore[arg-type]  # numpy's stub types **kwds as allow_pickle
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def load(path: Path) -> dict[str, np.ndarray]:
     if not Path(path).is_file():
         raise FileNotFoundError(f"dataset {path} not found")
-    with np.load(path) as f:
-        return {k: f[k] for k in f.files}
+    try:
+        with np.load(path) as f:
+            return {k: f[k] for k in f.files}
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
+        raise DamagedDataset(f"dataset {path} cannot be read ({exc}): delete it to generate it again") from None
 
 
 def metas_of(data: dict[str, np.ndarray]) -> list[CameraMetadata]:

@@ -26,6 +26,7 @@ of the same kind.
 """
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -36,7 +37,7 @@ from tqdm import tqdm
 
 from ..physics import CameraMetadata, NoiseModel
 from ..physics.sensitivity import SWEEP_INTENSITIES, SWEEPS, reference_metadata
-from .data import PARTS, generate, load, metas_of, save
+from .data import PARTS, DamagedDataset, generate, load, metas_of, save
 from .inference import clear_decisions
 from .peers import PEERS
 from .physics_prior import SOURCES, PhysicsPrior, box_smooth
@@ -135,9 +136,19 @@ def image_set_data(part: str, n: int, patch_size: int, image_set: ImageSet, cach
     if part not in PARTS:
         raise ValueError(f"part must be one of {tuple(PARTS)}, got {part!r}")
     path = None if cache_dir is None else Path(cache_dir) / f"images-{image_set.key}_{part}_p{patch_size}_n{n}.npz"
+    return _cached(path, lambda: generate(n, patch_size, SEEDS[part], "images", PARTS[part], progress=progress,
+                                          images=image_set.images))
+
+
+def _cached(path: Path | None, make: Callable[[], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The dataset at ``path`` if it is there and readable, else ``make()`` (saved there); a damaged file (an older
+    run interrupted while writing it: a traceback on every later run until 2026-12-04) is made again, said."""
     if path is not None and path.is_file():
-        return load(path)
-    data = generate(n, patch_size, SEEDS[part], "images", PARTS[part], progress=progress, images=image_set.images)
+        try:
+            return load(path)
+        except DamagedDataset as exc:
+            print(f"note: {exc}; generating it again", file=sys.stderr)
+    data = make()
     if path is not None:
         save(data, path)
     return data
@@ -153,12 +164,7 @@ def heldout(part: str, n: int, patch_size: int, cache_dir: Path | None = None, p
         raise ValueError(f"held-out set must be one of {tuple(HELDOUT_SETS)}, got {heldout_set!r}")
     hs = HELDOUT_SETS[heldout_set]
     path = cache_dir / f"{hs.split}_{part}_p{patch_size}_n{n}.npz" if cache_dir else None
-    if path is not None and path.is_file():
-        return load(path)
-    data = generate(n, patch_size, hs.seeds[part], hs.split, PARTS[part], progress=progress)
-    if path is not None:
-        save(data, path)
-    return data
+    return _cached(path, lambda: generate(n, patch_size, hs.seeds[part], hs.split, PARTS[part], progress=progress))
 
 
 def score(pred: dict[str, np.ndarray], data: dict[str, np.ndarray], part: str) -> dict:

@@ -2,8 +2,8 @@
 
 The benchmark's photographs are six small sample images; a camera engineer wants to know how the estimator
 reads the noise on the scenes *their* robot sees. Give clean images of such scenes (low gain, well exposed,
-ideally averaged frames): each is turned into grayscale DN (colour by ITU-R 601 luma; 16-bit and float images
-stretched to 0..255), area-downsampled by ``downsample`` (2 by default, as the benchmark's photographs: it
+ideally averaged frames): each is turned into grayscale DN (colour by ITU-R 601 luma; :func:`to_scene_dn`: integer
+images at the bit depth of their values, floats in [0, 1] or [0, 255] as such), area-downsampled by ``downsample`` (2 by default, as the benchmark's photographs: it
 halves the image's own noise), and the set's parts are drawn from them like the benchmark's (``data.PARTS``,
 seeds ``SEEDS``). The truth counts whatever the clean image holds as scene, including its own noise, film grain
 or JPEG blocking; :func:`own_noise_floor` says how much of that each image has, so that an error which is the
@@ -22,6 +22,10 @@ import numpy as np
 from .features import reference_sigma
 from .images import to_gray_dn
 
+#: Bit depths integer images are read at: the fewest holding 99.9 % of an image's pixels (:func:`to_scene_dn`).
+BIT_DEPTHS = (8, 10, 12, 14, 16)
+#: An image with more of its pixels at 0 or 255 DN is no scene (black, or saturated).
+MAX_CLIPPED = 0.5
 #: File types read (``.npy``: a 2-D or H x W x 3 array).
 SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".npy")
 #: Data seeds of the parts (never used for training or the bundled sets).
@@ -82,6 +86,40 @@ def _read(path: Path) -> np.ndarray:
     return a
 
 
+def to_scene_dn(a: np.ndarray, name: str | Path) -> np.ndarray:
+    """A user's image -> float32 grayscale DN on 0..255, its brightness as recorded: 8-bit as it is; other integers at
+    the bit depth of their values (the fewest of ``BIT_DEPTHS`` holding 99.9 % of the pixels: a 12-bit scene in
+    16-bit words reads as 12-bit, a hot pixel clips instead of darkening the rest); floats in [0, 1] times 255, in
+    [0, 255] as they are, others stretched between their 0.1 and 99.9 percentiles. Until 2026-12-04 16-bit and float
+    images were stretched between their minimum and maximum: one hot pixel put a 12-bit scene into 0..15 DN, a constant
+    float image read 0 DN. Negative integers and images mostly at 0 or 255 DN are refused (ValueError)."""
+    if a.dtype.kind == "b":
+        return to_gray_dn(a)
+    if a.dtype.kind == "i" and a.min() < 0:
+        raise ValueError(f"--images: {name} holds negative values (signed {a.dtype}): give DN, 0 and above")
+    g = a.astype(np.float32)
+    if g.ndim == 3:  # ITU-R 601 luma of the colour values, on their own scale
+        g = g[..., :3] @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    if a.dtype.kind in "ui":
+        top = float(np.percentile(g, 99.9))
+        bits = next((b for b in BIT_DEPTHS if top <= 2**b - 1), None)
+        g = _stretch(g) if bits is None else np.minimum(g * np.float32(255.0 / (2**bits - 1)), 255.0)
+    else:
+        lo, hi = float(g.min()), float(g.max())
+        g = g * np.float32(255.0) if 0.0 <= lo and hi <= 1.0 else g if 0.0 <= lo and hi <= 255.0 else _stretch(g)
+    clipped = float(np.mean((g <= 0.5) | (g >= 254.5)))
+    if clipped > MAX_CLIPPED:
+        raise ValueError(f"--images: {name} has {clipped:.0%} of its pixels at 0 or 255 DN: a black or saturated image "
+                         "is no scene to measure noise on")
+    return np.asarray(g, dtype=np.float32)
+
+
+def _stretch(g: np.ndarray) -> np.ndarray:
+    """Between the 0.1 and 99.9 percentiles onto 0..255 (clipped beyond)."""
+    lo, hi = np.percentile(g, [0.1, 99.9])
+    return np.clip((g - lo) * np.float32(255.0 / max(float(hi - lo), 1e-6)), 0.0, 255.0)
+
+
 def load_image_set(paths: Sequence[Path], downsample: int = 2, patch_size: int = 64) -> ImageSet:
     """The images in ``paths`` (files, or directories of ``SUFFIXES`` files), grayscale DN, area-downsampled by
     ``downsample`` (1-4); each must keep at least ``patch_size`` px on its shorter side."""
@@ -89,12 +127,12 @@ def load_image_set(paths: Sequence[Path], downsample: int = 2, patch_size: int =
         raise ValueError(f"--image-downsample must be 1-4, got {downsample}")
     names, ims = [], []
     for f in _files(paths):
-        im = to_gray_dn(_read(f))
+        im = to_scene_dn(_read(f), f)
         if downsample > 1:
             im = cv2.resize(im, (im.shape[1] // downsample, im.shape[0] // downsample), interpolation=cv2.INTER_AREA)
         if min(im.shape) < patch_size:
             raise ValueError(f"--images: {f} is {im.shape[1]}x{im.shape[0]} px after {downsample}x downsampling, "
-                             f"smaller than a {patch_size} px patch")
+                             f"smaller than the {patch_size} px it needs on its shorter side")
         names.append(f.name)
         ims.append(np.ascontiguousarray(im, dtype=np.float32))
     if len(set(names)) != len(names):
