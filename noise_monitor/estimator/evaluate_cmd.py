@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +73,15 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--cards writes the model cards from the bundled held-out sets; leave out --images")
     if args.plot and not args.images:
         raise ValueError("--plot draws the per-image figures of --images; give --images")
+    if args.cards:  # the card states the full benchmark's figures (until 2026-12-04 any run's, over the shipped card)
+        small = [flag for flag, given in (("--patches below 600", args.patches < 600),
+                                          ("--parts " + " ".join(args.parts), list(args.parts) != list(PARTS)),
+                                          ("--no-sweep", args.no_sweep), ("--no-peers", args.no_peers)) if given]
+        if small:
+            raise ValueError(f"--cards writes the model card from the full benchmark; {', '.join(small)} would put a "
+                             "smaller run's figures in it")
+    if args.json is not None and args.json.is_dir():
+        raise ValueError(f"--json {args.json} is a folder; give a file path")
     sets = args.heldout or ([] if args.images else ["benchmark"])
     names = args.variants or [n for n in NAMES if (args.weights_dir / f"{n}.pt").is_file()]
     if not names:
@@ -80,6 +90,15 @@ def run(args: argparse.Namespace) -> int:
     labels = compared(args.compare, names)
     for label, path in labels.items():
         estimators[label] = load("full_meta", args.device, weights=path)
+    for label, est in estimators.items():  # the held-out sets are made with the paper's sources alone
+        effects = sorted(getattr(est, "trained_effects", None) or {})
+        if effects and args.cards:
+            raise ValueError(f"--cards: {label} was fine-tuned for a camera with {', '.join(effects)}, which the "
+                             "benchmark's data lack: its figures here are biased, not the weights' own")
+        if effects:
+            print(f"note: {label} was fine-tuned for a camera with {', '.join(effects)}; the held-out sets hold none "
+                  "of them, so its sigma_model and xi here are biased (evaluate it on that camera's data)",
+                  file=sys.stderr)
     largest = max(args.patch_size or [e.patch_size for e in estimators.values()])
     args.image_set = load_image_set(args.images, args.image_downsample, largest) if args.images else None
     runs = {_label(size, hs): evaluate(estimators, args, size, hs, list(labels))

@@ -6,10 +6,14 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+import torch
+
 from ..physics import load_profile
 from ..physics.effects import load_plugin_file
 from ..physics.metadata import STATIC_FIELDS
 from .data import Scheme, camera_of, generate, imagery_of, load, photo_variants_of, procedural_of, save, scheme_of
+from .device import resolve_device
 from .images import JPEG_QUALITY, PHOTO_DOWNSCALE, Imagery
 from .networks import VARIANTS
 from .train import TrainSettings, train
@@ -116,6 +120,28 @@ def _check(args: argparse.Namespace) -> None:
                          "head), without --confidence")
     if (args.shape_trend or args.spectral) and args.variant != "full_meta":
         raise ValueError("--shape-trend and --spectral are inputs of the full_meta network")
+    # before the data are generated (minutes at the default size; until 2026-12-04 these failed only after, some with
+    # a traceback)
+    resolve_device(args.device)
+    if args.resume and not (args.out / "checkpoint.pt").is_file():
+        raise FileNotFoundError(f"--resume: no checkpoint at {args.out / 'checkpoint.pt'}")
+    if args.init is not None:
+        _check_init(args.init, args.variant)
+
+
+def _check_init(path: Path, variant: str) -> None:
+    """``--init`` must be weights of this variant written by ``train`` (a ``<variant>.pt`` checkpoint)."""
+    if not path.is_file():
+        raise FileNotFoundError(f"--init: {path} not found")
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # not a torch file, or one with other objects than tensors
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"--init: {path} is not noise_monitor weights (a <variant>.pt of train): {first}") from None
+    if not isinstance(ck, dict) or "variant" not in ck or "state_dict" not in ck:
+        raise ValueError(f"--init: {path} is not noise_monitor weights (a <variant>.pt of train)")
+    if ck["variant"] != variant:
+        raise ValueError(f"--init: {path} holds {ck['variant']} weights, not {variant} (--variant)")
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -178,10 +204,15 @@ def run(args: argparse.Namespace) -> int:
         if imagery_of(data) != imagery(args):
             raise ValueError(f"dataset {data_path} was generated with other imagery options "
                              f"({imagery_of(data).to_json()}) than {imagery(args).to_json()}; give a new --data path")
+        size = (int(len(data["noisy"])), int(data["noisy"].shape[-1]), int(data.get("data_seed", args.data_seed)))
+        if size != (args.patches, args.patch_size, args.data_seed):  # until 2026-12-04 recorded as asked, not as used
+            raise ValueError(f"dataset {data_path} holds {size[0]} patches of {size[1]} px from data seed {size[2]}, "
+                             f"not --patches {args.patches} --patch-size {args.patch_size} --data-seed "
+                             f"{args.data_seed}; give those or a new --data path")
     else:
         data = generate(args.patches, args.patch_size, args.data_seed, "train", scheme(args), effects=effects, sensor=sensor,
                         photo_variants=args.photo_variants, procedural=args.procedural, imagery=imagery(args))
-        save(data, data_path)
+        save({**data, "data_seed": np.array(args.data_seed)}, data_path)
     gen_s = time.time() - t0
     settings = TrainSettings(args.variant, steps=args.steps, batch=args.batch, lr=args.lr, seed=args.seed,
                              width=args.width, depth=args.depth, confidence=args.confidence,

@@ -90,6 +90,34 @@ def test_train_cli_profile_fine_tune(tmp_path, camera_yaml, meta):
     assert rc == 2
 
 
+def test_train_and_evaluate_refuse_what_does_not_fit(tmp_path, camera_yaml, capsys):
+    """Until 2026-12-04: a dataset of other size or seed was reused and the asked values recorded; a wrong --init
+    failed with a traceback after the data were generated; evaluate read fine-tuned weights on the benchmark's
+    effect-free data without a word, and --cards wrote any run's figures over the card."""
+    out = tmp_path / "ft"
+    base = ["train", "--variant", "full_meta", "--steps", "2", "--batch", "4", "--patch-size", "32", "--threads", "1"]
+    assert cli_main(base + ["--out", str(out), "--patches", "16", "--profile", str(camera_yaml)]) == 0
+    capsys.readouterr()
+    assert cli_main(base + ["--out", str(out), "--patches", "32", "--profile", str(camera_yaml)]) == 2
+    assert "holds 16 patches of 32 px from data seed 1, not --patches 32" in capsys.readouterr().err
+    for variant, init, needle in (("drne", out / "full_meta.pt", "holds full_meta weights, not drne"),
+                                  ("full_meta", out / "train_data.npz", "is not noise_monitor weights")):
+        other = tmp_path / f"init_{variant}"
+        assert cli_main(["train", "--variant", variant, "--out", str(other), "--patches", "16",
+                         "--init", str(init)]) == 2
+        assert needle in capsys.readouterr().err and not (other / "train_data.npz").exists()  # before the data
+    assert cli_main(["train", "--variant", "full_meta", "--out", str(tmp_path / "r"), "--resume"]) == 2
+    assert "--resume: no checkpoint at" in capsys.readouterr().err
+    ev = ["evaluate", "--weights-dir", str(out), "--variants", "full_meta", "--cache", str(tmp_path / "cache")]
+    assert cli_main(ev + ["--cards"]) == 2
+    assert "--cards: full_meta was fine-tuned for a camera with column_offsets" in capsys.readouterr().err
+    assert cli_main(ev + ["--cards", "--patches", "20", "--parts", "a"]) == 2
+    assert "--patches below 600, --parts a would put a smaller run's figures in it" in capsys.readouterr().err
+    assert not (out / "full_meta.md").exists()
+    assert cli_main(ev + ["--patches", "10", "--parts", "a", "--no-peers", "--no-sweep"]) == 0
+    assert "note: full_meta was fine-tuned for a camera with column_offsets" in capsys.readouterr().err
+
+
 def test_replay_uses_the_profile_model_in_the_estimator(tmp_path, camera_yaml):
     bag = simulate_bag(tmp_path / "cols.mcap", camera_yaml, "static", frames=3, width=160, height=128, seed=2)
     s = replay(bag, profile=str(camera_yaml), progress=False, plot=False)
