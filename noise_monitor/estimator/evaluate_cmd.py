@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     if args.cards:  # the card states the full benchmark's figures (until 2026-12-04 any run's, over the shipped card)
         small = [flag for flag, given in (("--patches below 600", args.patches < 600),
                                           ("--parts " + " ".join(args.parts), list(args.parts) != list(PARTS)),
-                                          ("--no-sweep", args.no_sweep), ("--no-peers", args.no_peers)) if given]
+                                          ("--no-sweep", args.no_sweep)) if given]
         if small:
             raise ValueError(f"--cards writes the model card from the full benchmark; {', '.join(small)} would put a "
                              "smaller run's figures in it")
