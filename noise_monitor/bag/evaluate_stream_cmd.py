@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 from noise_monitor.estimator.user_images import load_image_set
 
@@ -47,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.threads < 1:
+        raise ValueError(f"--threads must be >= 1, got {args.threads}")
     images = load_image_set(args.images, args.image_downsample, MIN_PHOTO_SIDE) if args.images else None
     result = evaluate_stream(args.profile, args.seeds, images, args.scenario, args.frames, args.width, args.height,
                              args.fps, args.gain_offset_db, args.params, args.threads, args.keep_bags,
@@ -56,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
               f"with the gain stated {args.gain_offset_db:+g} dB; {r['views']} views; false-alarm episodes "
               f"{r['false_alarm_episodes']}; detected {r['hits']} / {r['need']}")
     s = result["summary"]
-    det = "no frame was due an alarm" if not s["need"] else f"{100 * s['detection']:.1f} % ({s['hits']} / {s['need']})"
+    det = ("no frame was due an alarm" if not s["need"] else f"{100 * s['detection']:.1f} % ({s['hits']} / {s['need']}; "
+           f"95 % lower bound {100 * s['detection_lower_95']:.0f} %)")
     offset_err = (f"{s['offset_xi_error_rms']:.3f} DN" if math.isfinite(s["offset_xi_error_rms"]) else
                   f"none: no frame processed with the gain stated {args.gain_offset_db:+g} dB (the monitor skips a stated "
                   f"gain outside the profile's range as invalid metadata)")
@@ -71,7 +75,18 @@ def run(args: argparse.Namespace) -> int:
           f"{det} (target >= {100 * TARGET_DETECTION:.0f} %); alarm on at {s['alarm_not_due']} of the {s['not_due']} frames "
           f"with true |xi| < {NOT_DUE_XI} DN; xi error RMS {offset_err}\n"
           f"  {'meets' if s['meets_targets'] else 'does NOT meet'} issue 15's per-frame targets")
-    if args.json:
+    if args.json:  # standard JSON: a figure without frames is null (was NaN)
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=1))
+        args.json.write_text(json.dumps(_finite(result), indent=1, allow_nan=False))
     return 0
+
+
+def _finite(obj: Any) -> Any:
+    """``obj`` with every non-finite float replaced by None."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj

@@ -326,6 +326,8 @@ def run_replay(
         "bag": str(bag),
         "profile": prof.name if prof else None,
         "estimator": getattr(rt.estimator, "name", str(rt.params["model"])),
+        # the checkpoint (None: the bundled weights of the model; an estimator given in-process: not known here)
+        "weights": str(Path(rt.params["weights"]).resolve()) if rt.params.get("weights") else None,
         "hardware_id": hw,
         "topics_in": topics,
         "topics_out": {**output_topics(namespace), **({debug_topic: IMAGE_TYPE} if last_debug is not None else {})},

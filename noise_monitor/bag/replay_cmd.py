@@ -49,7 +49,7 @@ def _fmt(v: Any) -> str:
 def print_summary(s: dict[str, Any]) -> None:
     """Per-source table and alarm episodes on stdout."""
     print(f"\n{s['bag']}: {s['frames_total']} frames, {s['frames_processed']} processed, "
-          f"{s['frames_skipped']} skipped; estimator {s['estimator']}")
+          f"{s['frames_skipped']} skipped; estimator {s['estimator']}" + (f" ({s['weights']})" if s.get('weights') else ""))
     for reason, n in s["skip_reasons"].items():
         print(f"  skipped {n:4d} x {reason}")
     if s.get("frames_beyond_index"):

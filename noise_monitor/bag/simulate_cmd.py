@@ -120,6 +120,8 @@ def field_keywords(args: argparse.Namespace) -> FieldConditions:
         raise ValueError("--wobble reads a vibration at a frequency row by row: give --vibration PX --vibration-hz HZ")
     if args.pwm_hz is not None and args.mains_hz is not None:
         raise ValueError("--pwm-hz dims LEDs instead of lamps on the mains: give one of --pwm-hz and --mains-hz")
+    if args.pwm_hz is not None and not args.pwm_hz > 0:  # 0 simulated lamps on the mains without a word
+        raise ValueError(f"--pwm-hz must be > 0 Hz, got {args.pwm_hz:g}")
     if args.pwm_duty is not None and args.pwm_hz is None:
         raise ValueError("--pwm-duty is the duty cycle of --pwm-hz: give --pwm-hz HZ too")
     if args.vibration_hz and not args.vibration:

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import beta
 
 from noise_monitor.estimator.user_images import ImageSet
 from noise_monitor.physics import CameraProfile
@@ -139,6 +140,8 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "clean_xi_filtered_rms": float(np.sqrt(np.mean(xif**2))) if xif.size else float("nan"),
         "false_alarm_episodes": sum(r["false_alarm_episodes"] for r in rows),
         "need": need, "hits": hits, "detection": hits / need if need else float("nan"),
+        # one-sided 95 % Clopper-Pearson bound: how far a few frames due an alarm can vouch for the detection
+        "detection_lower_95": float(beta.ppf(0.05, hits, need - hits + 1)) if hits else 0.0,
         "alarmed_at_frame": at_frame, "at_frame": at_frame / need if need else float("nan"),
         "offset_xi_error_rms": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
         "views_with_need": sum(len(set(r["view_of_need"])) for r in rows),

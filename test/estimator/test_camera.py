@@ -116,6 +116,14 @@ def test_train_and_evaluate_refuse_what_does_not_fit(tmp_path, camera_yaml, caps
     assert not (out / "full_meta.md").exists()
     assert cli_main(ev + ["--patches", "10", "--parts", "a", "--no-peers", "--no-sweep"]) == 0
     assert "note: full_meta was fine-tuned for a camera with column_offsets" in capsys.readouterr().err
+    # replay records the checkpoint it ran (until 2026-12-04 only the variant's name)
+    from noise_monitor.bag.simulate import simulate_bag
+
+    bag = simulate_bag(tmp_path / "b.mcap", "ev76c661", "static", frames=3, width=96, height=64, seed=1)
+    assert cli_main(["replay", str(bag), "--profile", str(camera_yaml), "--weights", str(out / "full_meta.pt"),
+                     "--out", str(tmp_path / "rep"), "--json", str(tmp_path / "rep.json"), "--no-plot"]) == 0
+    assert json.loads((tmp_path / "rep.json").read_text())["weights"] == str((out / "full_meta.pt").resolve())
+    assert f"estimator full_meta ({(out / 'full_meta.pt').resolve()})" in capsys.readouterr().out
 
 
 def test_replay_uses_the_profile_model_in_the_estimator(tmp_path, camera_yaml):
