@@ -73,13 +73,14 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--cards writes the model cards from the bundled held-out sets; leave out --images")
     if args.plot and not args.images:
         raise ValueError("--plot draws the per-image figures of --images; give --images")
-    if args.cards:  # the card states the full benchmark's figures (until 2026-12-04 any run's, over the shipped card)
+    if args.cards and args.weights_dir.resolve() == WEIGHTS_DIR.resolve():
+        # the shipped cards state the full benchmark's figures (until 2026-12-04 any run's were written over them)
         small = [flag for flag, given in (("--patches below 600", args.patches < 600),
                                           ("--parts " + " ".join(args.parts), list(args.parts) != list(PARTS)),
                                           ("--no-sweep", args.no_sweep)) if given]
         if small:
-            raise ValueError(f"--cards writes the model card from the full benchmark; {', '.join(small)} would put a "
-                             "smaller run's figures in it")
+            raise ValueError(f"--cards writes the shipped model cards from the full benchmark; {', '.join(small)} would "
+                             "put a smaller run's figures in them (give --weights-dir for a copy's)")
     if args.json is not None and args.json.is_dir():
         raise ValueError(f"--json {args.json} is a folder; give a file path")
     sets = args.heldout or ([] if args.images else ["benchmark"])
