@@ -38,10 +38,11 @@ def write_card(name: str, weights_dir: Path, runs: dict[str, dict], command: str
                   f"- Data: {train['patches']} simulated patches of {train['patch_size']}x{train['patch_size']} px "
                   f"(scikit-image bundled photos{_variants(train)} + dead leaves{_procedural(train)}, sequential simulator, xi scheme; data seed "
                   f"{train.get('data_seed', '?')}" + (f", corruption scheme {json.dumps(train['scheme'])}" if "scheme" in train else "")
-                  + ")" + (f", generated in {train['data_seconds'] / 60:.1f} min" if train['data_seconds'] >= 60 else
-                           " (pre-generated dataset file; the same command without --data regenerates it identically "
-                           "from the data seed)"),
-                  f"- Training settings: {json.dumps(train['settings'])}"]
+                  + ")" + (" (pre-generated dataset file; the same command without --data regenerates it identically "
+                     "from the data seed)" if train.get("data_reused", train["data_seconds"] < 60) else
+                     f", generated in {train['data_seconds'] / 60:.1f} min"),
+                  f"- Training settings (as given; the network's inputs are its config above, those of an --init "
+                  f"kept): {json.dumps(train['settings'])}"]
     if ck["config"].get("confidence"):
         from .inference import MEASURABLE_ERROR_DN, MEASURABLE_RELATIVE_ERROR
 

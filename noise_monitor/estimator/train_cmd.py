@@ -187,7 +187,8 @@ def run(args: argparse.Namespace) -> int:
     effects, sensor = camera(args.profile)
     data_path = args.data or args.out / "train_data.npz"
     t0 = time.time()
-    if data_path.is_file():
+    reused = data_path.is_file()
+    if reused:
         data = load(data_path)
         if camera_of(data) != (effects, sensor):
             raise ValueError(f"dataset {data_path} was generated for another camera (effects, sensor) than "
@@ -224,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
                "photo_variants": args.photo_variants, "procedural": args.procedural,
                **({"imagery": imagery(args).as_dict()} if not imagery(args).is_default() else {}),
                "patches": int(len(data["noisy"])), "patch_size": int(data["noisy"].shape[-1]),
-               "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
+               "data_reused": reused, "data_seconds": round(gen_s, 1), "train_seconds": round(time.time() - t0 - gen_s, 1),
                "settings": vars(settings)}
     print(json.dumps(summary, indent=2))
     if args.json:

@@ -134,3 +134,20 @@ def test_replay_uses_the_profile_model_in_the_estimator(tmp_path, camera_yaml):
     assert s["sigma_total"]["mean"] == pytest.approx(s["sigma_model"]["mean"], rel=0.02)
     plain = replay(bag, profile="ev76c661", progress=False, plot=False)
     assert s["sigma_model"]["mean"] ** 2 - plain["sigma_model"]["mean"] ** 2 == pytest.approx(4.0, rel=0.1)
+
+
+def test_a_model_card_says_whether_its_data_were_generated_or_reused(tmp_path):
+    """A dataset generated in seconds was described as "pre-generated" (the card guessed from the time); train now
+    records whether it reused a dataset file (2026-12-04)."""
+    out = tmp_path / "w"
+    base = ["train", "--variant", "full_meta", "--out", str(out), "--steps", "2", "--batch", "4", "--patches", "16",
+            "--patch-size", "32", "--threads", "1", "--json", str(out / "full_meta.train.json")]
+    assert cli_main(base) == 0
+    assert json.loads((out / "full_meta.train.json").read_text())["data_reused"] is False
+    ev = ["evaluate", "--weights-dir", str(out), "--variants", "full_meta", "--patches", "10", "--parts", "a",
+          "--no-peers", "--no-sweep", "--cards", "--cache", str(tmp_path / "cache")]
+    assert cli_main(ev) == 0
+    card = (out / "full_meta.md").read_text()
+    assert "generated in 0.0 min" in card and "pre-generated" not in card
+    assert cli_main(base) == 0 and cli_main(ev) == 0  # the same dataset file again
+    assert "(pre-generated dataset file;" in (out / "full_meta.md").read_text()
