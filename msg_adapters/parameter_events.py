@@ -23,10 +23,15 @@ PRESETS: dict[str, tuple[str, ...]] = {
     "v4l2_camera": ("*|exposure_time_absolute|exposure_time_s|100us", "*|gain|gain_db|relative"),
     "usb_cam": ("*|exposure|exposure_time_s|100us", "*|gain|gain_db|relative"),
 }
-#: driver -> its auto-exposure parameters and the values under which the exposure parameter is not the frame's
-#: (V4L2 ``exposure_auto`` menu: 0 auto, 1 manual, 2 shutter priority, 3 aperture priority)
+def _v4l2_auto(value: Any) -> bool:
+    """V4L2's exposure menu: 0 auto, 1 manual, 2 shutter priority, 3 aperture priority (the exposure automatic)."""
+    return int(value) in (0, 3)
+
+
+#: driver -> its auto-exposure parameters (v4l2_camera's name of the control on newer and older kernels) and the
+#: values under which the exposure parameter is not the frame's
 AUTO_EXPOSURE: dict[str, dict[str, Callable[[Any], bool]]] = {
-    "v4l2_camera": {"auto_exposure": lambda v: int(v) in (0, 3), "exposure_auto": lambda v: int(v) in (0, 3)},
+    "v4l2_camera": {"auto_exposure": _v4l2_auto, "exposure_auto": _v4l2_auto},
     "usb_cam": {"autoexposure": bool},
 }
 #: driver -> its gain parameter and the value that leaves the device's gain alone (not reported)

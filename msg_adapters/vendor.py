@@ -241,9 +241,7 @@ def _realsense(msg: Any, profile: Any) -> dict[str, float | str]:
                            "(auto_exposure = 1) is the manual setting, not the frame's (librealsense#2549): turn the "
                            "colour stream's auto-exposure off (rgb_camera.enable_auto_exposure: false)")
     if "actual_exposure" in data:  # the RGB sensor counts in 100 us, depth and infrared in us
-        scale = 100.0 if colour else 1.0
-        out["exposure_time_s"] = _exposure_us("actual_exposure", _num("actual_exposure", data["actual_exposure"],
-                                                                       "100 us" if colour else "us") * scale)
+        out["exposure_time_s"] = _exposure_us("actual_exposure", data["actual_exposure"]) * (100.0 if colour else 1.0)
     if "gain_level" in data:
         out["gain_db"] = map_gain("gain_level", data["gain_level"], _gain_range(profile), _driver_range(profile))
     if not out:

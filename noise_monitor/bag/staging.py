@@ -11,10 +11,14 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import IO, Any, TypeVar
 
 from .errors import BagError
+
+T = TypeVar("T")
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -104,16 +108,23 @@ def _umask() -> int:
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
-    """Write a text file via a new file in its folder and ``os.replace`` (a symlink at ``path`` is
-    replaced, not followed; an interrupted write leaves the old file)."""
+    """Write a text file atomically (:func:`write_atomic`)."""
+    write_atomic(path, lambda fh: fh.write(text), "w")
+
+
+def write_atomic(path: str | Path, write: Callable[[IO[Any]], T], mode: str = "wb") -> T:
+    """Write a file by ``write(handle)`` into a new file in its folder, then ``os.replace`` (a symlink at ``path`` is
+    replaced, not followed; an interrupted write leaves the old file and no temporary one); returns what ``write``
+    returned."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent)
     try:
         os.fchmod(fd, 0o666 & ~_umask())  # mkstemp's file is private (0600); the result gets a plain file's mode
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
+        with os.fdopen(fd, mode) as fh:
+            result = write(fh)
         os.replace(tmp, p)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    return result

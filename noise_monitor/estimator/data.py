@@ -21,7 +21,6 @@ static fields) fixes the sensor while the operating conditions stay random.
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from ..bag.staging import write_atomic
 from ..physics import CameraMetadata, NoiseModel, factor_to_db, sample_metadata
 from ..physics.effects import effect_class
 from ..physics.metadata import NUMERIC_FIELDS, STATIC_FIELDS
@@ -211,16 +211,8 @@ class DamagedDataset(ValueError):
 
 
 def save(data: dict[str, np.ndarray], path: Path) -> None:
-    """Write atomically: a temporary file renamed into place (an interrupted run leaves no truncated dataset)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **data)  # type: ignore[arg-type]  # numpy's stub types **kwds as allow_pickle
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    """Write atomically (an interrupted run leaves no truncated dataset)."""
+    write_atomic(path, lambda fh: np.savez(fh, **data))  # type: ignore[arg-type]  # numpy's stub: **kwds
 
 
 def load(path: Path) -> dict[str, np.ndarray]:

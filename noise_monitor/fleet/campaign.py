@@ -18,6 +18,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from noise_monitor.bag.staging import write_text_atomic
 from noise_monitor.estimator.inference import weights_path
 from noise_monitor.monitor.config import default_params_path, read_ros_params
 from noise_monitor.paths import camera_profile_path
@@ -220,9 +221,7 @@ def run_campaign(
             campaign.pop("frames_in_table", None)
             outputs = {k: v for k, v in outputs.items() if k in ("json", "manifest")}
     campaign["outputs"] = outputs
-    tmp = out / (OUTPUTS["json"] + ".tmp")
-    tmp.write_text(json.dumps(campaign, indent=1))
-    tmp.replace(out / OUTPUTS["json"])
+    write_text_atomic(out / OUTPUTS["json"], json.dumps(campaign, indent=1))
     if interrupted:
         raise KeyboardInterrupt(f"campaign interrupted: {len(campaign['bags'])} of {len(paths)} bags finished "
                                 f"and recorded in {manifest.path}; re-run the same command to resume")

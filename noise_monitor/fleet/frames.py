@@ -2,15 +2,14 @@
 and the campaign's table merged from the bags' files one bag at a time."""
 from __future__ import annotations
 
-import os
-import socket
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from noise_monitor.bag.results import CONDITION_KEYS, FrameTable
+from noise_monitor.bag.staging import write_atomic
 
 try:
     import pyarrow as pa
@@ -54,10 +53,8 @@ def to_arrow(table: FrameTable, hardware_id: str, sha256: str) -> pa.Table:
 
 
 def write_parquet(tab: pa.Table, path: Path) -> None:
-    """Write atomically (a temporary file of this process renamed into place)."""
-    tmp = path.with_name(f"{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
-    pq.write_table(tab, tmp)
-    tmp.replace(path)
+    """Write atomically (a temporary file renamed into place)."""
+    write_atomic(path, lambda fh: pq.write_table(tab, fh))
 
 
 def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
@@ -74,20 +71,13 @@ def merge(parts: Iterable[tuple[Path, str]], path: Path) -> int:
     for s in schemas:
         names += [n for n in s.names if n not in names]
     schema = pa.schema([fields[n] for n in names])
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        rows = _write_parts(parts, schema, tmp)
-    except BaseException:  # an interrupt or a bad part leaves no half-written table behind
-        tmp.unlink(missing_ok=True)
-        raise
-    tmp.replace(path)
-    return rows
+    return write_atomic(path, lambda fh: _write_parts(parts, schema, fh))  # an interrupt leaves no half-written table
 
 
-def _write_parts(parts: list[tuple[Path, str]], schema: pa.Schema, tmp: Path) -> int:
-    """The parts, each with its bag column and the columns it lacks, into ``tmp``; returns rows."""
+def _write_parts(parts: list[tuple[Path, str]], schema: pa.Schema, sink: Any) -> int:
+    """The parts, each with its bag column and the columns it lacks, into ``sink`` (a binary file); returns rows."""
     rows = 0
-    with pq.ParquetWriter(tmp, schema) as writer:
+    with pq.ParquetWriter(sink, schema) as writer:
         for p, bag in parts:
             tab = pq.read_table(p)
             for i, name in enumerate(schema.names):

@@ -24,6 +24,7 @@ import numpy as np
 from noise_monitor.bag.reader import open_bag
 from noise_monitor.bag.replay import replay
 from noise_monitor.bag.results import CONDITION_KEYS, FrameTable
+from noise_monitor.bag.staging import write_text_atomic
 from noise_monitor.monitor.runtime import MonitorRuntime
 from noise_monitor.physics import CameraProfile, load_plugin_file, load_profile
 
@@ -197,9 +198,7 @@ def run_bag(path: str, settings: CampaignSettings) -> dict[str, Any]:
                              plot=settings.bag_outputs, table=table)
             summary["sha256"] = sha
             write_parquet(to_arrow(table, summary["hardware_id"], sha), out / "frames.parquet")
-            tmp = out / f"summary.json.{socket.gethostname()}.{os.getpid()}.tmp"
-            tmp.write_text(json.dumps(summary, indent=1))
-            tmp.replace(out / "summary.json")
+            write_text_atomic(out / "summary.json", json.dumps(summary, indent=1))
             outcome.update(status="ok", record=_record(summary, table), frames=summary["frames_total"])
     except MemoryExceeded:
         outcome.update(reason=f"worker memory limit exceeded: resident {guard.tripped_mb:.0f} MB > "
