@@ -513,6 +513,6 @@ def test_ctrl_c_while_the_table_is_merged_leaves_campaign_json(fleet: dict[str, 
     monkeypatch.undo()
     c = json.loads((tmp_path / "out" / "campaign.json").read_text())
     assert c["interrupted"] and c["totals"]["bags_evaluated"] == 2 and "parquet" not in c["outputs"]
-    assert not list((tmp_path / "out").glob("*.tmp"))
+    assert not list((tmp_path / "out").glob("*.tmp")) and not list((tmp_path / "out").glob(".frames.parquet.*"))
     again = run_campaign(bags, tmp_path / "out", **kw)  # the resume writes the table and report
     assert not again["interrupted"] and again["frames_in_table"] == sum(b["frames_total"] for b in again["bags"])
